@@ -1,11 +1,28 @@
 """se3dyn: multibody dynamics on the special Euclidean group SE(3).
 
 The method is the finite-element formulation of multibody systems on SE(3) with a Lie-group
-generalized-alpha integrator (see ``docs/`` and the module :mod:`se3dyn.lie` for conventions).
+generalized-alpha integrator. Conventions are written once in :mod:`se3dyn.lie`.
+
+>>> import se3dyn as sd
+>>> model = sd.examples.slider_crank()
+>>> result = sd.simulate(model, t_end=5.0, step=1e-2, rho_inf=0.9)  # doctest: +SKIP
 """
 
-from se3dyn import lie
+from se3dyn import examples, lie
+from se3dyn.errors import ModelError, NewtonError, Se3dynError, SimulationError
+from se3dyn.integrator import GeneralizedAlpha, State
+from se3dyn.joints import JOINT_TYPES
+from se3dyn.model import PD, JointSpec, LoadSpec, Model, ModelBuilder, NodeSpec
+from se3dyn.results import Results
+from se3dyn.simulate import simulate
+from se3dyn.system import System, compile_model
+from se3dyn.timefunc import Callable, Constant, Ramp, Sine, Step, Table
 
 __version__ = "0.1.0"
 
-__all__ = ["lie", "__version__"]
+__all__ = [
+    "lie", "examples", "ModelBuilder", "Model", "NodeSpec", "JointSpec", "LoadSpec", "PD",
+    "System", "compile_model", "simulate", "Results", "GeneralizedAlpha", "State",
+    "Constant", "Step", "Ramp", "Table", "Sine", "Callable", "JOINT_TYPES",
+    "Se3dynError", "ModelError", "SimulationError", "NewtonError", "__version__",
+]

@@ -1,0 +1,88 @@
+"""Exceptions of se3dyn. Every message names the item, the field, what was expected and what came."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class Se3dynError(Exception):
+    """Base class of all se3dyn errors."""
+
+
+class ModelError(Se3dynError, ValueError):
+    """An invalid model description.
+
+    Parameters
+    ----------
+    item : str
+        The offending item, e.g. ``"joint '7' (hinge)"``.
+    field : str
+        The offending field, e.g. ``"axis"``.
+    expected : str
+        What was expected.
+    got : Any
+        What came (``repr`` is shown, shortened).
+    """
+
+    def __init__(self, item: str, field: str, expected: str, got: Any = None, hint: str = ""):
+        self.item = item
+        self.field = field
+        self.expected = expected
+        self.got = got
+        shown = _short_repr(got)
+        msg = f"{item}: field '{field}': expected {expected}, got {shown}"
+        if hint:
+            msg += f" ({hint})"
+        super().__init__(msg)
+
+
+class SimulationError(Se3dynError, RuntimeError):
+    """A simulation that could not proceed; ``result`` holds everything computed so far."""
+
+    def __init__(self, message: str, result: Any = None):
+        super().__init__(message)
+        self.result = result
+
+
+class NewtonError(SimulationError):
+    """Newton iterations of a time step failed to converge.
+
+    Attributes
+    ----------
+    t : float
+        Time the step was aiming for.
+    h : float
+        Step size.
+    iterations : int
+        Iterations performed.
+    residual_norm, constraint_norm : float
+        Final scaled residual norm and constraint violation.
+    item : str
+        Name of the node or joint carrying the largest residual entry.
+    result : Results or None
+        Results up to the last converged step.
+    """
+
+    def __init__(self, message: str, *, t: float, h: float, iterations: int,
+                 residual_norm: float, constraint_norm: float, item: str, result: Any = None):
+        super().__init__(message, result)
+        self.t = t
+        self.h = h
+        self.iterations = iterations
+        self.residual_norm = residual_norm
+        self.constraint_norm = constraint_norm
+        self.item = item
+
+
+def _short_repr(x: Any, limit: int = 120) -> str:
+    try:
+        import numpy as np
+
+        if isinstance(x, np.ndarray):
+            s = np.array2string(x, threshold=12, precision=6)
+            s = f"array of shape {x.shape}: {s}"
+        else:
+            s = repr(x)
+    except Exception:  # pragma: no cover - repr of exotic objects
+        s = object.__repr__(x)
+    return s if len(s) <= limit else s[: limit - 3] + "..."

@@ -1,0 +1,321 @@
+"""Lie-group generalized-alpha time integration (Eqs. (38)-(46)) with Newton iterations.
+
+One step from ``t_n`` to ``t_{n+1} = t_n + h`` solves for the increments ``n_{n+1}`` (Eq. (41)):
+
+* ``H_{n+1} = H_n exp(A n_{n+1})`` (Eq. (38)) for every node and joint;
+* the equations of motion (39) and the constraints (40) at ``t_{n+1}``;
+* ``v_{n+1} = v_n + (1-gamma) h a_n + gamma h a_{n+1}`` (42),
+  ``(1-alpha_m) a_{n+1} + alpha_m a_n = (1-alpha_f) vd_{n+1} + alpha_f vd_n`` (43),
+  with the parameters of Eq. (44) from the spectral radius ``rho_inf``.
+
+Newton corrections use ``dv = gamma' dn``, ``dvd = beta' dn`` and the scaled iteration matrix
+described in :mod:`se3dyn.system`. Converged when the residual is below ``tol_residual`` relative
+to the magnitude of the forces entering it and the constraints below ``tol_constraint`` (times the
+model's length scale), or when the increment correction reaches round-off with the constraints
+satisfied.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from se3dyn import lie
+from se3dyn.errors import ModelError, NewtonError, SimulationError
+from se3dyn.system import LinearSolver, System, evaluate
+
+__all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "energies"]
+
+
+@dataclass
+class State:
+    """Exactly what integration needs, so a restart from a State is bit-exact.
+
+    Attributes
+    ----------
+    t : float
+    H : ndarray (M, 4, 4)      node frames
+    HJ : ndarray (m, 4, 4)     joint transformations
+    v, vd, a : ndarray (nq,)   velocities, accelerations, generalized-alpha variable a (Eq. (43))
+    lam : ndarray (nm,)        multipliers
+    alpha : ndarray (nq,)      relative coordinates on joint unknowns (Eq. (60)); 0 on nodes
+    work_act, work_ext, dissipated : float
+        Accumulated actuator work (incl. PD laws), work of external loads, damper dissipation.
+    power : ndarray (3,)       (actuator, external, dissipation) powers at t (trapezoidal rule)
+    """
+
+    t: float
+    H: np.ndarray
+    HJ: np.ndarray
+    v: np.ndarray
+    vd: np.ndarray
+    a: np.ndarray
+    lam: np.ndarray
+    alpha: np.ndarray
+    work_act: float = 0.0
+    work_ext: float = 0.0
+    dissipated: float = 0.0
+    power: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+
+    def copy(self) -> State:
+        return dataclasses.replace(self, **{f.name: np.copy(getattr(self, f.name))
+                                            for f in dataclasses.fields(self)
+                                            if isinstance(getattr(self, f.name), np.ndarray)})
+
+
+@dataclass(frozen=True)
+class StepInfo:
+    """Outcome of one step: Newton iterations, final scaled residual and constraint norms."""
+
+    iterations: int
+    residual: float
+    constraint: float
+
+
+def step_inputs(s: System, t: float) -> dict:
+    """Time-dependent loads at time t.
+
+    Returns
+    -------
+    dict
+        ``f`` (M, 3) inertial forces incl. gravity, ``f_load`` (M, 3) without gravity, ``m``
+        (M, 3) material torques, ``tau`` (nq,) actuator forces, ``ref``/``rate`` (nq,) PD targets.
+    """
+    M, nq = s.M, s.nq
+    f_load = np.zeros((M, 3))
+    mt = np.zeros((M, 3))
+    for i, F, T in s.loads:
+        if F is not None:
+            f_load[i] += np.broadcast_to(np.asarray(F(t), dtype=float), (3,))
+        if T is not None:
+            mt[i] += np.broadcast_to(np.asarray(T(t), dtype=float), (3,))
+    tau = np.zeros(nq)
+    for d, tf in s.actuators:
+        tau[d] += np.broadcast_to(np.asarray(tf(t), dtype=float), d.shape)
+    ref = np.zeros(nq)
+    rate = np.zeros(nq)
+    for d, tgt, rt in s.controls:
+        ref[d] = np.broadcast_to(np.asarray(tgt(t), dtype=float), d.shape)
+        rate[d] = np.broadcast_to(np.asarray((tgt.rate(t) if rt is None else rt(t)),
+                                             dtype=float), d.shape)
+    f = f_load + s.node_mass[:, None] * s.gravity
+    out = dict(f=f, f_load=f_load, m=mt, tau=tau, ref=ref, rate=rate)
+    for key, val in out.items():
+        if not np.all(np.isfinite(val)):
+            raise SimulationError(f"t={t:.6g}: a time function returned a non-finite value for "
+                                  f"'{key}'")
+    return out
+
+
+def energies(s: System, st: State, inputs: dict) -> dict:
+    """Kinetic, gravity-potential and spring energy of a state, and the three powers.
+
+    Returns
+    -------
+    dict with floats ``kinetic`` (Eq. (47)), ``potential`` (gravity), ``spring`` (Eq. (62)),
+    and ``power`` ndarray (3,) = (actuator incl. PD, external loads, damper dissipation).
+    """
+    vb = st.v[s.node_dofidx]
+    mass = s.node_mass[s.node_free]
+    J = s.node_J[s.node_free]
+    kin = 0.5 * float(np.sum(mass * np.einsum("ni,ni->n", vb[:, :3], vb[:, :3]))
+                      + np.einsum("ni,nij,nj->", vb[:, 3:], J, vb[:, 3:]))
+    x = st.H[:, :3, 3]
+    pot = -float(np.sum(s.node_mass * (x @ s.gravity)))
+    e = st.alpha - s.dof_reference
+    spring = 0.5 * float(np.sum(s.dof_stiffness * e * e))
+    v = st.v
+    tau_pd = -s.dof_kp * (st.alpha - inputs["ref"]) - s.dof_kd * (v - inputs["rate"])
+    p_act = float(np.sum((inputs["tau"] + tau_pd) * v * s.dof_is_joint))
+    R = st.H[s.node_free, :3, :3]
+    xdot = np.einsum("nij,nj->ni", R, vb[:, :3])
+    p_ext = float(np.sum(inputs["f_load"][s.node_free] * xdot)
+                  + np.sum(inputs["m"][s.node_free] * vb[:, 3:]))
+    p_diss = float(np.sum(s.dof_damping * v * v))
+    return dict(kinetic=kin, potential=pot, spring=spring, power=np.array([p_act, p_ext, p_diss]))
+
+
+@dataclass(frozen=True)
+class GeneralizedAlpha:
+    """Lie-group generalized-alpha integrator (Eqs. (38)-(46)), frozen configuration.
+
+    Parameters
+    ----------
+    rho_inf : float
+        Spectral radius at infinite frequency, in [0, 1] (Eq. (44)); 1 means no numerical
+        dissipation.
+    tol_residual : float
+        Newton tolerance on ``||r||_inf`` relative to the magnitude of the forces in Eq. (39).
+    tol_constraint : float
+        Newton tolerance on ``||Phi||_inf`` (Eq. (40)), in units of the model's length scale.
+    max_iter : int
+        Maximum Newton iterations per step.
+    """
+
+    rho_inf: float = 0.9
+    tol_residual: float = 1e-10
+    tol_constraint: float = 1e-11
+    max_iter: int = 25
+
+    def __post_init__(self):
+        r = self.rho_inf
+        if not (isinstance(r, int | float) and 0.0 <= r <= 1.0):
+            raise ModelError("integrator", "rho_inf", "a number in [0, 1]", r)
+        for fld in ("tol_residual", "tol_constraint"):
+            v = getattr(self, fld)
+            if not (isinstance(v, int | float) and 0 < v < 1):
+                raise ModelError("integrator", fld, "a positive tolerance below 1", v)
+        if not (isinstance(self.max_iter, int) and self.max_iter >= 1):
+            raise ModelError("integrator", "max_iter", "a positive integer", self.max_iter)
+
+    @property
+    def params(self) -> tuple[float, float, float, float]:
+        """(alpha_m, alpha_f, gamma, beta) of Eq. (44)."""
+        r = self.rho_inf
+        am = (2 * r - 1) / (r + 1)
+        af = r / (r + 1)
+        g = 0.5 + af - am
+        b = 0.25 * (g + 0.5) ** 2
+        return am, af, g, b
+
+    # -----------------------------------------------------------------------------------------
+    def init(self, s: System, t0: float = 0.0, solver: LinearSolver | None = None) -> State:
+        """Initial state: frames from the model, velocities made consistent with the velocity
+        constraints, consistent accelerations and multipliers at t0 (Eqs. (36)-(37))."""
+        solver = solver or LinearSolver(s)
+        nq, nm = s.nq, s.nm
+        v = np.zeros(nq)
+        v[s.node_dofidx] = s.node_v0[s.node_free]
+        st = State(t=t0, H=s.node_H0.copy(), HJ=s.joint_H0.copy(), v=v, vd=np.zeros(nq),
+                   a=np.zeros(nq), lam=np.zeros(nm), alpha=np.zeros(nq))
+        inputs = step_inputs(s, t0)
+        zero = np.zeros(nq)
+        ev = evaluate(s, st.H, st.HJ, st.alpha, zero, v, zero, st.lam, inputs, (1.0, 0.0, 0.0))
+        if nm and np.any(v != 0):
+            st.v = self._project_velocity(s, solver, ev.values, v)
+            ev = evaluate(s, st.H, st.HJ, st.alpha, zero, st.v, zero, st.lam, inputs,
+                          (1.0, 0.0, 0.0))
+        # [M Phi_q^T; Phi_q 0][vd; lam] = [-b; ad(v_J) Ad v_A]  (acceleration-level constraints)
+        rhs = np.concatenate([-ev.r, self._accel_rhs(s, st)])
+        solver.factor(ev.values, f"t={t0:.6g} (initial accelerations)")
+        sol = solver.solve(rhs)
+        st.vd = sol[:nq]
+        st.a = st.vd.copy()
+        st.lam = sol[nq:]
+        e = energies(s, st, inputs)
+        st.power = e["power"]
+        return st
+
+    @staticmethod
+    def _accel_rhs(s: System, st: State) -> np.ndarray:
+        out = np.zeros(s.nm)
+        for g in s.groups:
+            if not g.k:
+                continue
+            vJ = np.einsum("jik,jk->ji", g.A, st.v[g.jdof])
+            vA = np.where(g.dof_a[:, :1] < 0, 0.0, st.v[np.maximum(g.dof_a, 0)])
+            Ad = lie.adjoint_inv(st.HJ[g.ids])
+            out[g.mult] = np.einsum("jil,jl->ji", lie.ad6(vJ) @ Ad, vA)
+        return out
+
+    @staticmethod
+    def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,
+                          v0: np.ndarray) -> np.ndarray:
+        """Closest velocity (mass-weighted, with a small weight on massless unknowns) that
+        satisfies the velocity constraints Phi_q v = 0."""
+        import scipy.sparse as sp
+        import scipy.sparse.linalg as spla
+
+        A = sp.csr_matrix(solver.matrix(values))
+        nq = s.nq
+        Wm = A[:nq, :nq]
+        Phi = A[nq:, :nq]
+        w = 1e-6 * max(float(np.abs(Wm.diagonal()).max(initial=0.0)), 1e-300)
+        W = Wm + w * sp.identity(nq)
+        K = sp.bmat([[W, Phi.T], [Phi, None]], format="csc")
+        sol = spla.spsolve(K, np.concatenate([W @ v0, np.zeros(s.nm)]))
+        return np.asarray(sol[:nq])
+
+    # -----------------------------------------------------------------------------------------
+    def step(self, s: System, st: State, h: float, solver: LinearSolver | None = None,
+             ) -> tuple[State, StepInfo]:
+        """Advance one step of size h; raises :class:`NewtonError` when Newton fails."""
+        solver = solver or LinearSolver(s)
+        am, af, g, b = self.params
+        t1 = st.t + h
+        nq = s.nq
+        inputs = step_inputs(s, t1)
+        # predictor: vd_{n+1} = 0
+        vd = np.zeros(nq)
+        a = (af * st.vd - am * st.a) / (1 - am)
+        v = st.v + h * (1 - g) * st.a + h * g * a
+        n = h * st.v + h * h * (0.5 - b) * st.a + h * h * b * a
+        lam = st.lam.copy()
+        bp = (1 - am) / (b * h * h * (1 - af))
+        gp = g / (b * h)
+        coef = (1.0, gp / bp, 1.0 / bp)
+        ltol = self.tol_constraint * s.length_scale
+        it = 0
+        while True:
+            ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, coef)
+            fs = max(ev.f_scale, 1e-300)
+            er = float(np.abs(ev.r).max(initial=0.0)) / fs
+            ep = float(np.abs(ev.phi).max(initial=0.0))
+            if not (np.isfinite(er) and np.isfinite(ep)):
+                self._fail(s, t1, h, it, ev, "the iterate became non-finite")
+            if er <= self.tol_residual and ep <= ltol:
+                break
+            if it >= self.max_iter:
+                self._fail(s, t1, h, it, ev, "no convergence within max_iter iterations")
+            solver.factor(ev.values, f"t={t1:.9g}, h={h:.3g}, Newton iteration {it + 1}")
+            d = solver.solve(-np.concatenate([ev.r / bp, ev.phi]))
+            dn = d[:nq]
+            n += dn
+            v += gp * dn
+            vd += bp * dn
+            lam += bp * d[nq:]
+            it += 1
+            # round-off stagnation: correction at the level of the increment's last digits
+            if (ep <= ltol and np.abs(dn).max(initial=0.0)
+                    <= 4e-16 * max(np.abs(n).max(initial=0.0), 1e-300)):
+                ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, None)
+                er = float(np.abs(ev.r).max(initial=0.0)) / max(ev.f_scale, 1e-300)
+                ep = float(np.abs(ev.phi).max(initial=0.0))
+                break
+        a = a + (1 - af) / (1 - am) * vd  # Eq. (43), with the predictor part already in a
+        new = State(t=t1, H=ev.H, HJ=ev.HJ, v=v, vd=vd, a=a, lam=lam, alpha=ev.alpha,
+                    work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated)
+        e = energies(s, new, inputs)
+        p = e["power"]
+        new.power = p
+        # trapezoidal accumulation of the powers (second order, like the integrator)
+        new.work_act += 0.5 * h * (st.power[0] + p[0])
+        new.work_ext += 0.5 * h * (st.power[1] + p[1])
+        new.dissipated += 0.5 * h * (st.power[2] + p[2])
+        return new, StepInfo(it, er, ep)
+
+    def _fail(self, s: System, t: float, h: float, it: int, ev, why: str):
+        r = np.abs(ev.r)
+        phi = np.abs(ev.phi)
+        rs = r / max(ev.f_scale, 1e-300)
+        if phi.size and phi.max() / (self.tol_constraint * s.length_scale) > (
+                rs.max(initial=0.0) / self.tol_residual):
+            i = int(np.nanargmax(phi))
+            where = s.labels[s.nq + i]
+            item = s.items[s.nq + i]
+        elif r.size:
+            i = int(np.nanargmax(rs))
+            where = s.labels[i]
+            item = s.items[i]
+        else:  # pragma: no cover
+            where = item = "?"
+        msg = (f"Newton failed at t={t:.9g} (step h={h:.3g}) after {it} iterations: {why}; "
+               f"residual {float(np.nanmax(rs, initial=0.0)):.3e} (relative, tol "
+               f"{self.tol_residual:.1e}), constraint violation "
+               f"{float(np.nanmax(phi, initial=0.0)):.3e} (tol "
+               f"{self.tol_constraint * s.length_scale:.1e}); worst: {where}")
+        raise NewtonError(msg, t=t, h=h, iterations=it,
+                          residual_norm=float(np.nanmax(rs, initial=0.0)),
+                          constraint_norm=float(np.nanmax(phi, initial=0.0)), item=item)

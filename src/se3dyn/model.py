@@ -1,0 +1,553 @@
+"""Model description: frozen, named specs built by :class:`ModelBuilder` and validated on build.
+
+A model is what the user describes, with names, not numbers: nodes (frames with optional mass and
+inertia, Sec. 2 and 6), kinematic joints between two nodes (``H_B = H_A H_J``, Eq. (7)) with their
+force elements (springs Eq. (62), dampers Eq. (64), actuators Eq. (66), PD control laws), nodal
+loads (Eq. (66)) and gravity. :func:`se3dyn.system.compile_model` turns it into arrays.
+
+Initial configuration (Sec. 5.2): node frames are ``H(R0, x0)`` with ``R0`` the identity unless
+an ``orientation`` is given; joint transformations start at ``H_J0 = H_A0^-1 H_B0`` so that the
+constraints hold exactly; joint axes are given in the inertial frame of the initial configuration
+and expressed in the material frame of node B by the compiler.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from se3dyn.errors import ModelError
+from se3dyn.joints import JOINT_TYPES, is_abelian, unit_vector
+from se3dyn.timefunc import TimeFunction, as_timefunc
+
+__all__ = ["NodeSpec", "JointSpec", "LoadSpec", "PD", "Model", "ModelBuilder"]
+
+
+@dataclass(frozen=True)
+class PD:
+    """PD control law on the relative coordinates of an abelian joint.
+
+    The actuator force is ``tau = -kp (alpha - target(t)) - kd (alpha_dot - target_rate(t))``
+    (a spring-damper with a moving reference, Eqs. (62), (64), (66)); ``target_rate`` defaults to
+    the time derivative of ``target``.
+
+    Parameters
+    ----------
+    kp, kd : float or array_like, shape (k,)
+        Proportional and derivative gains (>= 0).
+    target : number, array (k,), TimeFunction or callable of t
+        Target relative coordinates alpha_ref(t).
+    target_rate : same, optional
+        Target rates; derivative of ``target`` if omitted.
+    """
+
+    kp: Any
+    kd: Any = 0.0
+    target: Any = 0.0
+    target_rate: Any = None
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """A node: a frame in SE(3) (Eq. (1)) with optional rigid-body inertia at it (Eq. (49)).
+
+    Attributes
+    ----------
+    name : str
+    position : ndarray, shape (3,)
+        Initial position in the inertial frame.
+    orientation : ndarray, shape (3, 3)
+        Initial rotation R0 (columns: material axes in the inertial frame); identity by default.
+    mass : float
+    inertia : ndarray, shape (3, 3)
+        Inertia tensor about the node in the inertial frame of the initial configuration
+        (``R0_principal J' R0_principal^T``, Sec. 6).
+    fixed : bool
+        Clamped node (no unknowns).
+    velocity : ndarray, shape (6,)
+        Initial velocity ``(U, Omega)`` in the *inertial* frame (converted on compile).
+    """
+
+    name: str
+    position: np.ndarray
+    orientation: np.ndarray
+    mass: float
+    inertia: np.ndarray
+    fixed: bool
+    velocity: np.ndarray
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """A kinematic joint ``H_B = H_A H_J`` with ``H_J`` in the subgroup spanned by A (Eqs. 7-9).
+
+    Attributes
+    ----------
+    name, type, node_a, node_b : str
+    params : dict
+        Type parameters as given (axis, axes, normal, pitch, A).
+    A : ndarray, shape (6, k)
+        Subalgebra basis in the inertial frame of the initial configuration (Table 1).
+    stiffness, reference, damping : ndarray, shape (k,)
+        Spring K (Eq. (62)) with reference alpha0, damper C (Eq. (64)).
+    actuator : TimeFunction or None
+        Actuator force/torque tau(t) (Eq. (66)), k components.
+    control : PD or None
+        PD law, normalised: kp, kd arrays (k,), target and target_rate TimeFunctions.
+    composite : str or None
+        Name of the composite joint (e.g. a universal joint) this joint belongs to.
+    """
+
+    name: str
+    type: str
+    node_a: str
+    node_b: str
+    params: dict
+    A: np.ndarray
+    stiffness: np.ndarray
+    reference: np.ndarray
+    damping: np.ndarray
+    actuator: TimeFunction | None
+    control: PD | None
+    composite: str | None = None
+
+    @property
+    def k(self) -> int:
+        return self.A.shape[1]
+
+    @property
+    def abelian(self) -> bool:
+        return is_abelian(self.A)
+
+
+@dataclass(frozen=True)
+class LoadSpec:
+    """External load on a node (Eq. (66)): force in the inertial frame, torque in the material
+    frame of the node, each a TimeFunction of 3 components or None."""
+
+    name: str
+    node: str
+    force: TimeFunction | None
+    torque: TimeFunction | None
+
+
+@dataclass(frozen=True)
+class Model:
+    """A validated, immutable model. Build it with :class:`ModelBuilder`."""
+
+    nodes: tuple[NodeSpec, ...]
+    joints: tuple[JointSpec, ...]
+    loads: tuple[LoadSpec, ...] = ()
+    gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    composites: dict = field(default_factory=dict)
+    name: str = "model"
+
+    def node(self, name: str) -> NodeSpec:
+        """The node called ``name`` (KeyError listing valid names otherwise)."""
+        for n in self.nodes:
+            if n.name == name:
+                return n
+        raise KeyError(_unknown("node", name, [n.name for n in self.nodes]))
+
+    def joint(self, name: str) -> JointSpec:
+        """The joint called ``name``."""
+        for j in self.joints:
+            if j.name == name:
+                return j
+        raise KeyError(_unknown("joint", name, [j.name for j in self.joints]))
+
+    @property
+    def node_names(self) -> list[str]:
+        return [n.name for n in self.nodes]
+
+    @property
+    def joint_names(self) -> list[str]:
+        return [j.name for j in self.joints]
+
+
+def _unknown(kind: str, name: str, valid: list[str]) -> str:
+    close = difflib.get_close_matches(str(name), valid, n=1)
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    shown = ", ".join(repr(v) for v in valid[:20]) + (" ..." if len(valid) > 20 else "")
+    return f"unknown {kind} {name!r}{hint} (valid: {shown})"
+
+
+def _vec(v: Any, n: int, item: str, fld: str, *, allow_none: bool = False) -> np.ndarray | None:
+    if v is None and allow_none:
+        return None
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(item, fld, f"{n} numbers", v) from None
+    if a.shape != (n,):
+        raise ModelError(item, fld, f"{n} numbers", v)
+    if not np.all(np.isfinite(a)):
+        raise ModelError(item, fld, f"{n} finite numbers", v)
+    return a
+
+
+def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.ndarray:
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(item, fld, f"a number or {k} numbers", v) from None
+    if a.ndim == 0:
+        a = np.full(k, float(a))
+    if a.shape != (k,):
+        raise ModelError(item, fld, f"a number or {k} numbers (one per relative coordinate)", v)
+    if not np.all(np.isfinite(a)):
+        raise ModelError(item, fld, "finite numbers", v)
+    if nonneg and np.any(a < 0):
+        raise ModelError(item, fld, "non-negative values", v)
+    return a
+
+
+def _rotation(v: Any, item: str, fld: str) -> np.ndarray:
+    try:
+        R = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(item, fld, "a 3x3 rotation matrix", v) from None
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        raise ModelError(item, fld, "a 3x3 rotation matrix", v)
+    if np.abs(R.T @ R - np.eye(3)).max() > 1e-9 or np.linalg.det(R) < 0:
+        raise ModelError(item, fld, "an orthonormal matrix with determinant +1 (a rotation)", R)
+    return R
+
+
+class ModelBuilder:
+    """Mutable builder of a :class:`Model` (the Python front door).
+
+    Parameters
+    ----------
+    gravity : array_like, shape (3,)
+        Gravity acceleration in the inertial frame, e.g. ``(0, 0, -9.81)``.
+    name : str
+        Model name (used in results and files).
+
+    Examples
+    --------
+    >>> import se3dyn as sd
+    >>> mb = sd.ModelBuilder(gravity=(0, 0, -9.81))
+    >>> mb.node("ground", position=(0, 0, 0), fixed=True)
+    >>> mb.node("bob", position=(1, 0, 0), mass=1.0, inertia=(1e-3, 1e-3, 1e-3))
+    >>> mb.joint("pivot", "spherical", "ground", "bob")  # doctest: +SKIP
+    """
+
+    def __init__(self, gravity: Any = (0.0, 0.0, 0.0), name: str = "model"):
+        self._gravity = _vec(gravity, 3, "model", "gravity")
+        self._name = str(name)
+        self._nodes: dict[str, NodeSpec] = {}
+        self._joints: dict[str, JointSpec] = {}
+        self._loads: dict[str, LoadSpec] = {}
+        self._composites: dict[str, tuple[str, ...]] = {}
+
+    # -----------------------------------------------------------------------------------------
+    def node(self, name: str, position: Any = (0.0, 0.0, 0.0), *, orientation: Any = None,
+             mass: float = 0.0, inertia: Any = None, principal_axes: Any = None,
+             fixed: bool = False, velocity: Any = None, angular_velocity: Any = None,
+             velocity_frame: str = "inertial") -> None:
+        """Add a node.
+
+        Parameters
+        ----------
+        name : str
+            Unique node name.
+        position : array_like, shape (3,)
+            Initial position in the inertial frame (Table 2).
+        orientation : array_like, shape (3, 3), optional
+            Initial rotation R0 of the node frame (identity by default, as the paper proposes).
+        mass : float
+            Mass (kg), >= 0. A node with mass needs a positive-definite inertia.
+        inertia : array_like, shape (3,) or (3, 3), optional
+            Principal moments ``(J1, J2, J3)`` about ``principal_axes`` (identity by default),
+            or a full symmetric tensor in the inertial frame of the initial configuration (Sec. 6).
+        principal_axes : array_like, shape (3, 3), optional
+            Rotation ``R0_I`` whose columns are the principal axes (Sec. 6, ``J = R0 J' R0^T``).
+        fixed : bool
+            Clamped node (boundary condition); must carry no mass.
+        velocity, angular_velocity : array_like, shape (3,), optional
+            Initial linear and angular velocity.
+        velocity_frame : {"inertial", "material"}
+            Frame in which the initial velocities are given.
+        """
+        item = f"node {name!r}"
+        if not isinstance(name, str) or not name:
+            raise ModelError("node", "name", "a non-empty string", name)
+        if name in self._nodes:
+            raise ModelError(item, "name", "a unique node name", name, "defined twice")
+        x = _vec(position, 3, item, "position")
+        R0 = np.eye(3) if orientation is None else _rotation(orientation, item, "orientation")
+        try:
+            m = float(mass)
+        except (TypeError, ValueError):
+            raise ModelError(item, "mass", "a non-negative number (kg)", mass) from None
+        if not math.isfinite(m) or m < 0:
+            raise ModelError(item, "mass", "a non-negative finite number (kg)", mass)
+        J = self._inertia(item, m, inertia, principal_axes)
+        if fixed and (m > 0 or np.any(J != 0)):
+            raise ModelError(item, "mass", "no mass or inertia on a fixed node", m,
+                             "a clamped node does not move; put the body on a free node")
+        if velocity_frame not in ("inertial", "material"):
+            raise ModelError(item, "velocity_frame", "'inertial' or 'material'", velocity_frame)
+        vU = np.zeros(3) if velocity is None else _vec(velocity, 3, item, "velocity")
+        vO = (np.zeros(3) if angular_velocity is None
+              else _vec(angular_velocity, 3, item, "angular_velocity"))
+        if fixed and (np.any(vU != 0) or np.any(vO != 0)):
+            raise ModelError(item, "velocity", "zero velocity for a fixed node", (vU, vO))
+        if velocity_frame == "material":
+            vU, vO = R0 @ vU, R0 @ vO
+        self._nodes[name] = NodeSpec(name, x, R0, m, J, bool(fixed), np.concatenate([vU, vO]))
+
+    @staticmethod
+    def _inertia(item: str, m: float, inertia: Any, axes: Any) -> np.ndarray:
+        if inertia is None:
+            if m > 0:
+                raise ModelError(item, "inertia", "a positive-definite inertia for a node with "
+                                 "mass", None, "give principal values (J1, J2, J3)")
+            return np.zeros((3, 3))
+        try:
+            Jin = np.asarray(inertia, dtype=float)
+        except (TypeError, ValueError):
+            raise ModelError(item, "inertia", "3 principal values or a 3x3 tensor", inertia) from None
+        if not np.all(np.isfinite(Jin)):
+            raise ModelError(item, "inertia", "finite values", inertia)
+        if Jin.shape == (3,):
+            Rp = np.eye(3) if axes is None else _rotation(axes, item, "principal_axes")
+            J = Rp @ np.diag(Jin) @ Rp.T
+        elif Jin.shape == (3, 3):
+            if axes is not None:
+                raise ModelError(item, "principal_axes", "no principal axes with a full tensor",
+                                 axes)
+            if np.abs(Jin - Jin.T).max() > 1e-12 * max(1.0, np.abs(Jin).max()):
+                raise ModelError(item, "inertia", "a symmetric 3x3 tensor", Jin)
+            J = 0.5 * (Jin + Jin.T)
+        else:
+            raise ModelError(item, "inertia", "3 principal values or a 3x3 tensor", inertia)
+        if m == 0 and np.any(J != 0):
+            raise ModelError(item, "inertia", "no inertia on a node without mass", inertia,
+                             "give the node a mass")
+        if m > 0:
+            ev = np.linalg.eigvalsh(J)
+            if ev.min() <= 0:
+                raise ModelError(item, "inertia", "a positive-definite inertia", inertia,
+                                 f"eigenvalues {ev}")
+        return J
+
+    # -----------------------------------------------------------------------------------------
+    def joint(self, name: str, type: str, node_a: str, node_b: str, *, axis: Any = None,
+              axes: Any = None, normal: Any = None, pitch: Any = None, A: Any = None,
+              stiffness: Any = None, reference: Any = None, damping: Any = None,
+              actuator: Any = None, torque: Any = None, force: Any = None,
+              control: PD | None = None) -> None:
+        """Add a kinematic joint ``H_B = H_A H_J`` (Eq. (7)) between nodes A and B.
+
+        Parameters
+        ----------
+        name : str
+            Unique joint name.
+        type : str
+            One of ``rigid, hinge, prismatic, cylindrical, spherical, planar, screw, general,
+            universal`` (Table 1).
+        node_a, node_b : str
+            Node names (A and B of Eq. (7)).
+        axis : array_like, shape (3,)
+            Unit axis (hinge, prismatic, cylindrical, screw), inertial frame, initial config.
+        axes : array_like, shape (3, 3) / (2, 3)
+            Spherical: three orthonormal rotation axes (identity default). Planar: two in-plane
+            axes. Universal: the two hinge axes (first on A's side, second on B's side).
+        normal : array_like, shape (3,)
+            Planar joint: plane normal.
+        pitch : float
+            Screw joint: translation per radian (m/rad).
+        A : array_like, shape (6, k)
+            General joint: subalgebra basis, columns ``(e_U, e_Omega)``.
+        stiffness, reference : float or array_like, shape (k,)
+            Spring on the relative coordinates, Eq. (62): ``K (alpha - reference)``.
+        damping : float or array_like, shape (k,)
+            Damper on the relative velocities, Eq. (64): ``C v_j``.
+        actuator : number, array (k,), TimeFunction or callable of t
+            Actuator force/torque tau(t) on the relative coordinates (Eq. (66)). ``torque`` and
+            ``force`` are aliases, for readability.
+        control : PD, optional
+            PD control law on the relative coordinates (abelian joints only).
+        """
+        jt_keys = sorted(list(JOINT_TYPES) + ["universal"])
+        item = f"joint {name!r} ({type})"
+        if not isinstance(name, str) or not name:
+            raise ModelError("joint", "name", "a non-empty string", name)
+        if name in self._joints or name in self._composites:
+            raise ModelError(item, "name", "a unique joint name", name, "defined twice")
+        if type not in jt_keys:
+            close = difflib.get_close_matches(str(type), jt_keys, n=1)
+            raise ModelError(f"joint {name!r}", "type", "one of " + ", ".join(jt_keys), type,
+                             f"did you mean '{close[0]}'?" if close else "")
+        for fld, nd in (("node_a", node_a), ("node_b", node_b)):
+            if nd not in self._nodes:
+                raise ModelError(item, fld, "the name of a node defined before the joint", nd,
+                                 _unknown("node", nd, list(self._nodes)))
+        if node_a == node_b:
+            raise ModelError(item, "node_b", "a node other than node_a", node_b,
+                             "a joint between a node and itself")
+        acts = [(k, v) for k, v in (("actuator", actuator), ("torque", torque), ("force", force))
+                if v is not None]
+        if len(acts) > 1:
+            raise ModelError(item, acts[1][0], f"only one of actuator/torque/force", acts[1][1])
+        act_field, act = acts[0] if acts else ("actuator", None)
+        if type == "universal":
+            self._universal(name, node_a, node_b, axes, stiffness, reference, damping,
+                            act_field, act, control)
+            return
+        given = {"axis": axis, "axes": axes, "normal": normal, "pitch": pitch, "A": A}
+        jt = JOINT_TYPES[type]
+        for key, val in given.items():
+            if val is not None and key not in jt.params:
+                raise ModelError(item, key, "parameters " + (", ".join(jt.params) or "none"),
+                                 val, f"a {type} joint takes no '{key}'")
+        params = {key: given[key] for key in jt.params}
+        for key in ("axis", "normal", "pitch", "A"):
+            if key in params and params[key] is None:
+                raise ModelError(item, key, f"a value (required for a {type} joint)", None)
+        A_ = jt.make_A(item, **params)
+        self._add_joint(name, type, node_a, node_b, params, A_, stiffness, reference, damping,
+                        act_field, act, control)
+
+    def _add_joint(self, name, type, node_a, node_b, params, A_, stiffness, reference, damping,
+                   act_field, act, control, composite=None):
+        item = f"joint {name!r} ({type})"
+        k = A_.shape[1]
+        K = np.zeros(k) if stiffness is None else _kvec(stiffness, k, item, "stiffness",
+                                                           nonneg=True)
+        a0 = np.zeros(k) if reference is None else _kvec(reference, k, item, "reference")
+        C = np.zeros(k) if damping is None else _kvec(damping, k, item, "damping", nonneg=True)
+        if k == 0:
+            for fld, v in (("stiffness", stiffness), ("damping", damping), (act_field, act),
+                           ("control", control)):
+                if v is not None:
+                    raise ModelError(item, fld, "nothing: a rigid joint has no relative "
+                                     "coordinates", v)
+        tau = None if act is None else as_timefunc(act, item, act_field, k)
+        pd = None
+        if control is not None:
+            if not isinstance(control, PD):
+                raise ModelError(item, "control", "an se3dyn.PD(kp, kd, target) law", control)
+            if not is_abelian(A_):
+                raise ModelError(item, "control", "an abelian joint (hinge, prismatic, "
+                                 "cylindrical, screw) for a PD law on relative coordinates",
+                                 type)
+            kp = _kvec(control.kp, k, item, "control.kp", nonneg=True)
+            kd = _kvec(control.kd, k, item, "control.kd", nonneg=True)
+            tgt = as_timefunc(control.target, item, "control.target", k)
+            rate = (None if control.target_rate is None
+                    else as_timefunc(control.target_rate, item, "control.target_rate", k))
+            pd = PD(kp, kd, tgt, rate)
+        self._joints[name] = JointSpec(name, type, node_a, node_b, params, A_, K, a0, C, tau, pd,
+                                       composite)
+
+    def _universal(self, name, node_a, node_b, axes, stiffness, reference, damping, act_field,
+                   act, control):
+        item = f"joint {name!r} (universal)"
+        try:
+            ax = np.asarray(axes, dtype=float)
+        except (TypeError, ValueError):
+            ax = None
+        if axes is None or ax is None or ax.shape != (2, 3):
+            raise ModelError(item, "axes", "two orthogonal unit axes (shape (2, 3))", axes)
+        a1 = unit_vector(ax[0], item, "axes[0]")
+        a2 = unit_vector(ax[1], item, "axes[1]")
+        if abs(a1 @ a2) > 1e-9:
+            raise ModelError(item, "axes", "two orthogonal axes (a cardan cross)", axes)
+        cross = f"{name}:cross"
+        if cross in self._nodes:
+            raise ModelError(item, "name", "a name whose ':cross' node is free", cross)
+        self._nodes[cross] = NodeSpec(cross, self._nodes[node_b].position.copy(), np.eye(3), 0.0,
+                                      np.zeros((3, 3)), False, np.zeros(6))
+
+        def part(v, i, fld):
+            if v is None:
+                return None
+            a = _kvec(v, 2, item, fld)
+            return a[i]
+
+        tau = None if act is None else as_timefunc(act, item, act_field, 2)
+        sub = []
+        for i, (na, nb, a) in enumerate(((node_a, cross, a1), (cross, node_b, a2))):
+            sname = f"{name}:{i + 1}"
+            A_ = JOINT_TYPES["hinge"].make_A(item, axis=a)
+            sub_act = None if tau is None else _component(tau, i)
+            sub_pd = None
+            if control is not None:
+                sub_pd = PD(part(control.kp, i, "control.kp"), part(control.kd, i, "control.kd"),
+                            _component(as_timefunc(control.target, item, "control.target", 2), i),
+                            None if control.target_rate is None else _component(
+                                as_timefunc(control.target_rate, item, "control.target_rate",
+                                            2), i))
+            self._add_joint(sname, "hinge", na, nb, {"axis": a}, A_, part(stiffness, i,
+                            "stiffness"), part(reference, i, "reference"),
+                            part(damping, i, "damping"), act_field, sub_act, sub_pd,
+                            composite=name)
+            sub.append(sname)
+        self._composites[name] = tuple(sub)
+
+    # -----------------------------------------------------------------------------------------
+    def load(self, name: str, node: str, *, force: Any = None, torque: Any = None) -> None:
+        """Add an external load on a node (Eq. (66)).
+
+        Parameters
+        ----------
+        name : str
+            Unique load name.
+        node : str
+            Loaded node.
+        force : array (3,), TimeFunction or callable of t, optional
+            Force in the **inertial** frame (its tangent term, Eq. (67), is included).
+        torque : array (3,), TimeFunction or callable of t, optional
+            Torque in the **material** frame of the node.
+        """
+        item = f"load {name!r}"
+        if name in self._loads:
+            raise ModelError(item, "name", "a unique load name", name, "defined twice")
+        if node not in self._nodes:
+            raise ModelError(item, "node", "the name of a defined node", node,
+                             _unknown("node", node, list(self._nodes)))
+        if self._nodes[node].fixed:
+            raise ModelError(item, "node", "a free node (a load on a clamped node does nothing)",
+                             node)
+        if force is None and torque is None:
+            raise ModelError(item, "force", "a force and/or a torque", None)
+        f = None if force is None else as_timefunc(force, item, "force", 3)
+        m = None if torque is None else as_timefunc(torque, item, "torque", 3)
+        self._loads[name] = LoadSpec(name, node, f, m)
+
+    # -----------------------------------------------------------------------------------------
+    def build(self) -> Model:
+        """Validate the whole model and return the immutable :class:`Model`."""
+        if not self._nodes:
+            raise ModelError("model", "nodes", "at least one node", 0)
+        attached = {n: 0 for n in self._nodes}
+        for j in self._joints.values():
+            attached[j.node_a] += 1
+            attached[j.node_b] += 1
+        loaded = {ld.node for ld in self._loads.values()}
+        for n in self._nodes.values():
+            if not n.fixed and n.mass == 0 and attached[n.name] == 0:
+                raise ModelError(f"node {n.name!r}", "mass", "a mass, or a joint attaching it",
+                                 0.0, "a free massless node with no joint has no equation of "
+                                 "motion" + (" (a load alone is not enough)" if n.name in loaded
+                                             else ""))
+        return Model(tuple(self._nodes.values()), tuple(self._joints.values()),
+                     tuple(self._loads.values()), self._gravity.copy(), dict(self._composites),
+                     self._name)
+
+
+def _component(f: TimeFunction, i: int) -> TimeFunction:
+    from se3dyn.timefunc import Callable
+
+    def comp(t, f=f, i=i):
+        v = np.atleast_1d(np.asarray(f(t), dtype=float))
+        return float(v[i] if v.size > 1 else v[0])
+
+    return Callable(comp)

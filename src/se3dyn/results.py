@@ -1,0 +1,162 @@
+"""In-memory results of a simulation, with accessors by node and joint name.
+
+Writing files and plotting are separate layers; this module only holds arrays.
+"""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from se3dyn.system import System
+
+__all__ = ["Results"]
+
+
+@dataclass
+class Results:
+    """Time histories of a simulation (one row per stored step, the initial state included).
+
+    Attributes
+    ----------
+    system : System
+    t : ndarray (n,)
+    H : ndarray (n, M, 4, 4)        node frames
+    v, vd : ndarray (n, nq)         velocities and accelerations (material frame, Eq. (4))
+    lam : ndarray (n, nm)           multipliers
+    alpha : ndarray (n, nq)         relative coordinates (joint unknowns; Eq. (60))
+    kinetic, potential, spring : ndarray (n,)   energies (Eq. (47), gravity, Eq. (62))
+    work_actuators, work_loads, dissipation : ndarray (n,)   accumulated works
+    iterations : ndarray (n,) int   Newton iterations of the step ending at t (0 at t0)
+    residual, constraint : ndarray (n,)   final relative residual and constraint violation
+    stats : dict                    steps, total iterations, wall time, settings
+    """
+
+    system: System
+    t: np.ndarray
+    H: np.ndarray
+    v: np.ndarray
+    vd: np.ndarray
+    lam: np.ndarray
+    alpha: np.ndarray
+    kinetic: np.ndarray
+    potential: np.ndarray
+    spring: np.ndarray
+    work_actuators: np.ndarray
+    work_loads: np.ndarray
+    dissipation: np.ndarray
+    iterations: np.ndarray
+    residual: np.ndarray
+    constraint: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------------------------------
+    def _node(self, name: str) -> int:
+        names = self.system.node_names
+        try:
+            return names.index(name)
+        except ValueError:
+            close = difflib.get_close_matches(str(name), names, n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            raise KeyError(f"unknown node {name!r}{hint} (valid: {', '.join(names)})") from None
+
+    def _joints(self, name: str) -> list[int]:
+        s = self.system
+        comp = s.model.composites
+        names = list(s.joint_names)
+        if name in comp:
+            return [names.index(n) for n in comp[name]]
+        if name in names:
+            return [names.index(name)]
+        valid = [n for n in names if ":" not in n] + list(comp)
+        close = difflib.get_close_matches(str(name), valid, n=1)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        raise KeyError(f"unknown joint {name!r}{hint} (valid: {', '.join(valid)})")
+
+    def node_position(self, name: str) -> np.ndarray:
+        """Position of a node in the inertial frame, shape (n, 3)."""
+        return self.H[:, self._node(name), :3, 3].copy()
+
+    def node_rotation(self, name: str) -> np.ndarray:
+        """Rotation matrix of a node (material axes in the inertial frame), shape (n, 3, 3)."""
+        return self.H[:, self._node(name), :3, :3].copy()
+
+    def node_frame(self, name: str) -> np.ndarray:
+        """Homogeneous frame of a node, shape (n, 4, 4)."""
+        return self.H[:, self._node(name)].copy()
+
+    def _node_dof(self, name: str, arr: np.ndarray, frame: str) -> np.ndarray:
+        i = self._node(name)
+        s = self.system
+        if frame not in ("material", "inertial"):
+            raise ValueError(f"frame: expected 'material' or 'inertial', got {frame!r}")
+        if s.node_fixed[i]:
+            return np.zeros((len(self.t), 6))
+        d = s.node_dofadr[i]
+        out = arr[:, d:d + 6].copy()
+        if frame == "inertial":
+            R = self.H[:, i, :3, :3]
+            out[:, :3] = np.einsum("nij,nj->ni", R, out[:, :3])
+            out[:, 3:] = np.einsum("nij,nj->ni", R, out[:, 3:])
+        return out
+
+    def node_velocity(self, name: str, frame: str = "material") -> np.ndarray:
+        """Velocity ``(U, Omega)`` of a node, shape (n, 6).
+
+        ``frame="material"``: the unknowns of Eq. (4); ``frame="inertial"``: ``(R v_U, R v_Omega)``
+        (the time derivative of the position and the spatial angular velocity).
+        """
+        return self._node_dof(name, self.v, frame)
+
+    def node_acceleration(self, name: str, frame: str = "material") -> np.ndarray:
+        """Time derivative of the material velocity, shape (n, 6); ``frame="inertial"`` rotates
+        both parts by R (this is not the inertial acceleration of the point unless Omega = 0)."""
+        return self._node_dof(name, self.vd, frame)
+
+    def joint_coordinates(self, name: str) -> np.ndarray:
+        """Relative coordinates alpha of a joint (Eq. (60)), unwrapped, shape (n, k).
+
+        For a composite joint (universal), the coordinates of its parts side by side.
+        """
+        s = self.system
+        cols = []
+        for j in self._joints(name):
+            d = s.joint_dofadr[j]
+            cols.append(self.alpha[:, d:d + s.joint_k[j]] if d >= 0
+                        else np.zeros((len(self.t), 0)))
+        return np.concatenate(cols, axis=1)
+
+    def joint_velocities(self, name: str) -> np.ndarray:
+        """Relative velocities v_j of a joint (Eq. (61)), shape (n, k)."""
+        s = self.system
+        cols = []
+        for j in self._joints(name):
+            d = s.joint_dofadr[j]
+            cols.append(self.v[:, d:d + s.joint_k[j]] if d >= 0
+                        else np.zeros((len(self.t), 0)))
+        return np.concatenate(cols, axis=1)
+
+    def joint_multipliers(self, name: str) -> np.ndarray:
+        """Lagrange multipliers of a joint, shape (n, 6) (n, 6 * parts for a composite).
+
+        They are the constraint forces and moments on node B in its material frame, with
+        the sign of Eq. (36) (``Phi_q^T lambda`` on the left-hand side).
+        """
+        s = self.system
+        return np.concatenate([self.lam[:, s.joint_multadr[j]:s.joint_multadr[j] + 6]
+                               for j in self._joints(name)], axis=1)
+
+    @property
+    def total_energy(self) -> np.ndarray:
+        """Kinetic + gravity potential + spring energy, shape (n,)."""
+        return self.kinetic + self.potential + self.spring
+
+    @property
+    def energy_balance(self) -> np.ndarray:
+        """``E - W_actuators - W_loads + dissipation``, constant for the exact solution, (n,)."""
+        return self.total_energy - self.work_actuators - self.work_loads + self.dissipation
+
+    def __len__(self) -> int:
+        return len(self.t)

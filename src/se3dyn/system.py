@@ -1,0 +1,531 @@
+"""Compiled system: numbered unknowns, struct-of-arrays element batches, fixed sparsity pattern,
+and the vectorised evaluation of the residual (Eq. (39)), the constraints (Eqs. (54)-(56)) and the
+iteration matrix (Eq. (46)).
+
+Unknowns (Sec. 3.3, Eq. (14)): for every free node 6 increments ``n_I = (n_U, n_Omega)`` and for
+every joint its k relative increments ``n_j`` -> ``nq = 6 M_free + sum k``. Multipliers: 6 per joint
+(Eq. (55)) -> ``nm = 6 m``. The iteration matrix has size ``N = nq + nm``.
+
+Naming follows MuJoCo's struct-of-arrays style: ``node_dofadr[i]`` is the first unknown of node i
+(-1 for a clamped node), ``joint_dofadr[j]`` the first relative increment of joint j, and
+``joint_multadr[j]`` its first multiplier row (in the multiplier vector).
+
+Scaling (the "scaled" iteration matrix). With ``beta' = (1-alpha_m)/(beta h^2 (1-alpha_f))`` the
+dynamic rows are divided by beta' and the multiplier columns multiplied by beta' (multipliers
+solved as ``lambda / beta'``). The matrix then reads
+
+    [[M + (gamma'/beta') C_T + K_T T / beta',  Phi_q^T],
+     [Phi_q* T,                                0      ]]
+
+whose entries are O(1) whatever the step, so Newton converges alike for h = 1e-1 and h = 1e-6
+(the unscaled matrix of Eq. (46) has a condition number growing like h^-4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from se3dyn import lie
+from se3dyn.errors import ModelError, SimulationError
+from se3dyn.model import Model
+
+__all__ = ["System", "JointGroup", "compile_model", "Evaluation"]
+
+_COMP6 = ("U_x", "U_y", "U_z", "Omega_x", "Omega_y", "Omega_z")
+
+
+@dataclass(frozen=True)
+class JointGroup:
+    """All joints with the same number k of relative coordinates, as arrays.
+
+    Attributes
+    ----------
+    k : int
+    ids : ndarray (nj,)        joint indices
+    A : ndarray (nj, 6, k)     subalgebra bases in the material frame of node B (Eq. (9))
+    Apinv : ndarray (nj, k, 6) pseudo-inverses of A
+    a, b : ndarray (nj,)       node indices of A and B
+    dof_a, dof_b : ndarray (nj, 6)  unknown indices of nodes A and B (-1 when clamped)
+    jdof : ndarray (nj, k)     unknown indices of the relative increments
+    mult : ndarray (nj, 6)     multiplier indices (into the multiplier vector)
+    abelian : ndarray (nj,) bool
+    H0 : ndarray (nj, 4, 4)    initial joint transformations H_J0 = H_A0^-1 H_B0 (Sec. 5.2)
+    """
+
+    k: int
+    ids: np.ndarray
+    A: np.ndarray
+    Apinv: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    dof_a: np.ndarray
+    dof_b: np.ndarray
+    jdof: np.ndarray
+    mult: np.ndarray
+    abelian: np.ndarray
+    H0: np.ndarray
+    has_nonabelian_spring: bool
+
+
+@dataclass(frozen=True)
+class System:
+    """Frozen arrays describing a compiled model (see the module docstring for the numbering).
+
+    Shapes: M nodes, m joints, nq unknowns, nm = 6 m multipliers, N = nq + nm.
+    """
+
+    model: Model
+    nq: int
+    nm: int
+    node_names: tuple[str, ...]
+    node_fixed: np.ndarray  # (M,) bool
+    node_dofadr: np.ndarray  # (M,) int
+    node_free: np.ndarray  # (nf,) node indices of free nodes
+    node_dofidx: np.ndarray  # (nf, 6) unknowns of free nodes
+    node_mass: np.ndarray  # (M,)
+    node_J: np.ndarray  # (M, 3, 3) inertia in the material frame
+    node_H0: np.ndarray  # (M, 4, 4)
+    node_v0: np.ndarray  # (M, 6) material initial velocities
+    joint_names: tuple[str, ...]
+    joint_type: tuple[str, ...]
+    joint_k: np.ndarray  # (m,)
+    joint_dofadr: np.ndarray  # (m,)
+    joint_multadr: np.ndarray  # (m,)
+    joint_a: np.ndarray  # (m,)
+    joint_b: np.ndarray  # (m,)
+    joint_H0: np.ndarray  # (m, 4, 4)
+    joint_abelian: np.ndarray  # (m,) bool
+    groups: tuple[JointGroup, ...]
+    # force elements on joint unknowns, (nq,) arrays, zero on node unknowns
+    dof_stiffness: np.ndarray
+    dof_reference: np.ndarray
+    dof_damping: np.ndarray
+    dof_kp: np.ndarray
+    dof_kd: np.ndarray
+    dof_is_joint: np.ndarray  # (nq,) bool
+    gravity: np.ndarray  # (3,)
+    actuators: tuple  # ((dof indices (k,), TimeFunction), ...)
+    controls: tuple  # ((dof indices, target, target_rate or None), ...)
+    loads: tuple  # ((node index, force TF or None, torque TF or None), ...)
+    labels: tuple[str, ...]  # (N,) item and component of each unknown / constraint row
+    items: tuple[str, ...]  # (N,) item name of each row
+    length_scale: float
+    pattern: dict = field(repr=False)
+
+    @property
+    def N(self) -> int:
+        return self.nq + self.nm
+
+    @property
+    def M(self) -> int:
+        return len(self.node_names)
+
+    @property
+    def m(self) -> int:
+        return len(self.joint_names)
+
+
+# ---------------------------------------------------------------------------------------------
+def compile_model(model: Model) -> System:
+    """Number the unknowns, batch the elements by type and compute the sparsity pattern once.
+
+    Parameters
+    ----------
+    model : Model
+
+    Returns
+    -------
+    System
+    """
+    if not isinstance(model, Model):
+        raise ModelError("compile", "model", "an se3dyn.Model (from ModelBuilder.build())",
+                         type(model).__name__)
+    nodes = model.nodes
+    M = len(nodes)
+    nidx = {n.name: i for i, n in enumerate(nodes)}
+    node_fixed = np.array([n.fixed for n in nodes], dtype=bool)
+    node_dofadr = -np.ones(M, dtype=np.int64)
+    nq = 0
+    labels: list[str] = []
+    items: list[str] = []
+    for i, n in enumerate(nodes):
+        if not n.fixed:
+            node_dofadr[i] = nq
+            nq += 6
+            labels += [f"node '{n.name}' {c}" for c in _COMP6]
+            items += [f"node '{n.name}'"] * 6
+    node_free = np.flatnonzero(~node_fixed)
+    node_dofidx = node_dofadr[node_free][:, None] + np.arange(6)
+    R0 = np.array([n.orientation for n in nodes])
+    H0 = lie.make_frame(R0, np.array([n.position for n in nodes]))
+    node_mass = np.array([n.mass for n in nodes])
+    # inertia to the material frame of the initial configuration: J_mat = R0^T J_in R0 (Sec. 6)
+    node_J = np.einsum("nji,njk,nkl->nil", R0, np.array([n.inertia for n in nodes]), R0)
+    vin = np.array([n.velocity for n in nodes]).reshape(M, 6)
+    node_v0 = np.concatenate([np.einsum("nji,nj->ni", R0, vin[:, :3]),
+                              np.einsum("nji,nj->ni", R0, vin[:, 3:])], axis=1)
+
+    joints = model.joints
+    m = len(joints)
+    joint_k = np.array([j.k for j in joints], dtype=np.int64)
+    joint_dofadr = -np.ones(m, dtype=np.int64)
+    for jj, j in enumerate(joints):
+        if j.k:
+            joint_dofadr[jj] = nq
+            nq += j.k
+            labels += [f"joint '{j.name}' alpha_{c}" for c in range(j.k)]
+            items += [f"joint '{j.name}'"] * j.k
+    nm = 6 * m
+    for j in joints:
+        labels += [f"joint '{j.name}' constraint {c}" for c in range(6)]
+        items += [f"joint '{j.name}'"] * 6
+    joint_multadr = 6 * np.arange(m, dtype=np.int64)
+    ja = np.array([nidx[j.node_a] for j in joints], dtype=np.int64)
+    jb = np.array([nidx[j.node_b] for j in joints], dtype=np.int64)
+    joint_H0 = lie.compose(lie.inverse(H0[ja]), H0[jb]) if m else np.zeros((0, 4, 4))
+    # A in the material frame of node B: e -> (R_B0^T e_U, R_B0^T e_Omega)
+    A_mat = []
+    for jj, j in enumerate(joints):
+        Rb = R0[jb[jj]]
+        A_mat.append(np.concatenate([Rb.T @ j.A[:3], Rb.T @ j.A[3:]], axis=0))
+    abelian = np.array([j.abelian for j in joints], dtype=bool)
+
+    dof_K = np.zeros(nq)
+    dof_ref = np.zeros(nq)
+    dof_C = np.zeros(nq)
+    dof_kp = np.zeros(nq)
+    dof_kd = np.zeros(nq)
+    dof_is_joint = np.zeros(nq, dtype=bool)
+    actuators, controls = [], []
+    for jj, j in enumerate(joints):
+        if not j.k:
+            continue
+        d = joint_dofadr[jj] + np.arange(j.k)
+        dof_is_joint[d] = True
+        dof_K[d] = j.stiffness
+        dof_ref[d] = j.reference
+        dof_C[d] = j.damping
+        if j.actuator is not None:
+            actuators.append((d, j.actuator))
+        if j.control is not None:
+            dof_kp[d] = j.control.kp
+            dof_kd[d] = j.control.kd
+            controls.append((d, j.control.target, j.control.target_rate))
+
+    groups = []
+    for k in sorted(set(joint_k.tolist())):
+        ids = np.flatnonzero(joint_k == k)
+        A = np.array([A_mat[i] for i in ids]).reshape(len(ids), 6, k)
+        dof_a = np.where(node_fixed[ja[ids]][:, None], -1,
+                         node_dofadr[ja[ids]][:, None] + np.arange(6))
+        dof_b = np.where(node_fixed[jb[ids]][:, None], -1,
+                         node_dofadr[jb[ids]][:, None] + np.arange(6))
+        jdof = joint_dofadr[ids][:, None] + np.arange(k)
+        nonab_spring = bool(np.any([(not abelian[i]) and np.any(joints[i].stiffness != 0)
+                                    for i in ids]))
+        groups.append(JointGroup(
+            k=k, ids=ids, A=A, Apinv=np.linalg.pinv(A) if k else np.zeros((len(ids), 0, 6)),
+            a=ja[ids], b=jb[ids], dof_a=dof_a, dof_b=dof_b, jdof=jdof.reshape(len(ids), k),
+            mult=joint_multadr[ids][:, None] + np.arange(6), abelian=abelian[ids],
+            H0=joint_H0[ids], has_nonabelian_spring=nonab_spring))
+
+    loads = tuple((nidx[ld.node], ld.force, ld.torque) for ld in model.loads)
+    pos = H0[:, :3, 3]
+    L = float(np.max(np.linalg.norm(pos - pos.mean(axis=0), axis=1))) if M else 1.0
+    sysd = dict(
+        model=model, nq=nq, nm=nm, node_names=tuple(n.name for n in nodes),
+        node_fixed=node_fixed, node_dofadr=node_dofadr, node_free=node_free,
+        node_dofidx=node_dofidx, node_mass=node_mass, node_J=node_J, node_H0=H0,
+        node_v0=node_v0, joint_names=tuple(j.name for j in joints),
+        joint_type=tuple(j.type for j in joints), joint_k=joint_k, joint_dofadr=joint_dofadr,
+        joint_multadr=joint_multadr, joint_a=ja, joint_b=jb, joint_H0=joint_H0,
+        joint_abelian=abelian, groups=tuple(groups), dof_stiffness=dof_K, dof_reference=dof_ref,
+        dof_damping=dof_C, dof_kp=dof_kp, dof_kd=dof_kd, dof_is_joint=dof_is_joint,
+        gravity=model.gravity.copy(), actuators=tuple(actuators), controls=tuple(controls),
+        loads=loads, labels=tuple(labels), items=tuple(items), length_scale=max(L, 1.0),
+        pattern={})
+    s = System(**sysd)
+    s.pattern.update(_pattern(s))
+    return s
+
+
+# ---------------------------------------------------------------------------------------------
+def _block(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Row/col indices of a batch of dense blocks: rows (nb, r), cols (nb, c) -> (nb, r, c)."""
+    nb, r = rows.shape
+    c = cols.shape[1]
+    R = np.broadcast_to(rows[:, :, None], (nb, r, c))
+    C = np.broadcast_to(cols[:, None, :], (nb, r, c))
+    return R.ravel(), C.ravel()
+
+
+def _pattern(s: System) -> dict:
+    """Fixed sparsity pattern: the (row, col) of every value produced by :func:`evaluate`, in the
+    same order, and the map of each value to its slot in CSC storage (duplicates summed)."""
+    N, nq = s.N, s.nq
+    rows, cols = [], []
+    r, c = _block(s.node_dofidx, s.node_dofidx)
+    rows.append(r)
+    cols.append(c)
+    for g in s.groups:
+        mrow = nq + g.mult
+        for rr, cc in ((mrow, g.dof_a), (mrow, g.dof_b), (mrow, g.jdof), (g.dof_a, mrow),
+                       (g.dof_b, mrow), (g.jdof, mrow), (g.dof_a, g.jdof), (g.jdof, g.jdof)):
+            r, c = _block(rr, cc)
+            rows.append(r)
+            cols.append(c)
+    rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+    cols = np.concatenate(cols) if cols else np.zeros(0, np.int64)
+    keep = np.flatnonzero((rows >= 0) & (cols >= 0))
+    key = cols[keep] * N + rows[keep]  # column-major: CSC order after sorting
+    uniq, inv = np.unique(key, return_inverse=True)
+    indices = (uniq % N).astype(np.int32)
+    colnum = uniq // N
+    indptr = np.searchsorted(colnum, np.arange(N + 1)).astype(np.int32)
+    dense_key = rows[keep] * N + cols[keep]
+    return dict(keep=keep, inv=inv, nnz=len(uniq), indices=indices, indptr=indptr,
+                dense_key=dense_key, nvals=len(rows))
+
+
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class Evaluation:
+    """Everything evaluated at one Newton iterate.
+
+    Attributes
+    ----------
+    H : (M, 4, 4) node frames; HJ : (m, 4, 4) joint transformations
+    r : (nq,) residual of Eq. (39); phi : (nm,) constraints Eq. (55)
+    alpha : (nq,) relative coordinates (joint unknowns; zero on node unknowns)
+    f_scale : float, magnitude of the forces entering r (for relative tolerances)
+    values : (nvals,) iteration-matrix values in pattern order, or None
+    """
+
+    H: np.ndarray
+    HJ: np.ndarray
+    r: np.ndarray
+    phi: np.ndarray
+    alpha: np.ndarray
+    f_scale: float
+    values: np.ndarray | None = None
+
+
+def _lam_matrix(lam: np.ndarray) -> np.ndarray:
+    """(nj, 6) -> (nj, 6, 6): the matrix Lambda with ad6(d)^T lam = Lambda d."""
+    out = np.zeros(lam.shape[:-1] + (6, 6))
+    LU = lie.hat3(lam[..., :3])
+    out[..., :3, 3:] = LU
+    out[..., 3:, :3] = LU
+    out[..., 3:, 3:] = lie.hat3(lam[..., 3:])
+    return out
+
+
+def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n: np.ndarray,
+             v: np.ndarray, vd: np.ndarray, lam: np.ndarray, inputs: dict,
+             coef: tuple[float, float, float] | None) -> Evaluation:
+    """Evaluate the residual, the constraints and (if ``coef``) the scaled iteration matrix.
+
+    Parameters
+    ----------
+    s : System
+    Hn : (M, 4, 4), HJn : (m, 4, 4)
+        Frames at the start of the step; the iterate is ``H = Hn exp(n)`` (Eq. (38)).
+    alpha_n : (nq,)
+        Relative coordinates at the start of the step (joint unknowns).
+    n, v, vd : (nq,)
+        Increments (Eq. (41)), velocities and accelerations of the iterate.
+    lam : (nm,)
+        Multipliers.
+    inputs : dict
+        Time-dependent loads at the end of the step: ``f`` (M, 3) inertial forces incl. gravity,
+        ``m`` (M, 3) material torques, ``tau`` (nq,) actuator forces, ``ref`` and ``rate`` (nq,)
+        PD targets.
+    coef : (cM, cC, cK) or None
+        Coefficients of M, C_T and K_T T in the iteration matrix (``(1, gamma'/beta', 1/beta')``
+        for the scaled Newton matrix; ``(1, 0, 0)`` for the initial accelerations).
+
+    Returns
+    -------
+    Evaluation
+    """
+    nq = s.nq
+    M = s.M
+    nf = len(s.node_free)
+    # --- nodes: H = Hn exp(n_I) (Eq. (38)), T_SE(3)(n_I) (Eq. (21))
+    n_node = np.zeros((M, 6))
+    n_node[s.node_free] = n[s.node_dofidx]
+    H = Hn.copy()
+    H[s.node_free] = Hn[s.node_free] @ lie.exp_se3(n_node[s.node_free])
+    Tn = np.broadcast_to(np.eye(6), (M, 6, 6)).copy()
+    Tn[s.node_free] = lie.tangent_se3(n_node[s.node_free])
+    R = H[:, :3, :3]
+    vb = v[s.node_dofidx]  # (nf, 6)
+    vdb = vd[s.node_dofidx]
+    mass = s.node_mass[s.node_free]
+    J = s.node_J[s.node_free]
+    vU, vO = vb[:, :3], vb[:, 3:]
+    JO = np.einsum("nij,nj->ni", J, vO)
+    # inertia forces, Eq. (51)
+    fin = np.concatenate([mass[:, None] * (vdb[:, :3] + np.cross(vO, vU)),
+                          np.einsum("nij,nj->ni", J, vdb[:, 3:]) + np.cross(vO, JO)], axis=1)
+    # external forces, Eq. (66): g_ext,I = (R^T f, m)
+    RtF = np.einsum("nji,nj->ni", R[s.node_free], inputs["f"][s.node_free])
+    gext = np.concatenate([RtF, inputs["m"][s.node_free]], axis=1)
+    r = np.zeros(nq + 1)  # last slot collects contributions to clamped nodes
+    r[s.node_dofidx] = fin - gext
+    f_scale = max(float(np.abs(fin).max(initial=0.0)), float(np.abs(gext).max(initial=0.0)))
+    vals = []
+    if coef is not None:
+        cM, cC, cK = coef
+        blk = np.zeros((nf, 6, 6))
+        blk[:, :3, :3] = mass[:, None, None] * np.eye(3)
+        blk[:, 3:, 3:] = J
+        blk *= cM
+        if cC:
+            # tangent damping, Eq. (53)
+            CT = np.zeros((nf, 6, 6))
+            CT[:, :3, :3] = mass[:, None, None] * lie.hat3(vO)
+            CT[:, :3, 3:] = -mass[:, None, None] * lie.hat3(vU)
+            CT[:, 3:, 3:] = lie.hat3(vO) @ J - lie.hat3(JO)
+            blk += cC * CT
+        if cK:
+            # tangent stiffness of the external forces, Eq. (67), times T_SE(3)(n_I)
+            KT = np.zeros((nf, 6, 6))
+            KT[:, :3, 3:] = -lie.hat3(RtF)
+            blk += cK * (KT @ Tn[s.node_free])
+        vals.append(blk.ravel())
+
+    # --- joints, generic kernel over the batches of equal k
+    m = s.m
+    HJ = np.zeros((m, 4, 4))
+    phi = np.zeros(s.nm)
+    alpha = np.zeros(nq)
+    lam_max = float(np.abs(lam).max(initial=0.0))
+    gint_max = 0.0
+    for g in s.groups:
+        k, nj = g.k, len(g.ids)
+        nJ = np.einsum("jik,jk->ji", g.A, n[g.jdof]) if k else np.zeros((nj, 6))
+        HJg = HJn[g.ids] @ lie.exp_se3(nJ) if k else HJn[g.ids].copy()
+        HJ[g.ids] = HJg
+        TJ = lie.tangent_se3(nJ) @ g.A if k else np.zeros((nj, 6, 0))  # Eq. (27), (59)
+        Ad = lie.adjoint_inv(HJg)  # Eq. (57)
+        G = lie.inverse(H[g.b]) @ H[g.a] @ HJg
+        phi[g.mult] = lie.vect_se3(G)  # Eq. (55)
+        lg = lam[g.mult]  # (nj, 6)
+        AdT = np.swapaxes(Ad, 1, 2)
+        ra = np.einsum("jik,jk->ji", AdT, lg)  # Phi_q^T lambda, Eq. (58)
+        r_ab = np.zeros(nq + 1)
+        np.add.at(r_ab, np.where(g.dof_a < 0, nq, g.dof_a), ra)
+        np.add.at(r_ab, np.where(g.dof_b < 0, nq, g.dof_b), -lg)
+        r += r_ab
+        if k:
+            jd = g.jdof
+            rj = np.einsum("jik,ji->jk", g.A, lg)
+            # relative coordinates: Eq. (60) for abelian joints; log coordinates otherwise
+            a_ab = alpha_n[jd] + n[jd]
+            if np.all(g.abelian):
+                a_g = a_ab
+            else:
+                lg_rel = lie.log_se3(lie.inverse(g.H0) @ HJg)
+                a_log = np.einsum("jki,ji->jk", g.Apinv, lg_rel)
+                a_g = np.where(g.abelian[:, None], a_ab, a_log)
+            alpha[jd] = a_g
+            K = s.dof_stiffness[jd]
+            C = s.dof_damping[jd]
+            kp = s.dof_kp[jd]
+            kd = s.dof_kd[jd]
+            vj = v[jd]
+            e = a_g - s.dof_reference[jd]
+            fs = K * e
+            if g.has_nonabelian_spring:
+                # g = T_A(alpha)^-T K (alpha - alpha0) for non-abelian joints
+                TA = g.Apinv @ lie.tangent_se3(np.einsum("jik,jk->ji", g.A, a_g)) @ g.A
+                TAinvT = np.swapaxes(np.linalg.inv(TA), 1, 2)
+                fs = np.where(g.abelian[:, None], fs, np.einsum("jkl,jl->jk", TAinvT, fs))
+            gint = fs + C * vj + kp * (a_g - inputs["ref"][jd]) + kd * (vj - inputs["rate"][jd])
+            gint_max = max(gint_max, float(np.abs(gint).max(initial=0.0)))
+            r[jd] += rj + gint - inputs["tau"][jd]  # Eqs. (62), (64), (66)
+        if coef is not None:
+            cM, cC, cK = coef
+            RG = G[:, :3, :3]
+            Dv = np.zeros((nj, 6, 6))
+            Dv[:, :3, :3] = RG
+            Dv[:, 3:, 3:] = 0.5 * (np.trace(RG, axis1=1, axis2=2)[:, None, None] * np.eye(3)
+                                   - np.swapaxes(RG, 1, 2))
+            # exact linearisation of vect(H_B^-1 H_A H_J); equals Eq. (59) when Phi = 0
+            CA = Dv @ Ad @ Tn[g.a]
+            CB = -Dv @ lie.adjoint_inv(G) @ Tn[g.b]
+            CJ = Dv @ TJ
+            vals += [CA.ravel(), CB.ravel(), CJ.ravel(), AdT.ravel(),
+                     np.broadcast_to(-np.eye(6), (nj, 6, 6)).ravel(),
+                     np.swapaxes(g.A, 1, 2).ravel()]
+            # geometric stiffness of Phi_q^T lambda w.r.t. the joint increment
+            GS = -cK * (AdT @ _lam_matrix(lg) @ TJ)
+            vals.append(GS.ravel())
+            if k:
+                KJ = np.zeros((nj, k, k))
+                idx = np.arange(k)
+                KJ[:, idx, idx] = cK * (K + kp) + cC * (C + kd)
+                if g.has_nonabelian_spring:
+                    # d alpha = T_A(alpha)^-1 T_A(n_j) d n_j for log coordinates
+                    TAn = g.Apinv @ TJ
+                    Knon = cK * (TAinvT @ (K[:, :, None] * np.linalg.inv(TA)) @ TAn)
+                    Knon[:, idx, idx] += cC * (C + kd)
+                    sel = ~g.abelian
+                    KJ[sel] = Knon[sel]
+                vals.append(KJ.ravel())
+    f_scale = max(f_scale, lam_max, gint_max,
+                  float(np.abs(inputs["tau"]).max(initial=0.0)))
+    values = np.concatenate(vals) if coef is not None else None
+    return Evaluation(H=H, HJ=HJ, r=r[:nq], phi=phi, alpha=alpha, f_scale=f_scale, values=values)
+
+
+# ---------------------------------------------------------------------------------------------
+class LinearSolver:
+    """Factorise and solve the iteration matrix in the fixed pattern.
+
+    Dense LU (LAPACK) for N <= ``dense_max``, sparse LU (SuperLU, COLAMD ordering) above.
+    """
+
+    def __init__(self, s: System, dense_max: int = 400):
+        self.s = s
+        self.N = s.N
+        self.dense = self.N <= dense_max
+        self._lu = None
+
+    def matrix(self, values: np.ndarray):
+        p = self.s.pattern
+        v = values[p["keep"]]
+        if self.dense:
+            return np.bincount(p["dense_key"], weights=v, minlength=self.N * self.N).reshape(
+                self.N, self.N)
+        data = np.bincount(p["inv"], weights=v, minlength=p["nnz"])
+        return sp.csc_matrix((data, p["indices"], p["indptr"]), shape=(self.N, self.N))
+
+    def factor(self, values: np.ndarray, where: str) -> None:
+        A = self.matrix(values)
+        try:
+            if self.dense:
+                with np.errstate(all="ignore"):
+                    lu = sla.lu_factor(A, check_finite=True)
+                piv = np.abs(np.diag(lu[0]))
+                if not np.all(np.isfinite(piv)) or piv.min() <= 1e-14 * max(piv.max(), 1e-300):
+                    raise RuntimeError("singular")
+                self._lu = lu
+            else:
+                self._lu = spla.splu(A, permc_spec="COLAMD")
+        except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
+            raise SimulationError(
+                f"{where}: the iteration matrix is singular ({exc}); typical causes: redundant "
+                "constraints (a joint duplicated, an overconstrained loop), a free massless node "
+                "whose motion no joint determines, or a non-finite state") from None
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        if self.dense:
+            return sla.lu_solve(self._lu, rhs, check_finite=False)
+        return self._lu.solve(rhs)

@@ -1,0 +1,221 @@
+"""Time functions for actuators, control targets and external loads.
+
+Each function ``f`` is a frozen spec with ``f(t)`` (value, scalar or array) and ``f.rate(t)`` (time
+derivative, used for the target velocity of a PD controller). Built-ins: :class:`Constant`,
+:class:`Step`, :class:`Ramp`, :class:`Table` (piecewise linear), :class:`Sine`. Any Python
+callable ``f(t)`` is accepted too (wrapped in :class:`Callable`, whose rate is a central finite
+difference).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable as _CallableABC
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from se3dyn.errors import ModelError
+
+__all__ = ["TimeFunction", "Constant", "Step", "Ramp", "Table", "Sine", "Callable", "as_timefunc"]
+
+
+class TimeFunction:
+    """Base class: ``f(t)`` and ``f.rate(t)``; ``kind`` is the model-file key."""
+
+    kind = ""
+
+    def __call__(self, t: float) -> Any:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def rate(self, t: float) -> Any:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+def _value(v: Any, item: str, fld: str) -> np.ndarray | float:
+    a = np.asarray(v, dtype=float) if not isinstance(v, int | float) else float(v)
+    if isinstance(a, np.ndarray):
+        if a.ndim > 1:
+            raise ModelError(item, fld, "a number or a 1-D array", v)
+        if not np.all(np.isfinite(a)):
+            raise ModelError(item, fld, "finite numbers", v)
+        if a.ndim == 0:
+            return float(a)
+    elif not math.isfinite(a):
+        raise ModelError(item, fld, "a finite number", v)
+    return a
+
+
+@dataclass(frozen=True)
+class Constant(TimeFunction):
+    """``f(t) = value``."""
+
+    value: Any
+    kind = "constant"
+
+    def __post_init__(self):
+        object.__setattr__(self, "value", _value(self.value, "time function 'constant'", "value"))
+
+    def __call__(self, t):
+        return self.value
+
+    def rate(self, t):
+        return 0.0 * np.asarray(self.value)
+
+
+@dataclass(frozen=True)
+class Step(TimeFunction):
+    """``value`` for ``start <= t < stop``, zero otherwise (e.g. the paper's torque, Sec. 11.2)."""
+
+    value: Any
+    start: float = 0.0
+    stop: float = math.inf
+    kind = "step"
+
+    def __post_init__(self):
+        object.__setattr__(self, "value", _value(self.value, "time function 'step'", "value"))
+        if not (self.stop > self.start):
+            raise ModelError("time function 'step'", "stop", f"a time after start={self.start}",
+                             self.stop)
+
+    def __call__(self, t):
+        on = self.start <= t < self.stop
+        return self.value if on else 0.0 * np.asarray(self.value)
+
+    def rate(self, t):
+        return 0.0 * np.asarray(self.value)
+
+
+@dataclass(frozen=True)
+class Ramp(TimeFunction):
+    """Zero before ``start``, linear to ``value`` at ``start + duration``, constant after."""
+
+    value: Any
+    start: float = 0.0
+    duration: float = 1.0
+    kind = "ramp"
+
+    def __post_init__(self):
+        object.__setattr__(self, "value", _value(self.value, "time function 'ramp'", "value"))
+        if not (self.duration > 0):
+            raise ModelError("time function 'ramp'", "duration", "a positive time", self.duration)
+
+    def __call__(self, t):
+        s = min(max((t - self.start) / self.duration, 0.0), 1.0)
+        return s * np.asarray(self.value) if isinstance(self.value, np.ndarray) else s * self.value
+
+    def rate(self, t):
+        on = self.start <= t < self.start + self.duration
+        return np.asarray(self.value) / self.duration * (1.0 if on else 0.0)
+
+
+@dataclass(frozen=True)
+class Table(TimeFunction):
+    """Piecewise-linear interpolation of ``values`` at increasing ``times``; held constant outside.
+
+    ``values`` has shape ``(n,)`` or ``(n, k)`` for a k-vector function.
+    """
+
+    times: Any
+    values: Any
+    kind = "table"
+
+    def __post_init__(self):
+        item = "time function 'table'"
+        t = np.asarray(self.times, dtype=float)
+        y = np.asarray(self.values, dtype=float)
+        if t.ndim != 1 or t.size < 2:
+            raise ModelError(item, "times", "at least two times in a 1-D list", self.times)
+        if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+            raise ModelError(item, "times", "finite, strictly increasing times", self.times)
+        if y.shape[:1] != t.shape or y.ndim > 2 or not np.all(np.isfinite(y)):
+            raise ModelError(item, "values", f"{t.size} finite values (one per time)", self.values)
+        object.__setattr__(self, "times", t)
+        object.__setattr__(self, "values", y)
+
+    def _interp(self, t, y):
+        if y.ndim == 1:
+            return float(np.interp(t, self.times, y))
+        return np.array([np.interp(t, self.times, y[:, i]) for i in range(y.shape[1])])
+
+    def __call__(self, t):
+        return self._interp(t, self.values)
+
+    def rate(self, t):
+        i = int(np.searchsorted(self.times, t, side="right")) - 1
+        if i < 0 or i >= self.times.size - 1:
+            return 0.0 * self.values[0]
+        return (self.values[i + 1] - self.values[i]) / (self.times[i + 1] - self.times[i])
+
+
+@dataclass(frozen=True)
+class Sine(TimeFunction):
+    """``offset + amplitude * sin(2 pi frequency t + phase)`` (frequency in Hz, phase in rad)."""
+
+    amplitude: Any
+    frequency: float
+    phase: float = 0.0
+    offset: Any = 0.0
+    kind = "sine"
+
+    def __post_init__(self):
+        item = "time function 'sine'"
+        object.__setattr__(self, "amplitude", _value(self.amplitude, item, "amplitude"))
+        object.__setattr__(self, "offset", _value(self.offset, item, "offset"))
+        if not (math.isfinite(self.frequency) and self.frequency >= 0):
+            raise ModelError(item, "frequency", "a non-negative frequency in Hz", self.frequency)
+
+    def __call__(self, t):
+        w = 2 * math.pi * self.frequency
+        return self.offset + self.amplitude * math.sin(w * t + self.phase)
+
+    def rate(self, t):
+        w = 2 * math.pi * self.frequency
+        return self.amplitude * w * math.cos(w * t + self.phase)
+
+
+@dataclass(frozen=True)
+class Callable(TimeFunction):
+    """Any Python callable ``fn(t)``; ``rate`` by central differences with step ``dt``."""
+
+    fn: _CallableABC = field(compare=False)
+    dt: float = 1e-6
+    kind = "callable"
+
+    def __call__(self, t):
+        v = self.fn(t)
+        return np.asarray(v, dtype=float) if np.ndim(v) else float(v)
+
+    def rate(self, t):
+        a = np.asarray(self.fn(t + self.dt), dtype=float)
+        b = np.asarray(self.fn(t - self.dt), dtype=float)
+        return (a - b) / (2 * self.dt)
+
+
+def as_timefunc(v: Any, item: str, fld: str, size: int | None = None) -> TimeFunction:
+    """Turn a number, an array, a :class:`TimeFunction` or a callable into a TimeFunction.
+
+    ``size`` is the length a vector value must have (``None``: any). The value at ``t = 0`` is
+    evaluated to check its shape, so a wrong callable fails at build time, naming the item.
+    """
+    if isinstance(v, TimeFunction):
+        f = v
+    elif callable(v):
+        f = Callable(v)
+    else:
+        try:
+            f = Constant(v)
+        except (TypeError, ValueError):
+            raise ModelError(item, fld, "a number, an array, a time function or a callable of t",
+                             v) from None
+    try:
+        val = np.asarray(f(0.0), dtype=float)
+    except Exception as exc:  # user callables may raise anything
+        raise ModelError(item, fld, "a function of t that can be evaluated at t = 0",
+                         f"{type(exc).__name__}: {exc}") from None
+    if size is not None and val.size not in (1, size) or val.ndim > 1:
+        raise ModelError(item, fld, f"{size} component(s)", val)
+    if not np.all(np.isfinite(val)):
+        raise ModelError(item, fld, "finite values", val)
+    return f
