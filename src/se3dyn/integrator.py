@@ -24,7 +24,7 @@ import numpy as np
 
 from se3dyn import lie
 from se3dyn.errors import ModelError, NewtonError, SimulationError
-from se3dyn.system import LinearSolver, System, evaluate
+from se3dyn.system import LinearSolver, System, evaluate, matrix_values
 
 __all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "energies"]
 
@@ -259,7 +259,7 @@ class GeneralizedAlpha:
         ltol = self.tol_constraint * s.length_scale
         it = 0
         while True:
-            ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, coef)
+            ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs)
             fs = max(ev.f_scale, 1e-300)
             er = float(np.abs(ev.r).max(initial=0.0)) / fs
             ep = float(np.abs(ev.phi).max(initial=0.0))
@@ -269,7 +269,7 @@ class GeneralizedAlpha:
                 break
             if it >= self.max_iter:
                 self._fail(s, t1, h, it, ev, "no convergence within max_iter iterations")
-            solver.factor(ev.values, f"t={t1:.9g}, h={h:.3g}, Newton iteration {it + 1}")
+            solver.factor(matrix_values(s, ev, coef), f"t={t1:.9g}, h={h:.3g}, Newton iteration {it + 1}")
             d = solver.solve(-np.concatenate([ev.r / bp, ev.phi]))
             dn = d[:nq]
             n += dn

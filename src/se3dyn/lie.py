@@ -64,6 +64,7 @@ __all__ = [
     "log_se3",
     "tangent_se3",
     "tangent_se3_inv",
+    "exp_tangent_se3",
     "adjoint",
     "adjoint_inv",
     "vect_se3",
@@ -445,6 +446,40 @@ def tangent_se3(n: np.ndarray) -> np.ndarray:
     out[..., 3:, 3:] = Tso
     out[..., :3, 3:] = _t_uo_plus(n[..., :3], w, k)
     return out
+
+
+def exp_tangent_se3(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(exp_se3(n), tangent_se3(n))`` with the coefficient functions evaluated once.
+
+    Parameters
+    ----------
+    n : array_like, shape (..., 6)
+
+    Returns
+    -------
+    E : ndarray, shape (..., 4, 4)
+        Eq. (17).
+    T : ndarray, shape (..., 6, 6)
+        Eqs. (21)-(22).
+    """
+    n = np.asarray(n, dtype=float)
+    w = n[..., 3:]
+    k = _coeffs(w, "ahcde")
+    W = hat3(w)
+    W2 = W @ W
+    a = k["a"][..., None, None]
+    h = k["h"][..., None, None]
+    c = k["c"][..., None, None]
+    E = np.zeros(n.shape[:-1] + (4, 4))
+    E[..., :3, :3] = _I3 + a * W + h * W2
+    E[..., :3, 3] = np.einsum("...ij,...j->...i", _I3 + h * W + c * W2, n[..., :3])
+    E[..., 3, 3] = 1.0
+    Tso = _I3 - h * W + c * W2
+    T = np.zeros(n.shape[:-1] + (6, 6))
+    T[..., :3, :3] = Tso
+    T[..., 3:, 3:] = Tso
+    T[..., :3, 3:] = _t_uo_plus(n[..., :3], w, k)
+    return E, T
 
 
 def tangent_se3_inv(n: np.ndarray) -> np.ndarray:

@@ -34,7 +34,8 @@ from se3dyn import lie
 from se3dyn.errors import ModelError, SimulationError
 from se3dyn.model import Model
 
-__all__ = ["System", "JointGroup", "compile_model", "Evaluation"]
+__all__ = ["System", "JointGroup", "compile_model", "Evaluation", "evaluate", "matrix_values",
+           "LinearSolver"]
 
 _COMP6 = ("U_x", "U_y", "U_z", "Omega_x", "Omega_y", "Omega_z")
 
@@ -313,6 +314,7 @@ class Evaluation:
     alpha: np.ndarray
     f_scale: float
     values: np.ndarray | None = None
+    cache: dict | None = field(default=None, repr=False)
 
 
 def _lam_matrix(lam: np.ndarray) -> np.ndarray:
@@ -327,7 +329,7 @@ def _lam_matrix(lam: np.ndarray) -> np.ndarray:
 
 def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n: np.ndarray,
              v: np.ndarray, vd: np.ndarray, lam: np.ndarray, inputs: dict,
-             coef: tuple[float, float, float] | None) -> Evaluation:
+             coef: tuple[float, float, float] | None = None) -> Evaluation:
     """Evaluate the residual, the constraints and (if ``coef``) the scaled iteration matrix.
 
     Parameters
@@ -347,7 +349,9 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
         PD targets.
     coef : (cM, cC, cK) or None
         Coefficients of M, C_T and K_T T in the iteration matrix (``(1, gamma'/beta', 1/beta')``
-        for the scaled Newton matrix; ``(1, 0, 0)`` for the initial accelerations).
+        for the scaled Newton matrix; ``(1, 0, 0)`` for the initial accelerations). When None,
+        the matrix is not evaluated; :func:`matrix_values` evaluates it later from the cached
+        intermediates.
 
     Returns
     -------
@@ -355,14 +359,14 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     """
     nq = s.nq
     M = s.M
-    nf = len(s.node_free)
     # --- nodes: H = Hn exp(n_I) (Eq. (38)), T_SE(3)(n_I) (Eq. (21))
     n_node = np.zeros((M, 6))
     n_node[s.node_free] = n[s.node_dofidx]
     H = Hn.copy()
-    H[s.node_free] = Hn[s.node_free] @ lie.exp_se3(n_node[s.node_free])
+    E, Tf = lie.exp_tangent_se3(n_node[s.node_free])
+    H[s.node_free] = Hn[s.node_free] @ E
     Tn = np.broadcast_to(np.eye(6), (M, 6, 6)).copy()
-    Tn[s.node_free] = lie.tangent_se3(n_node[s.node_free])
+    Tn[s.node_free] = Tf
     R = H[:, :3, :3]
     vb = v[s.node_dofidx]  # (nf, 6)
     vdb = vd[s.node_dofidx]
@@ -379,26 +383,7 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     r = np.zeros(nq + 1)  # last slot collects contributions to clamped nodes
     r[s.node_dofidx] = fin - gext
     f_scale = max(float(np.abs(fin).max(initial=0.0)), float(np.abs(gext).max(initial=0.0)))
-    vals = []
-    if coef is not None:
-        cM, cC, cK = coef
-        blk = np.zeros((nf, 6, 6))
-        blk[:, :3, :3] = mass[:, None, None] * np.eye(3)
-        blk[:, 3:, 3:] = J
-        blk *= cM
-        if cC:
-            # tangent damping, Eq. (53)
-            CT = np.zeros((nf, 6, 6))
-            CT[:, :3, :3] = mass[:, None, None] * lie.hat3(vO)
-            CT[:, :3, 3:] = -mass[:, None, None] * lie.hat3(vU)
-            CT[:, 3:, 3:] = lie.hat3(vO) @ J - lie.hat3(JO)
-            blk += cC * CT
-        if cK:
-            # tangent stiffness of the external forces, Eq. (67), times T_SE(3)(n_I)
-            KT = np.zeros((nf, 6, 6))
-            KT[:, :3, 3:] = -lie.hat3(RtF)
-            blk += cK * (KT @ Tn[s.node_free])
-        vals.append(blk.ravel())
+    cache: dict = {"nodes": (Tn, RtF, mass, J, vU, vO, JO), "groups": []}
 
     # --- joints, generic kernel over the batches of equal k
     m = s.m
@@ -409,20 +394,25 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     gint_max = 0.0
     for g in s.groups:
         k, nj = g.k, len(g.ids)
-        nJ = np.einsum("jik,jk->ji", g.A, n[g.jdof]) if k else np.zeros((nj, 6))
-        HJg = HJn[g.ids] @ lie.exp_se3(nJ) if k else HJn[g.ids].copy()
+        if k:
+            nJ = np.einsum("jik,jk->ji", g.A, n[g.jdof])
+            EJ, TJ6 = lie.exp_tangent_se3(nJ)
+            HJg = HJn[g.ids] @ EJ
+            TJ = TJ6 @ g.A  # Eqs. (27), (59)
+        else:
+            HJg = HJn[g.ids].copy()
+            TJ = np.zeros((nj, 6, 0))
         HJ[g.ids] = HJg
-        TJ = lie.tangent_se3(nJ) @ g.A if k else np.zeros((nj, 6, 0))  # Eq. (27), (59)
         Ad = lie.adjoint_inv(HJg)  # Eq. (57)
         G = lie.inverse(H[g.b]) @ H[g.a] @ HJg
         phi[g.mult] = lie.vect_se3(G)  # Eq. (55)
         lg = lam[g.mult]  # (nj, 6)
         AdT = np.swapaxes(Ad, 1, 2)
         ra = np.einsum("jik,jk->ji", AdT, lg)  # Phi_q^T lambda, Eq. (58)
-        r_ab = np.zeros(nq + 1)
-        np.add.at(r_ab, np.where(g.dof_a < 0, nq, g.dof_a), ra)
-        np.add.at(r_ab, np.where(g.dof_b < 0, nq, g.dof_b), -lg)
-        r += r_ab
+        r += np.bincount(np.where(g.dof_a < 0, nq, g.dof_a).ravel(), ra.ravel(), nq + 1)
+        r -= np.bincount(np.where(g.dof_b < 0, nq, g.dof_b).ravel(), lg.ravel(), nq + 1)
+        TA = TAinvT = None
+        K = C = kp = kd = None
         if k:
             jd = g.jdof
             rj = np.einsum("jik,ji->jk", g.A, lg)
@@ -440,8 +430,7 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
             kp = s.dof_kp[jd]
             kd = s.dof_kd[jd]
             vj = v[jd]
-            e = a_g - s.dof_reference[jd]
-            fs = K * e
+            fs = K * (a_g - s.dof_reference[jd])
             if g.has_nonabelian_spring:
                 # g = T_A(alpha)^-T K (alpha - alpha0) for non-abelian joints
                 TA = g.Apinv @ lie.tangent_se3(np.einsum("jik,jk->ji", g.A, a_g)) @ g.A
@@ -450,39 +439,81 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
             gint = fs + C * vj + kp * (a_g - inputs["ref"][jd]) + kd * (vj - inputs["rate"][jd])
             gint_max = max(gint_max, float(np.abs(gint).max(initial=0.0)))
             r[jd] += rj + gint - inputs["tau"][jd]  # Eqs. (62), (64), (66)
-        if coef is not None:
-            cM, cC, cK = coef
-            RG = G[:, :3, :3]
-            Dv = np.zeros((nj, 6, 6))
-            Dv[:, :3, :3] = RG
-            Dv[:, 3:, 3:] = 0.5 * (np.trace(RG, axis1=1, axis2=2)[:, None, None] * np.eye(3)
-                                   - np.swapaxes(RG, 1, 2))
-            # exact linearisation of vect(H_B^-1 H_A H_J); equals Eq. (59) when Phi = 0
-            CA = Dv @ Ad @ Tn[g.a]
-            CB = -Dv @ lie.adjoint_inv(G) @ Tn[g.b]
-            CJ = Dv @ TJ
-            vals += [CA.ravel(), CB.ravel(), CJ.ravel(), AdT.ravel(),
-                     np.broadcast_to(-np.eye(6), (nj, 6, 6)).ravel(),
-                     np.swapaxes(g.A, 1, 2).ravel()]
-            # geometric stiffness of Phi_q^T lambda w.r.t. the joint increment
-            GS = -cK * (AdT @ _lam_matrix(lg) @ TJ)
-            vals.append(GS.ravel())
-            if k:
-                KJ = np.zeros((nj, k, k))
-                idx = np.arange(k)
-                KJ[:, idx, idx] = cK * (K + kp) + cC * (C + kd)
-                if g.has_nonabelian_spring:
-                    # d alpha = T_A(alpha)^-1 T_A(n_j) d n_j for log coordinates
-                    TAn = g.Apinv @ TJ
-                    Knon = cK * (TAinvT @ (K[:, :, None] * np.linalg.inv(TA)) @ TAn)
-                    Knon[:, idx, idx] += cC * (C + kd)
-                    sel = ~g.abelian
-                    KJ[sel] = Knon[sel]
-                vals.append(KJ.ravel())
+        cache["groups"].append((G, Ad, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT))
     f_scale = max(f_scale, lam_max, gint_max,
                   float(np.abs(inputs["tau"]).max(initial=0.0)))
-    values = np.concatenate(vals) if coef is not None else None
-    return Evaluation(H=H, HJ=HJ, r=r[:nq], phi=phi, alpha=alpha, f_scale=f_scale, values=values)
+    ev = Evaluation(H=H, HJ=HJ, r=r[:nq], phi=phi, alpha=alpha, f_scale=f_scale)
+    ev.cache = cache
+    if coef is not None:
+        ev.values = matrix_values(s, ev, coef)
+    return ev
+
+
+def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float]) -> np.ndarray:
+    """Values of the scaled iteration matrix (Eq. (46)) at an evaluated iterate, pattern order.
+
+    Parameters
+    ----------
+    s : System
+    ev : Evaluation
+        From :func:`evaluate` at the same iterate.
+    coef : (cM, cC, cK)
+        Coefficients of M, C_T and K_T T (see :func:`evaluate`).
+
+    Returns
+    -------
+    ndarray (nvals,)
+    """
+    cM, cC, cK = coef
+    Tn, RtF, mass, J, vU, vO, JO = ev.cache["nodes"]
+    nf = len(s.node_free)
+    blk = np.zeros((nf, 6, 6))
+    blk[:, :3, :3] = mass[:, None, None] * np.eye(3)
+    blk[:, 3:, 3:] = J
+    blk *= cM
+    if cC:
+        # tangent damping, Eq. (53)
+        CT = np.zeros((nf, 6, 6))
+        CT[:, :3, :3] = mass[:, None, None] * lie.hat3(vO)
+        CT[:, :3, 3:] = -mass[:, None, None] * lie.hat3(vU)
+        CT[:, 3:, 3:] = lie.hat3(vO) @ J - lie.hat3(JO)
+        blk += cC * CT
+    if cK:
+        # tangent stiffness of the external forces, Eq. (67), times T_SE(3)(n_I)
+        KT = np.zeros((nf, 6, 6))
+        KT[:, :3, 3:] = -lie.hat3(RtF)
+        blk += cK * (KT @ Tn[s.node_free])
+    vals = [blk.ravel()]
+    for g, (G, Ad, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT) in zip(s.groups, ev.cache["groups"],
+                                                                 strict=True):
+        k, nj = g.k, len(g.ids)
+        RG = G[:, :3, :3]
+        Dv = np.zeros((nj, 6, 6))
+        Dv[:, :3, :3] = RG
+        Dv[:, 3:, 3:] = 0.5 * (np.trace(RG, axis1=1, axis2=2)[:, None, None] * np.eye(3)
+                               - np.swapaxes(RG, 1, 2))
+        # exact linearisation of vect(H_B^-1 H_A H_J); equals Eq. (59) when Phi = 0
+        CA = Dv @ Ad @ Tn[g.a]
+        CB = -Dv @ lie.adjoint_inv(G) @ Tn[g.b]
+        CJ = Dv @ TJ
+        vals += [CA.ravel(), CB.ravel(), CJ.ravel(), AdT.ravel(),
+                 np.broadcast_to(-np.eye(6), (nj, 6, 6)).ravel(),
+                 np.swapaxes(g.A, 1, 2).ravel()]
+        # geometric stiffness of Phi_q^T lambda w.r.t. the joint increment
+        vals.append((-cK * (AdT @ _lam_matrix(lg) @ TJ)).ravel())
+        if k:
+            KJ = np.zeros((nj, k, k))
+            idx = np.arange(k)
+            KJ[:, idx, idx] = cK * (K + kp) + cC * (C + kd)
+            if g.has_nonabelian_spring:
+                # d alpha = T_A(alpha)^-1 T_A(n_j) d n_j for log coordinates
+                TAn = g.Apinv @ TJ
+                Knon = cK * (TAinvT @ (K[:, :, None] * np.linalg.inv(TA)) @ TAn)
+                Knon[:, idx, idx] += cC * (C + kd)
+                sel = ~g.abelian
+                KJ[sel] = Knon[sel]
+            vals.append(KJ.ravel())
+    return np.concatenate(vals)
 
 
 # ---------------------------------------------------------------------------------------------
