@@ -258,6 +258,7 @@ class GeneralizedAlpha:
         coef = (1.0, gp / bp, 1.0 / bp)
         ltol = self.tol_constraint * s.length_scale
         it = 0
+        er0 = 1.0
         while True:
             ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs)
             fs = max(ev.f_scale, 1e-300)
@@ -268,8 +269,19 @@ class GeneralizedAlpha:
             if er <= self.tol_residual and ep <= ltol:
                 break
             if it >= self.max_iter:
-                self._fail(s, t1, h, it, ev, "no convergence within max_iter iterations")
-            solver.factor(matrix_values(s, ev, coef), f"t={t1:.9g}, h={h:.3g}, Newton iteration {it + 1}")
+                self._fail(s, t1, h, it, ev, f"no convergence within max_iter={self.max_iter} "
+                           "iterations")
+            if it >= 3 and (ep > 10.0 * s.length_scale or er > 1e3 * max(er0, 1.0)):
+                self._fail(s, t1, h, it, ev, "Newton is diverging (try a smaller step or "
+                           "rho_inf < 1)")
+            if it == 0:
+                er0 = er
+            try:
+                solver.factor(matrix_values(s, ev, coef), f"t={t1:.9g}")
+            except SimulationError as exc:
+                self._fail(s, t1, h, it, ev, "the iteration matrix is singular (redundant "
+                           "constraints, a massless node no joint determines, or a diverged "
+                           f"iterate) [{exc}]")
             d = solver.solve(-np.concatenate([ev.r / bp, ev.phi]))
             dn = d[:nq]
             n += dn
