@@ -382,6 +382,27 @@ def log_so3(R: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # SE(3)
 # ---------------------------------------------------------------------------------------------
+def _exp_se3_from(n, W, W2, k) -> np.ndarray:
+    a = k["a"][..., None, None]
+    h = k["h"][..., None, None]
+    c = k["c"][..., None, None]
+    out = np.zeros(n.shape[:-1] + (4, 4))
+    out[..., :3, :3] = _I3 + a * W + h * W2
+    # T_SO3^T = I + (b/2) W + c W^2
+    out[..., :3, 3] = np.einsum("...ij,...j->...i", _I3 + h * W + c * W2, n[..., :3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def _tangent_se3_from(n, W, W2, k) -> np.ndarray:
+    Tso = _I3 - k["h"][..., None, None] * W + k["c"][..., None, None] * W2
+    out = np.zeros(n.shape[:-1] + (6, 6))
+    out[..., :3, :3] = Tso
+    out[..., 3:, 3:] = Tso
+    out[..., :3, 3:] = _t_uo_plus(n[..., :3], n[..., 3:], k, W, W2)
+    return out
+
+
 def exp_se3(n: np.ndarray) -> np.ndarray:
     """Exponential map of SE(3), Eq. (17): ``[[exp_so3(n_O), T_SO3(n_O)^T n_U], [0, 1]]``.
 
@@ -395,31 +416,20 @@ def exp_se3(n: np.ndarray) -> np.ndarray:
     ndarray, shape (..., 4, 4)
     """
     n = np.asarray(n, dtype=float)
-    w = n[..., 3:]
-    k = _coeffs(w, "ahc")
-    W = hat3(w)
-    W2 = W @ W
-    a = k["a"][..., None, None]
-    h = k["h"][..., None, None]
-    c = k["c"][..., None, None]
-    out = np.zeros(n.shape[:-1] + (4, 4))
-    out[..., :3, :3] = _I3 + a * W + h * W2
-    # T_SO3^T = I + (b/2) W + c W^2
-    out[..., :3, 3] = np.einsum("...ij,...j->...i", _I3 + h * W + c * W2, n[..., :3])
-    out[..., 3, 3] = 1.0
-    return out
+    W = hat3(n[..., 3:])
+    return _exp_se3_from(n, W, W @ W, _coeffs(n[..., 3:], "ahc"))
 
 
-def _t_uo_plus(nU: np.ndarray, w: np.ndarray, k: dict[str, np.ndarray]) -> np.ndarray:
+def _t_uo_plus(nU: np.ndarray, w: np.ndarray, k: dict[str, np.ndarray], W: np.ndarray,
+               W2: np.ndarray) -> np.ndarray:
     """The coupling block T_UOmega+ of Eq. (22), shape (..., 3, 3)."""
     U = hat3(nU)
-    W = hat3(w)
     h = k["h"][..., None, None]
     c = k["c"][..., None, None]
     d = k["d"][..., None, None]
     e = k["e"][..., None, None]
     wu = np.einsum("...i,...i->...", w, nU)[..., None, None]
-    return -h * U + c * (U @ W + W @ U) + wu * (d * W + e * (W @ W))
+    return -h * U + c * (U @ W + W @ U) + wu * (d * W + e * W2)
 
 
 def tangent_se3(n: np.ndarray) -> np.ndarray:
@@ -437,15 +447,8 @@ def tangent_se3(n: np.ndarray) -> np.ndarray:
         ``[[T_SO3(n_O), T_UO+(n_U, n_O)], [0, T_SO3(n_O)]]``.
     """
     n = np.asarray(n, dtype=float)
-    w = n[..., 3:]
-    k = _coeffs(w, "hcde")
-    W = hat3(w)
-    Tso = _I3 - k["h"][..., None, None] * W + k["c"][..., None, None] * (W @ W)
-    out = np.zeros(n.shape[:-1] + (6, 6))
-    out[..., :3, :3] = Tso
-    out[..., 3:, 3:] = Tso
-    out[..., :3, 3:] = _t_uo_plus(n[..., :3], w, k)
-    return out
+    W = hat3(n[..., 3:])
+    return _tangent_se3_from(n, W, W @ W, _coeffs(n[..., 3:], "hcde"))
 
 
 def exp_tangent_se3(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -463,23 +466,10 @@ def exp_tangent_se3(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Eqs. (21)-(22).
     """
     n = np.asarray(n, dtype=float)
-    w = n[..., 3:]
-    k = _coeffs(w, "ahcde")
-    W = hat3(w)
+    W = hat3(n[..., 3:])
     W2 = W @ W
-    a = k["a"][..., None, None]
-    h = k["h"][..., None, None]
-    c = k["c"][..., None, None]
-    E = np.zeros(n.shape[:-1] + (4, 4))
-    E[..., :3, :3] = _I3 + a * W + h * W2
-    E[..., :3, 3] = np.einsum("...ij,...j->...i", _I3 + h * W + c * W2, n[..., :3])
-    E[..., 3, 3] = 1.0
-    Tso = _I3 - h * W + c * W2
-    T = np.zeros(n.shape[:-1] + (6, 6))
-    T[..., :3, :3] = Tso
-    T[..., 3:, 3:] = Tso
-    T[..., :3, 3:] = _t_uo_plus(n[..., :3], w, k)
-    return E, T
+    k = _coeffs(n[..., 3:], "ahcde")
+    return _exp_se3_from(n, W, W2, k), _tangent_se3_from(n, W, W2, k)
 
 
 def tangent_se3_inv(n: np.ndarray) -> np.ndarray:
@@ -498,8 +488,9 @@ def tangent_se3_inv(n: np.ndarray) -> np.ndarray:
     w = n[..., 3:]
     k = _coeffs(w, "hcdef")
     W = hat3(w)
-    Ti = _I3 + 0.5 * W + k["f"][..., None, None] * (W @ W)
-    C = _t_uo_plus(n[..., :3], w, k)
+    W2 = W @ W
+    Ti = _I3 + 0.5 * W + k["f"][..., None, None] * W2
+    C = _t_uo_plus(n[..., :3], w, k, W, W2)
     out = np.zeros(n.shape[:-1] + (6, 6))
     out[..., :3, :3] = Ti
     out[..., 3:, 3:] = Ti
@@ -574,6 +565,9 @@ def adjoint_inv(H: np.ndarray) -> np.ndarray:
 def vect_se3(H: np.ndarray) -> np.ndarray:
     """Vectorial map of Eq. (56): ``(x, phi(R))`` with ``hat3(phi(R)) = (R - R^T)/2``.
 
+    It coincides with :func:`vee6` applied to the 4x4 matrix (whose rotation part is reduced to
+    its antisymmetric part by :func:`vee3`).
+
     Parameters
     ----------
     H : array_like, shape (..., 4, 4)
@@ -582,8 +576,7 @@ def vect_se3(H: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (..., 6)
     """
-    H = np.asarray(H, dtype=float)
-    return np.concatenate([H[..., :3, 3], vee3(H[..., :3, :3])], axis=-1)
+    return vee6(H)
 
 
 # ---------------------------------------------------------------------------------------------

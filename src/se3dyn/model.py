@@ -395,7 +395,7 @@ class ModelBuilder:
         acts = [(k, v) for k, v in (("actuator", actuator), ("torque", torque), ("force", force))
                 if v is not None]
         if len(acts) > 1:
-            raise ModelError(item, acts[1][0], f"only one of actuator/torque/force", acts[1][1])
+            raise ModelError(item, acts[1][0], "only one of actuator/torque/force", acts[1][1])
         act_field, act = acts[0] if acts else ("actuator", None)
         if type == "universal":
             self._universal(name, node_a, node_b, axes, stiffness, reference, damping,
