@@ -67,11 +67,26 @@ class State:
 
 @dataclass(frozen=True)
 class StepInfo:
-    """Outcome of one step: Newton iterations, final scaled residual and constraint norms."""
+    """Outcome of one step: Newton iterations, final scaled residual and constraint norms, and
+    the energies of the new state (see :func:`energies`)."""
 
     iterations: int
     residual: float
     constraint: float
+    energies: dict | None = None
+
+
+def _sample(f, t: float, shape: tuple[int, ...], item: str, what: str) -> np.ndarray:
+    """Evaluate a time function, checking shape and finiteness, naming the item on failure."""
+    try:
+        val = np.asarray(f(t), dtype=float)
+        val = np.broadcast_to(val, shape)
+    except Exception as exc:  # user callables may raise anything
+        raise SimulationError(f"t={t:.9g}: {item}: {what} could not be evaluated to "
+                              f"{shape[0]} component(s): {type(exc).__name__}: {exc}") from None
+    if not np.all(np.isfinite(val)):
+        raise SimulationError(f"t={t:.9g}: {item}: {what} returned a non-finite value {val}")
+    return val
 
 
 def step_inputs(s: System, t: float) -> dict:
@@ -82,31 +97,31 @@ def step_inputs(s: System, t: float) -> dict:
     dict
         ``f`` (M, 3) inertial forces incl. gravity, ``f_load`` (M, 3) without gravity, ``m``
         (M, 3) material torques, ``tau`` (nq,) actuator forces, ``ref``/``rate`` (nq,) PD targets.
+
+    Raises
+    ------
+    SimulationError
+        When a time function fails, changes size or returns a non-finite value (naming it).
     """
     M, nq = s.M, s.nq
     f_load = np.zeros((M, 3))
     mt = np.zeros((M, 3))
-    for i, F, T in s.loads:
+    for i, F, T, item in s.loads:
         if F is not None:
-            f_load[i] += np.broadcast_to(np.asarray(F(t), dtype=float), (3,))
+            f_load[i] += _sample(F, t, (3,), item, "force")
         if T is not None:
-            mt[i] += np.broadcast_to(np.asarray(T(t), dtype=float), (3,))
+            mt[i] += _sample(T, t, (3,), item, "torque")
     tau = np.zeros(nq)
-    for d, tf in s.actuators:
-        tau[d] += np.broadcast_to(np.asarray(tf(t), dtype=float), d.shape)
+    for d, tf, item in s.actuators:
+        tau[d] += _sample(tf, t, d.shape, item, "value")
     ref = np.zeros(nq)
     rate = np.zeros(nq)
-    for d, tgt, rt in s.controls:
-        ref[d] = np.broadcast_to(np.asarray(tgt(t), dtype=float), d.shape)
-        rate[d] = np.broadcast_to(np.asarray((tgt.rate(t) if rt is None else rt(t)),
-                                             dtype=float), d.shape)
+    for d, tgt, rt, item in s.controls:
+        ref[d] = _sample(tgt, t, d.shape, item, "target")
+        rate[d] = (_sample(tgt.rate, t, d.shape, item, "target rate") if rt is None
+                   else _sample(rt, t, d.shape, item, "target_rate"))
     f = f_load + s.node_mass[:, None] * s.gravity
-    out = dict(f=f, f_load=f_load, m=mt, tau=tau, ref=ref, rate=rate)
-    for key, val in out.items():
-        if not np.all(np.isfinite(val)):
-            raise SimulationError(f"t={t:.6g}: a time function returned a non-finite value for "
-                                  f"'{key}'")
-    return out
+    return dict(f=f, f_load=f_load, m=mt, tau=tau, ref=ref, rate=rate)
 
 
 def energies(s: System, st: State, inputs: dict) -> dict:
@@ -223,8 +238,13 @@ class GeneralizedAlpha:
     @staticmethod
     def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,
                           v0: np.ndarray) -> np.ndarray:
-        """Closest velocity (mass-weighted, with a small weight on massless unknowns) that
-        satisfies the velocity constraints Phi_q v = 0."""
+        """Velocities satisfying the velocity constraints ``Phi_q v = 0``.
+
+        First the unknowns without mass (massless nodes, joint coordinates), which the
+        constraints determine, are solved by least squares with the given body velocities held:
+        consistent body velocities are kept exactly. If that leaves a violation, the closest
+        consistent velocity in the mass-weighted norm is taken instead.
+        """
         import scipy.sparse as sp
         import scipy.sparse.linalg as spla
 
@@ -232,7 +252,17 @@ class GeneralizedAlpha:
         nq = s.nq
         Wm = A[:nq, :nq]
         Phi = A[nq:, :nq]
-        w = 1e-6 * max(float(np.abs(Wm.diagonal()).max(initial=0.0)), 1e-300)
+        body = np.abs(Wm.diagonal()) > 0
+        scale = max(float(np.abs(v0).max(initial=0.0)), 1e-300)
+        if nq <= 3000:
+            PU = Phi[:, ~body].toarray()
+            rhs = -(Phi[:, body] @ v0[body])
+            vU = np.linalg.lstsq(PU, rhs, rcond=None)[0] if PU.size else np.zeros(0)
+            v = v0.copy()
+            v[~body] = vU
+            if np.abs(Phi @ v).max(initial=0.0) <= 1e-12 * scale * s.length_scale:
+                return v
+        w = 1e-12 * max(float(np.abs(Wm.diagonal()).max(initial=0.0)), 1e-300)
         W = Wm + w * sp.identity(nq)
         K = sp.bmat([[W, Phi.T], [Phi, None]], format="csc")
         sol = spla.spsolve(K, np.concatenate([W @ v0, np.zeros(s.nm)]))
@@ -246,7 +276,10 @@ class GeneralizedAlpha:
         am, af, g, b = self.params
         t1 = st.t + h
         nq = s.nq
-        inputs = step_inputs(s, t1)
+        try:
+            inputs = step_inputs(s, t1)
+        except SimulationError as exc:
+            raise SimulationError(f"step h={h:.6g} to {exc}") from None
         # predictor: vd_{n+1} = 0
         vd = np.zeros(nq)
         a = (af * st.vd - am * st.a) / (1 - am)
@@ -306,7 +339,7 @@ class GeneralizedAlpha:
         new.work_act += 0.5 * h * (st.power[0] + p[0])
         new.work_ext += 0.5 * h * (st.power[1] + p[1])
         new.dissipated += 0.5 * h * (st.power[2] + p[2])
-        return new, StepInfo(it, er, ep)
+        return new, StepInfo(it, er, ep, e)
 
     def _fail(self, s: System, t: float, h: float, it: int, ev, why: str):
         r = np.abs(ev.r)

@@ -74,7 +74,8 @@ def unit_vector(v: Any, item: str, fld: str) -> np.ndarray:
         raise ModelError(item, fld, "a unit 3-vector", v, "the axis has zero length")
     if abs(nrm - 1.0) > _UNIT_TOL:
         raise ModelError(item, fld, "a unit 3-vector", v,
-                         f"its length is {nrm:.12g}; normalise it, e.g. {tuple(a / nrm)}")
+                         f"its length is {nrm:.12g}; normalise it, e.g. "
+                         f"({', '.join(f'{c:.12g}' for c in a / nrm)})")
     return a / nrm
 
 

@@ -386,7 +386,7 @@ class ModelBuilder:
             raise ModelError(f"joint {name!r}", "type", "one of " + ", ".join(jt_keys), type,
                              f"did you mean '{close[0]}'?" if close else "")
         for fld, nd in (("node_a", node_a), ("node_b", node_b)):
-            if nd not in self._nodes:
+            if not isinstance(nd, str) or nd not in self._nodes:
                 raise ModelError(item, fld, "the name of a node defined before the joint", nd,
                                  _unknown("node", nd, list(self._nodes)))
         if node_a == node_b:
@@ -418,6 +418,12 @@ class ModelBuilder:
     def _add_joint(self, name, type, node_a, node_b, params, A_, stiffness, reference, damping,
                    act_field, act, control, composite=None):
         item = f"joint {name!r} ({type})"
+        if name in self._joints:
+            raise ModelError(f"joint {composite!r}" if composite else item, "name",
+                             "a joint name not used yet", name,
+                             f"joint {name!r} exists already" + (
+                                 f"; the parts of composite joint {composite!r} are named "
+                                 f"'{composite}:1' and '{composite}:2'" if composite else ""))
         k = A_.shape[1]
         K = np.zeros(k) if stiffness is None else _kvec(stiffness, k, item, "stiffness",
                                                            nonneg=True)

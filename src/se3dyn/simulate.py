@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from collections.abc import Callable
 
@@ -90,14 +91,20 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     """
     s = model if isinstance(model, System) else compile_model(model)
     for fld, val in (("t_end", t_end), ("step", step), ("t_start", t_start)):
-        if not isinstance(val, int | float) or not math.isfinite(val):
+        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
+                or not math.isfinite(float(val))):
             raise ModelError("simulate", fld, "a finite number (s)", val)
+    t_end, step, t_start = float(t_end), float(step), float(t_start)
     if not step > 0:
         raise ModelError("simulate", "step", "a positive time step (s)", step)
     if not t_end > t_start:
         raise ModelError("simulate", "t_end", f"a time after t_start={t_start}", t_end)
+    if isinstance(output_every, numbers.Integral) and not isinstance(output_every, bool):
+        output_every = int(output_every)
     if not (isinstance(output_every, int) and output_every >= 1):
         raise ModelError("simulate", "output_every", "a positive integer", output_every)
+    if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool):
+        rho_inf = float(rho_inf)
     integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,
                              tol_constraint=tol_constraint, max_iter=max_iter)
     nsteps = max(1, math.ceil((t_end - t_start) / step - 1e-9))
@@ -130,7 +137,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         st.t = t1  # exact grid times, no drift
         total_it += info.iterations
         if i % output_every == 0 or i == nsteps:
-            e = energies(s, st, step_inputs(s, st.t))
+            e = info.energies
             rec.add(st, e["kinetic"], e["potential"], e["spring"], info.iterations,
                     info.residual, info.constraint)
         if progress is not None:

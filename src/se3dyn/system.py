@@ -110,9 +110,9 @@ class System:
     dof_kd: np.ndarray
     dof_is_joint: np.ndarray  # (nq,) bool
     gravity: np.ndarray  # (3,)
-    actuators: tuple  # ((dof indices (k,), TimeFunction), ...)
-    controls: tuple  # ((dof indices, target, target_rate or None), ...)
-    loads: tuple  # ((node index, force TF or None, torque TF or None), ...)
+    actuators: tuple  # ((dof indices (k,), TimeFunction, item name), ...)
+    controls: tuple  # ((dof indices, target, target_rate or None, item name), ...)
+    loads: tuple  # ((node index, force TF or None, torque TF or None, item name), ...)
     labels: tuple[str, ...]  # (N,) item and component of each unknown / constraint row
     items: tuple[str, ...]  # (N,) item name of each row
     length_scale: float
@@ -212,11 +212,12 @@ def compile_model(model: Model) -> System:
         dof_ref[d] = j.reference
         dof_C[d] = j.damping
         if j.actuator is not None:
-            actuators.append((d, j.actuator))
+            actuators.append((d, j.actuator, f"joint '{j.name}' actuator"))
         if j.control is not None:
             dof_kp[d] = j.control.kp
             dof_kd[d] = j.control.kd
-            controls.append((d, j.control.target, j.control.target_rate))
+            controls.append((d, j.control.target, j.control.target_rate,
+                             f"joint '{j.name}' control target"))
 
     groups = []
     for k in sorted(set(joint_k.tolist())):
@@ -235,7 +236,7 @@ def compile_model(model: Model) -> System:
             mult=joint_multadr[ids][:, None] + np.arange(6), abelian=abelian[ids],
             H0=joint_H0[ids], has_nonabelian_spring=nonab_spring))
 
-    loads = tuple((nidx[ld.node], ld.force, ld.torque) for ld in model.loads)
+    loads = tuple((nidx[ld.node], ld.force, ld.torque, f"load '{ld.name}'") for ld in model.loads)
     pos = H0[:, :3, 3]
     L = float(np.max(np.linalg.norm(pos - pos.mean(axis=0), axis=1))) if M else 1.0
     sysd = dict(
