@@ -163,7 +163,7 @@ def test_iteration_matrix_is_the_jacobian_for_every_joint_type():
     # joint-joint blocks of the springs on non-abelian joints: documented approximate tangent
     approx = np.zeros_like(D, dtype=bool)
     bound = np.zeros_like(D)
-    for jj, (name, typ) in enumerate(zip(s.joint_names, s.joint_type, strict=True)):
+    for jj, typ in enumerate(s.joint_type):
         if typ in NON_ABELIAN:
             d = s.joint_dofadr[jj] + np.arange(s.joint_k[jj])
             approx[np.ix_(d, d)] = True

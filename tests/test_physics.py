@@ -280,7 +280,7 @@ def test_constant_torque_on_an_offset_body_uses_the_parallel_axis_inertia():
 # ---------------------------------------------------------------------------------------------
 # 5-10. The paper's slider-crank
 # ---------------------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _crank(h: float, t_end: float):
     return sd.simulate(sd.examples.slider_crank(), t_end, h, rho_inf=0.9)
 

@@ -1,4 +1,7 @@
-"""Exceptions of se3dyn. Every message names the item, the field, what was expected and what came."""
+"""Exceptions of se3dyn.
+
+Every message names the item, the field, what was expected and what came.
+"""
 
 from __future__ import annotations
 

@@ -312,7 +312,8 @@ class ModelBuilder:
         try:
             Jin = np.asarray(inertia, dtype=float)
         except (TypeError, ValueError):
-            raise ModelError(item, "inertia", "3 principal values or a 3x3 tensor", inertia) from None
+            raise ModelError(item, "inertia", "3 principal values or a 3x3 tensor",
+                             inertia) from None
         if not np.all(np.isfinite(Jin)):
             raise ModelError(item, "inertia", "finite values", inertia)
         if Jin.shape == (3,):

@@ -115,28 +115,22 @@ class Results:
         both parts by R (this is not the inertial acceleration of the point unless Omega = 0)."""
         return self._node_dof(name, self.vd, frame)
 
+    def _joint_cols(self, name: str, arr: np.ndarray) -> np.ndarray:
+        s = self.system
+        cols = [arr[:, s.joint_dofadr[j]:s.joint_dofadr[j] + s.joint_k[j]]
+                for j in self._joints(name) if s.joint_k[j]]
+        return np.concatenate(cols, axis=1) if cols else np.zeros((len(self.t), 0))
+
     def joint_coordinates(self, name: str) -> np.ndarray:
         """Relative coordinates alpha of a joint (Eq. (60)), unwrapped, shape (n, k).
 
         For a composite joint (universal), the coordinates of its parts side by side.
         """
-        s = self.system
-        cols = []
-        for j in self._joints(name):
-            d = s.joint_dofadr[j]
-            cols.append(self.alpha[:, d:d + s.joint_k[j]] if d >= 0
-                        else np.zeros((len(self.t), 0)))
-        return np.concatenate(cols, axis=1)
+        return self._joint_cols(name, self.alpha)
 
     def joint_velocities(self, name: str) -> np.ndarray:
         """Relative velocities v_j of a joint (Eq. (61)), shape (n, k)."""
-        s = self.system
-        cols = []
-        for j in self._joints(name):
-            d = s.joint_dofadr[j]
-            cols.append(self.v[:, d:d + s.joint_k[j]] if d >= 0
-                        else np.zeros((len(self.t), 0)))
-        return np.concatenate(cols, axis=1)
+        return self._joint_cols(name, self.v)
 
     def joint_multipliers(self, name: str) -> np.ndarray:
         """Lagrange multipliers of a joint, shape (n, 6) (n, 6 * parts for a composite).

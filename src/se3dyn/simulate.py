@@ -10,7 +10,7 @@ from collections.abc import Callable
 import numpy as np
 
 from se3dyn.errors import ModelError, SimulationError
-from se3dyn.integrator import GeneralizedAlpha, State
+from se3dyn.integrator import GeneralizedAlpha, State, energies, step_inputs
 from se3dyn.model import Model
 from se3dyn.results import Results
 from se3dyn.system import LinearSolver, System, compile_model
@@ -112,8 +112,6 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     rec = _Recorder(s, nsteps // output_every + 2)
     wall0 = time.perf_counter()
     st = integ.init(s, t_start, solver)
-    from se3dyn.integrator import energies, step_inputs
-
     e = energies(s, st, step_inputs(s, t_start))
     rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
     total_it = 0
