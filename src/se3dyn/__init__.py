@@ -16,13 +16,13 @@ from se3dyn.model import PD, JointSpec, LoadSpec, Model, ModelBuilder, NodeSpec
 from se3dyn.results import Results
 from se3dyn.simulate import simulate
 from se3dyn.system import System, compile_model
-from se3dyn.timefunc import Callable, Constant, Ramp, Sine, Step, Table
+from se3dyn.timefunc import Callable, Component, Constant, Ramp, Sine, Step, Table
 
 __version__ = "0.1.0"
 
 __all__ = [
     "lie", "examples", "ModelBuilder", "Model", "NodeSpec", "JointSpec", "LoadSpec", "PD",
     "System", "compile_model", "simulate", "Results", "GeneralizedAlpha", "State",
-    "Constant", "Step", "Ramp", "Table", "Sine", "Callable", "JOINT_TYPES",
+    "Constant", "Step", "Ramp", "Table", "Sine", "Callable", "Component", "JOINT_TYPES",
     "Se3dynError", "ModelError", "SimulationError", "NewtonError", "__version__",
 ]

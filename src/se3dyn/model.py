@@ -22,7 +22,7 @@ import numpy as np
 
 from se3dyn.errors import ModelError
 from se3dyn.joints import JOINT_TYPES, is_abelian, unit_vector
-from se3dyn.timefunc import TimeFunction, as_timefunc
+from se3dyn.timefunc import Component, TimeFunction, as_timefunc
 
 __all__ = ["NodeSpec", "JointSpec", "LoadSpec", "PD", "Model", "ModelBuilder"]
 
@@ -319,6 +319,7 @@ class ModelBuilder:
         if Jin.shape == (3,):
             Rp = np.eye(3) if axes is None else _rotation(axes, item, "principal_axes")
             J = Rp @ np.diag(Jin) @ Rp.T
+            J = 0.5 * (J + J.T)  # exactly symmetric, like a given tensor
         elif Jin.shape == (3, 3):
             if axes is not None:
                 raise ModelError(item, "principal_axes", "no principal axes with a full tensor",
@@ -484,12 +485,12 @@ class ModelBuilder:
         for i, (na, nb, a) in enumerate(((node_a, cross, a1), (cross, node_b, a2))):
             sname = f"{name}:{i + 1}"
             A_ = JOINT_TYPES["hinge"].make_A(item, axis=a)
-            sub_act = None if tau is None else _component(tau, i)
+            sub_act = None if tau is None else Component(tau, i)
             sub_pd = None
             if control is not None:
                 sub_pd = PD(part(control.kp, i, "control.kp"), part(control.kd, i, "control.kd"),
-                            _component(as_timefunc(control.target, item, "control.target", 2), i),
-                            None if control.target_rate is None else _component(
+                            Component(as_timefunc(control.target, item, "control.target", 2), i),
+                            None if control.target_rate is None else Component(
                                 as_timefunc(control.target_rate, item, "control.target_rate",
                                             2), i))
             self._add_joint(sname, "hinge", na, nb, {"axis": a}, A_, part(stiffness, i,
@@ -548,13 +549,3 @@ class ModelBuilder:
         return Model(tuple(self._nodes.values()), tuple(self._joints.values()),
                      tuple(self._loads.values()), self._gravity.copy(), dict(self._composites),
                      self._name)
-
-
-def _component(f: TimeFunction, i: int) -> TimeFunction:
-    from se3dyn.timefunc import Callable
-
-    def comp(t, f=f, i=i):
-        v = np.atleast_1d(np.asarray(f(t), dtype=float))
-        return float(v[i] if v.size > 1 else v[0])
-
-    return Callable(comp)

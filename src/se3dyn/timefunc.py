@@ -18,7 +18,8 @@ import numpy as np
 
 from se3dyn.errors import ModelError
 
-__all__ = ["TimeFunction", "Constant", "Step", "Ramp", "Table", "Sine", "Callable", "as_timefunc"]
+__all__ = ["TimeFunction", "Constant", "Step", "Ramp", "Table", "Sine", "Callable", "Component",
+           "as_timefunc"]
 
 
 class TimeFunction:
@@ -191,6 +192,26 @@ class Callable(TimeFunction):
         a = np.asarray(self.fn(t + self.dt), dtype=float)
         b = np.asarray(self.fn(t - self.dt), dtype=float)
         return (a - b) / (2 * self.dt)
+
+
+@dataclass(frozen=True)
+class Component(TimeFunction):
+    """Component ``index`` of a vector-valued time function ``base`` (e.g. one hinge of a
+    universal joint driven by a 2-vector actuator)."""
+
+    base: TimeFunction
+    index: int
+    kind = "component"
+
+    def _pick(self, v: Any) -> float:
+        a = np.atleast_1d(np.asarray(v, dtype=float))
+        return float(a[self.index] if a.size > 1 else a[0])
+
+    def __call__(self, t):
+        return self._pick(self.base(t))
+
+    def rate(self, t):
+        return self._pick(self.base.rate(t))
 
 
 def as_timefunc(v: Any, item: str, fld: str, size: int | None = None) -> TimeFunction:

@@ -1,0 +1,1237 @@
+"""Declarative, versioned YAML model files (format version 1).
+
+A model file describes a :class:`~se3dyn.model.Model` (nodes, joints, loads, gravity) plus optional
+simulation settings, with names instead of numbers::
+
+    se3dyn: 1
+    name: pendulum
+    gravity: [0, 0, -9.81]
+    nodes:
+      ground: {position: [0, 0, 0], fixed: true}
+      bob: {position: [1, 0, 0], mass: 1.0, inertia: [1.0e-3, 1.0e-3, 1.0e-3]}
+    joints:
+      pivot: {type: hinge, a: ground, b: bob, axis: [0, 1, 0]}
+    simulation: {t_end: 2.0, step: 0.01}
+
+>>> from se3dyn.modelfile import load_model
+>>> model, settings = load_model("examples/slider_crank.yaml")   # doctest: +SKIP
+>>> result = se3dyn.simulate(model, **settings)                   # doctest: +SKIP
+
+One source of truth: :data:`FIELDS` lists, per section, every field with its type, default and
+description. The loader validates against it, :func:`json_schema` turns it into a JSON Schema
+(draft 2020-12, ``docs/model-file.schema.json``) and :func:`markdown_reference` into the
+field-by-field reference of ``docs/model-file.md``.
+
+Safety: files are parsed with a :class:`yaml.SafeLoader` subclass (nothing is ever evaluated as
+code); anchors and aliases are rejected (no "billion laughs"), and file size, nesting depth,
+collection lengths and node counts are bounded. Every invalid file raises
+:class:`ModelFileError` naming the file, the line, the item, the field, what was expected and what
+came. Regenerate the schema with ``python -m se3dyn.modelfile schema docs/model-file.schema.json``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
+
+from se3dyn.errors import ModelError
+from se3dyn.joints import JOINT_TYPES
+from se3dyn.model import PD, Model, ModelBuilder
+from se3dyn.timefunc import Component, Constant, Ramp, Sine, Step, Table, TimeFunction
+
+__all__ = [
+    "FORMAT_VERSION", "FIELDS", "ModelFileError", "load_model", "loads_model", "save_model",
+    "json_schema", "markdown_reference", "write_schema",
+]
+
+#: The format version written by :func:`save_model` and the only one :func:`loads_model` reads.
+FORMAT_VERSION = 1
+
+MAX_FILE_BYTES = 10 * 1024 * 1024  #: larger files are refused before parsing
+MAX_DEPTH = 32  #: maximum nesting of YAML collections
+MAX_ITEMS = 10_000  #: maximum entries of one YAML list or mapping
+MAX_NODES = 200_000  #: maximum YAML nodes in a document
+
+_JOINT_KEYS = tuple(sorted([*JOINT_TYPES, "universal"]))
+_TF_KINDS = ("constant", "step", "ramp", "table", "sine")
+
+
+# =================================================================================================
+# Error
+# =================================================================================================
+class ModelFileError(ModelError):
+    """An invalid model file: a :class:`~se3dyn.errors.ModelError` located in a file.
+
+    Attributes (besides ``item``, ``field``, ``expected``, ``got`` of ModelError)
+    ----------
+    filename : str
+    line : int or None
+        1-based line number, when YAML gives one.
+
+    The message reads ``"<file>, line <n>: <item>: field '<field>': expected <...>, got <...>
+    (<hint>)"``.
+    """
+
+    def __init__(self, filename: str, line: int | None, item: str, field: str, expected: str,
+                 got: Any = None, hint: str = "", *, message: str | None = None):
+        super().__init__(item, field, expected, got, hint)
+        self.filename = filename
+        self.line = line
+        loc = f"{filename}, line {line}" if line else str(filename)
+        text = message if message is not None else self.args[0]
+        text = re.sub(r"\s*\n\s*", " ", text)  # one line, always
+        self.args = (f"{loc}: {text}",)
+
+
+class _Got:
+    """A ``got`` value whose repr is a ready-made description."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def __repr__(self) -> str:
+        return self.text
+
+
+class _Reject(Exception):
+    """Raised inside the composer; turned into a ModelFileError by the loader."""
+
+    def __init__(self, mark, field: str, expected: str, got: str, hint: str = ""):
+        super().__init__(expected)
+        self.mark, self.field, self.expected, self.got, self.hint = mark, field, expected, got, hint
+
+
+# =================================================================================================
+# Safe, bounded YAML composition with line numbers
+# =================================================================================================
+class _Loader(yaml.SafeLoader):
+    """SafeLoader that composes a bounded node graph: no aliases or anchors, limited depth,
+    collection sizes and node count. Plain scalars like ``1e-4`` are floats (as in YAML 1.2)."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+        self._count = 0
+        self._path: list[str] = []
+
+    def _where(self) -> str:
+        return ".".join(self._path) or "(document)"
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            ev = self.peek_event()
+            raise _Reject(ev.start_mark, self._where(), "plain values (no YAML aliases)",
+                          f"alias *{ev.anchor}", "anchors (&name) and aliases (*name) are not "
+                          "supported in se3dyn model files; write the values out")
+        ev = self.peek_event()
+        if getattr(ev, "anchor", None) is not None:
+            raise _Reject(ev.start_mark, self._where(), "plain values (no YAML anchors)",
+                          f"anchor &{ev.anchor}", "anchors (&name) and aliases (*name) are not "
+                          "supported in se3dyn model files; write the values out")
+        self._count += 1
+        if self._count > MAX_NODES:
+            raise _Reject(ev.start_mark, self._where(), f"at most {MAX_NODES} YAML values",
+                          "more", "the document is too large")
+        if self._depth >= MAX_DEPTH:
+            raise _Reject(ev.start_mark, self._where(), f"at most {MAX_DEPTH} nested levels",
+                          "deeper nesting")
+        self._depth += 1
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def compose_sequence_node(self, anchor):
+        start = self.get_event()
+        tag = start.tag
+        if tag is None or tag == "!":
+            tag = self.resolve(SequenceNode, None, start.implicit)
+        node = SequenceNode(tag, [], start.start_mark, None, flow_style=start.flow_style)
+        i = 0
+        while not self.check_event(yaml.SequenceEndEvent):
+            if i >= MAX_ITEMS:
+                raise _Reject(start.start_mark, self._where(),
+                              f"a list of at most {MAX_ITEMS} items", "a longer list")
+            self._path.append(f"[{i}]")
+            try:
+                node.value.append(self.compose_node(node, i))
+            finally:
+                self._path.pop()
+            i += 1
+        node.end_mark = self.get_event().end_mark
+        return node
+
+    def compose_mapping_node(self, anchor):
+        start = self.get_event()
+        tag = start.tag
+        if tag is None or tag == "!":
+            tag = self.resolve(MappingNode, None, start.implicit)
+        node = MappingNode(tag, [], start.start_mark, None, flow_style=start.flow_style)
+        while not self.check_event(yaml.MappingEndEvent):
+            if len(node.value) >= MAX_ITEMS:
+                raise _Reject(start.start_mark, self._where(),
+                              f"a mapping of at most {MAX_ITEMS} entries", "a larger mapping")
+            key = self.compose_node(node, None)
+            self._path.append(str(key.value)[:40] if isinstance(key, ScalarNode) else "?")
+            try:
+                value = self.compose_node(node, key)
+            finally:
+                self._path.pop()
+            node.value.append((key, value))
+        node.end_mark = self.get_event().end_mark
+        return node
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
+# =================================================================================================
+# Field types: validation + JSON schema + documentation text from one description
+# =================================================================================================
+_BAD = object()
+
+
+class _Ctx:
+    def __init__(self, filename: str, loader: _Loader):
+        self.filename = filename
+        self.loader = loader
+
+    @staticmethod
+    def line(node: Node | None) -> int | None:
+        return None if node is None else node.start_mark.line + 1
+
+    def scalar(self, node: Node) -> Any:
+        if not isinstance(node, ScalarNode):
+            return _BAD
+        try:
+            return self.loader.construct_object(node, deep=True)
+        except Exception:  # unknown tags, oversized ints, bad timestamps: all "not a value"
+            return _BAD
+
+    def describe(self, node: Node) -> _Got:
+        if isinstance(node, SequenceNode):
+            return _Got(f"a list of {len(node.value)} item(s)")
+        if isinstance(node, MappingNode):
+            keys = [str(k.value) for k, _ in node.value[:5] if isinstance(k, ScalarNode)]
+            return _Got("a mapping" + (f" with keys {', '.join(keys)}" if keys else " (empty)")
+                        + (" ..." if len(node.value) > 5 else ""))
+        v = self.scalar(node)
+        if v is _BAD:
+            return _Got(f"{node.value!r} (tag {node.tag})"[:100])
+        s = repr(v)
+        return _Got(s if len(s) <= 100 else s[:97] + "...")
+
+    def fail(self, node: Node | None, item: str, fld: str, expected: str, got: Any = _BAD,
+             hint: str = ""):
+        if got is _BAD:
+            got = self.describe(node) if node is not None else _Got("nothing")
+        raise ModelFileError(self.filename, self.line(node), item, fld, expected, got, hint)
+
+
+class _Type:
+    text = ""
+
+    def schema(self) -> dict:
+        raise NotImplementedError
+
+    def convert(self, ctx: _Ctx, node: Node, item: str, fld: str) -> Any:
+        raise NotImplementedError
+
+
+def _num(ctx, node, item, fld, expected="a finite number") -> float:
+    v = ctx.scalar(node)
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        ctx.fail(node, item, fld, expected)
+    try:
+        f = float(v)
+    except OverflowError:
+        ctx.fail(node, item, fld, expected)
+    if not math.isfinite(f):
+        ctx.fail(node, item, fld, expected, hint="NaN and infinity are not allowed")
+    return f
+
+
+def _numlist(ctx, node, item, fld, expected, lo=0, hi=None) -> list[float]:
+    if not isinstance(node, SequenceNode) or len(node.value) < lo or (
+            hi is not None and len(node.value) > hi):
+        ctx.fail(node, item, fld, expected)
+    return [_num(ctx, n, item, f"{fld}[{i}]", f"a finite number ({expected})")
+            for i, n in enumerate(node.value)]
+
+
+_NUMBER = {"type": "number"}
+
+
+@dataclass(frozen=True)
+class Num(_Type):
+    """A finite number; optional bounds; ``integer`` for counts."""
+
+    minimum: float | None = None
+    exclusive_minimum: float | None = None
+    maximum: float | None = None
+    integer: bool = False
+
+    @property
+    def text(self) -> str:
+        s = "integer" if self.integer else "number"
+        if self.exclusive_minimum is not None:
+            s += f" > {self.exclusive_minimum:g}"
+        elif self.minimum is not None:
+            s += f" >= {self.minimum:g}"
+        if self.maximum is not None:
+            s += f", <= {self.maximum:g}"
+        return s
+
+    def schema(self) -> dict:
+        d: dict[str, Any] = {"type": "integer" if self.integer else "number"}
+        if self.minimum is not None:
+            d["minimum"] = self.minimum
+        if self.exclusive_minimum is not None:
+            d["exclusiveMinimum"] = self.exclusive_minimum
+        if self.maximum is not None:
+            d["maximum"] = self.maximum
+        return d
+
+    def convert(self, ctx, node, item, fld):
+        expected = ("an " if self.integer else "a finite ") + self.text
+        if self.integer:
+            v = ctx.scalar(node)
+            if isinstance(v, bool) or not isinstance(v, int):
+                ctx.fail(node, item, fld, expected)
+            x: Any = v
+        else:
+            x = _num(ctx, node, item, fld, expected)
+        if ((self.minimum is not None and x < self.minimum)
+                or (self.exclusive_minimum is not None and x <= self.exclusive_minimum)
+                or (self.maximum is not None and x > self.maximum)):
+            ctx.fail(node, item, fld, expected)
+        return x
+
+
+@dataclass(frozen=True)
+class Version(_Type):
+    text = f"integer, {FORMAT_VERSION}"
+
+    def schema(self) -> dict:
+        return {"const": FORMAT_VERSION}
+
+    def convert(self, ctx, node, item, fld):
+        v = ctx.scalar(node)
+        if isinstance(v, bool) or not isinstance(v, int):
+            ctx.fail(node, item, fld, f"the format version number {FORMAT_VERSION}")
+        if v != FORMAT_VERSION:
+            ctx.fail(node, item, fld, f"format version {FORMAT_VERSION}", v,
+                     f"this se3dyn reads version {FORMAT_VERSION} only; upgrade se3dyn for "
+                     f"newer files")
+        return v
+
+
+@dataclass(frozen=True)
+class Bool(_Type):
+    text = "true / false"
+
+    def schema(self) -> dict:
+        return {"type": "boolean"}
+
+    def convert(self, ctx, node, item, fld):
+        v = ctx.scalar(node)
+        if not isinstance(v, bool):
+            ctx.fail(node, item, fld, "true or false")
+        return v
+
+
+@dataclass(frozen=True)
+class Str(_Type):
+    """A string, optionally one of ``choices``; ``ref`` for a node name (strings or integers)."""
+
+    choices: tuple[str, ...] = ()
+    ref: str = ""
+
+    @property
+    def text(self) -> str:
+        if self.choices:
+            return "one of " + ", ".join(f"`{c}`" for c in self.choices)
+        return f"{self.ref} name" if self.ref else "string"
+
+    def schema(self) -> dict:
+        if self.choices:
+            return {"enum": list(self.choices)}
+        return {"type": ["string", "integer"]} if self.ref else {"type": "string"}
+
+    def convert(self, ctx, node, item, fld):
+        ok = (isinstance(node, ScalarNode) and node.tag in (
+            "tag:yaml.org,2002:str", *(("tag:yaml.org,2002:int",) if self.ref else ())))
+        expected = (f"one of {', '.join(self.choices)}" if self.choices
+                    else f"a {self.ref} name" if self.ref else "a string")
+        if not ok or not node.value:
+            ctx.fail(node, item, fld, expected)
+        v = str(node.value)
+        if self.choices and v not in self.choices:
+            close = difflib.get_close_matches(v, self.choices, n=1)
+            ctx.fail(node, item, fld, expected, v, f"did you mean '{close[0]}'?" if close else "")
+        return v
+
+
+@dataclass(frozen=True)
+class Vec(_Type):
+    """``n`` numbers (``n`` None: ``lo``..``hi`` numbers)."""
+
+    n: int | None = 3
+    lo: int = 1
+    hi: int = 6
+
+    @property
+    def text(self) -> str:
+        return f"{self.n} numbers" if self.n else f"list of {self.lo}-{self.hi} numbers"
+
+    def schema(self) -> dict:
+        lo, hi = (self.n, self.n) if self.n else (self.lo, self.hi)
+        return {"type": "array", "items": _NUMBER, "minItems": lo, "maxItems": hi}
+
+    def convert(self, ctx, node, item, fld):
+        lo, hi = (self.n, self.n) if self.n else (self.lo, self.hi)
+        return _numlist(ctx, node, item, fld, f"a list of {self.text}", lo, hi)
+
+
+@dataclass(frozen=True)
+class Mat(_Type):
+    """A list of ``rmin``..``rmax`` rows of ``cols`` numbers each (``cols`` None: 0..6, all rows
+    of equal length); ``flat``: a single list of ``rmin`` numbers is accepted too (k = 1)."""
+
+    rmin: int = 3
+    rmax: int = 3
+    cols: int | None = 3
+    flat: bool = False
+
+    @property
+    def text(self) -> str:
+        r = (str(self.rmin) if self.rmin == self.rmax else
+             f"{self.rmin} or {self.rmax}" if self.rmax == self.rmin + 1 else "n")
+        c = str(self.cols) if self.cols else "k"
+        s = f"{r} x {c} numbers (list of rows)"
+        return s + (f", or {self.rmin} numbers (k = 1)" if self.flat else "")
+
+    def schema(self) -> dict:
+        row = {"type": "array", "items": _NUMBER, "minItems": self.cols or 0,
+               "maxItems": self.cols or 6}
+        d = {"type": "array", "items": row, "minItems": self.rmin, "maxItems": self.rmax}
+        if self.flat:
+            return {"oneOf": [d, {"type": "array", "items": _NUMBER, "minItems": self.rmin,
+                                  "maxItems": self.rmin}]}
+        return d
+
+    def convert(self, ctx, node, item, fld):
+        expected = "a list of " + self.text
+        if not isinstance(node, SequenceNode) or not self.rmin <= len(node.value) <= self.rmax:
+            ctx.fail(node, item, fld, expected)
+        if self.flat and all(isinstance(n, ScalarNode) for n in node.value):
+            return _numlist(ctx, node, item, fld, expected, self.rmin, self.rmin)
+        lo, hi = (self.cols, self.cols) if self.cols else (0, 6)
+        out = [_numlist(ctx, r, item, f"{fld}[{i}]",
+                        f"a row of {self.cols or 'k'} numbers ({expected})", lo, hi)
+               for i, r in enumerate(node.value)]
+        if len({len(r) for r in out}) > 1:
+            ctx.fail(node, item, fld, expected + " (rows of equal length)")
+        return out
+
+
+@dataclass(frozen=True)
+class OneOf(_Type):
+    """The first alternative whose YAML shape matches (scalar / list / list of lists)."""
+
+    alts: tuple[_Type, ...] = ()
+
+    @property
+    def text(self) -> str:
+        return " or ".join(a.text for a in self.alts)
+
+    def schema(self) -> dict:
+        return {"oneOf": [a.schema() for a in self.alts]}
+
+    def convert(self, ctx, node, item, fld):
+        def shape(t):
+            if isinstance(t, Num):
+                return "scalar"
+            if isinstance(t, Mat):
+                return "matrix"
+            return "list"
+
+        if isinstance(node, SequenceNode):
+            nested = bool(node.value) and isinstance(node.value[0], SequenceNode)
+            want = "matrix" if nested else "list"
+        else:
+            want = "scalar"
+        for a in self.alts:
+            if shape(a) == want:
+                return a.convert(ctx, node, item, fld)
+        ctx.fail(node, item, fld, self.text)
+
+
+@dataclass(frozen=True)
+class Section(_Type):
+    """A mapping whose fields are ``FIELDS[name]``."""
+
+    name: str = ""
+
+    @property
+    def text(self) -> str:
+        return f"mapping, see [{self.name}](#{self.name.replace(' ', '-')})"
+
+    def schema(self) -> dict:
+        return {"$ref": f"#/$defs/{self.name}"}
+
+    def convert(self, ctx, node, item, fld):
+        if self.name == "simulation":  # its own item: "simulation: field 'step': ..."
+            return _section(ctx, node, self.name, "simulation", "")
+        return _section(ctx, node, self.name, item, f"{fld}." if fld else "")
+
+
+@dataclass(frozen=True)
+class Named(_Type):
+    """A mapping from names (keys, order kept) to ``FIELDS[section]`` mappings."""
+
+    section: str = ""
+
+    @property
+    def text(self) -> str:
+        return f"mapping name -> {self.section}, see [{self.section}](#{self.section})"
+
+    def schema(self) -> dict:
+        return {"type": "object", "additionalProperties": {"$ref": f"#/$defs/{self.section}"}}
+
+    def convert(self, ctx, node, item, fld):
+        if not isinstance(node, MappingNode):
+            ctx.fail(node, item, fld, f"a mapping from {self.section} names to {self.section}s")
+        out = []
+        seen: dict[str, int] = {}
+        for k, v in node.value:
+            if not isinstance(k, ScalarNode) or not k.value:
+                ctx.fail(k, item, fld, f"a {self.section} name (a non-empty string)")
+            name = str(k.value)
+            if name in seen:
+                ctx.fail(k, f"{self.section} {name!r}", "name", f"a unique {self.section} name",
+                         name, f"{self.section} {name!r} is already defined at line "
+                         f"{seen[name]}")
+            seen[name] = ctx.line(k)
+            obj = _section(ctx, v, self.section, f"{self.section} {name!r}", "")
+            obj.name, obj.line = name, ctx.line(k)
+            out.append(obj)
+        return out
+
+
+@dataclass(frozen=True)
+class TimeFunc(_Type):
+    """A number or list (constant) or ``{kind: {fields}}`` with kind in constant, step, ramp,
+    table, sine."""
+
+    text = "time function: number, list, or {constant\\|step\\|ramp\\|table\\|sine: {...}}"
+
+    def schema(self) -> dict:
+        return {"$ref": "#/$defs/time_function"}
+
+    def convert(self, ctx, node, item, fld):
+        expected = ("a number, a list of numbers or a time function {kind: {...}} with kind "
+                    "one of " + ", ".join(_TF_KINDS))
+        if isinstance(node, ScalarNode):
+            return _num(ctx, node, item, fld, expected)
+        if isinstance(node, SequenceNode):
+            return _numlist(ctx, node, item, fld, expected, 1, 6)
+        if len(node.value) != 1:
+            ctx.fail(node, item, fld, expected + " (exactly one kind)")
+        knode, vnode = node.value[0]
+        kind = str(knode.value) if isinstance(knode, ScalarNode) else ""
+        if kind not in _TF_KINDS:
+            close = difflib.get_close_matches(kind, _TF_KINDS, n=1)
+            ctx.fail(knode, item, fld, "a time function kind: " + ", ".join(_TF_KINDS),
+                     _Got(repr(kind)), f"did you mean '{close[0]}'?" if close else "")
+        obj = _section(ctx, vnode, kind, item, f"{fld}.{kind}.")
+        cls = {"constant": Constant, "step": Step, "ramp": Ramp, "table": Table,
+               "sine": Sine}[kind]
+        try:
+            return cls(**obj.values)
+        except ModelError as e:
+            key = e.field if e.field in obj.lines else None
+            raise ModelFileError(ctx.filename, obj.lines.get(key, ctx.line(vnode)), item,
+                                 f"{fld}.{kind}.{e.field}", e.expected, e.got) from None
+
+
+@dataclass(frozen=True)
+class Field:
+    """One field of a section: name, type, default (``None``: absent), description."""
+
+    name: str
+    type: _Type
+    default: Any = None
+    doc: str = ""
+    required: bool = False
+
+
+_V3 = Vec(3)
+_M33 = Mat(3, 3, 3)
+_KVEC = OneOf((Num(), Vec(None, 1, 6)))
+_KVEC_NN = OneOf((Num(minimum=0), Vec(None, 1, 6)))
+_VALUE = OneOf((Num(), Vec(None, 1, 6)))
+_ACT_DOC = ("Actuator force/torque tau(t) on the relative coordinates (Eq. 66), k components "
+            "(a number applies to all). `actuator`, `torque` and `force` are aliases; give at "
+            "most one.")
+
+#: The single source of truth of the format: section -> fields.
+FIELDS: dict[str, tuple[Field, ...]] = {
+    "model": (
+        Field("se3dyn", Version(), None, "Format version of the file (required).", True),
+        Field("name", Str(), "model", "Model name (used in results and files)."),
+        Field("gravity", _V3, [0, 0, 0], "Gravity acceleration in the inertial frame (m/s^2)."),
+        Field("nodes", Named("node"), None, "Nodes by name, in order (required).", True),
+        Field("joints", Named("joint"), {}, "Kinematic joints by name, in order."),
+        Field("loads", Named("load"), {}, "External nodal loads by name."),
+        Field("simulation", Section("simulation"), {}, "Simulation settings, returned by "
+              "`load_model` as a dict for `se3dyn.simulate(model, **settings)`."),
+    ),
+    "node": (
+        Field("position", _V3, [0, 0, 0], "Initial position in the inertial frame (m)."),
+        Field("orientation", _M33, "identity", "Initial rotation R0 (rows of the matrix; its "
+              "columns are the material axes in the inertial frame)."),
+        Field("mass", Num(minimum=0), 0, "Mass (kg)."),
+        Field("inertia", OneOf((_V3, _M33)), None, "Principal moments (J1, J2, J3) about "
+              "`principal_axes`, or a full symmetric 3x3 tensor in the inertial frame of the "
+              "initial configuration (kg m^2). Required when mass > 0."),
+        Field("principal_axes", _M33, "identity", "Rotation whose columns are the principal "
+              "axes (only with 3 principal moments)."),
+        Field("fixed", Bool(), False, "Clamped node (no unknowns; no mass, no velocity)."),
+        Field("velocity", _V3, [0, 0, 0], "Initial linear velocity (m/s)."),
+        Field("angular_velocity", _V3, [0, 0, 0], "Initial angular velocity (rad/s)."),
+        Field("velocity_frame", Str(("inertial", "material")), "inertial",
+              "Frame of `velocity` and `angular_velocity`."),
+    ),
+    "joint": (
+        Field("type", Str(_JOINT_KEYS), None, "Joint type, see [joint types](#joint-types).",
+              True),
+        Field("a", Str(ref="node"), None, "Node A (H_B = H_A H_J, Eq. 7).", True),
+        Field("b", Str(ref="node"), None, "Node B.", True),
+        Field("axis", _V3, None, "Unit axis in the inertial frame of the initial configuration "
+              "(hinge, prismatic, cylindrical, screw)."),
+        Field("axes", Mat(2, 3, 3), None, "Spherical: 3 orthonormal rotation axes (identity "
+              "by default); planar: 2 in-plane axes; universal: the 2 hinge axes."),
+        Field("normal", _V3, None, "Planar joint: plane normal."),
+        Field("pitch", Num(), None, "Screw joint: translation per radian (m/rad)."),
+        Field("A", Mat(6, 6, None, flat=True), None, "General joint: 6 x k subalgebra basis, "
+              "columns (e_U, e_Omega)."),
+        Field("stiffness", _KVEC_NN, 0, "Spring K on the relative coordinates (Eq. 62)."),
+        Field("reference", _KVEC, 0, "Spring reference alpha0."),
+        Field("damping", _KVEC_NN, 0, "Damper C on the relative velocities (Eq. 64)."),
+        Field("actuator", TimeFunc(), None, _ACT_DOC),
+        Field("torque", TimeFunc(), None, "Alias of `actuator`."),
+        Field("force", TimeFunc(), None, "Alias of `actuator`."),
+        Field("control", Section("control"), None, "PD control law (abelian joints only)."),
+    ),
+    "control": (
+        Field("kp", _KVEC_NN, None, "Proportional gain(s) (required).", True),
+        Field("kd", _KVEC_NN, 0, "Derivative gain(s)."),
+        Field("target", TimeFunc(), 0, "Target relative coordinates alpha_ref(t)."),
+        Field("target_rate", TimeFunc(), "d target/dt", "Target rates (the derivative of "
+              "`target` when absent)."),
+    ),
+    "load": (
+        Field("node", Str(ref="node"), None, "Loaded node (a free node; required).", True),
+        Field("force", TimeFunc(), None, "Force in the inertial frame (3 components)."),
+        Field("torque", TimeFunc(), None, "Torque in the material frame of the node (3 "
+              "components)."),
+    ),
+    "simulation": (
+        Field("t_end", Num(), None, "Final time (s)."),
+        Field("step", Num(exclusive_minimum=0), None, "Time step h (s)."),
+        Field("t_start", Num(), 0, "Initial time (s)."),
+        Field("rho_inf", Num(minimum=0, maximum=1), 0.9, "Spectral radius at infinite "
+              "frequency (Eq. 44)."),
+        Field("tol_residual", Num(exclusive_minimum=0), 1e-10, "Newton residual tolerance."),
+        Field("tol_constraint", Num(exclusive_minimum=0), 1e-11, "Constraint tolerance."),
+        Field("max_iter", Num(minimum=1, integer=True), 25, "Newton iterations per step."),
+        Field("output_every", Num(minimum=1, integer=True), 1, "Store every k-th step."),
+    ),
+    "constant": (
+        Field("value", _VALUE, None, "f(t) = value (required).", True),
+    ),
+    "step": (
+        Field("value", _VALUE, None, "Value for start <= t < stop, zero otherwise (required).",
+              True),
+        Field("start", Num(), 0, "Switch-on time (s)."),
+        Field("stop", Num(), "forever", "Switch-off time (s); omit for never."),
+    ),
+    "ramp": (
+        Field("value", _VALUE, None, "Final value (required).", True),
+        Field("start", Num(), 0, "Start of the ramp (s); zero before."),
+        Field("duration", Num(exclusive_minimum=0), 1, "Duration of the linear rise (s)."),
+    ),
+    "table": (
+        Field("times", Vec(None, 2, MAX_ITEMS), None, "Strictly increasing times (required).",
+              True),
+        Field("values", OneOf((Vec(None, 2, MAX_ITEMS), Mat(2, MAX_ITEMS, None))), None,
+              "One value (or one row of k values) per time; piecewise linear, held constant "
+              "outside (required).", True),
+    ),
+    "sine": (
+        Field("amplitude", _VALUE, None, "Amplitude (required).", True),
+        Field("frequency", Num(minimum=0), None, "Frequency (Hz) (required).", True),
+        Field("phase", Num(), 0, "Phase (rad)."),
+        Field("offset", _VALUE, 0, "Offset."),
+    ),
+}
+
+_SECTION_DOC = {
+    "model": "The top level of the file.",
+    "node": "An entry of `nodes:` (key: the node name). A frame in SE(3) with optional rigid-"
+            "body inertia.",
+    "joint": "An entry of `joints:` (key: the joint name). A kinematic joint H_B = H_A H_J "
+             "between nodes `a` and `b`, with its force elements. Vector force elements have "
+             "k components (k = number of relative coordinates of the type); a number applies "
+             "to all of them.",
+    "control": "The `control:` mapping of a joint: tau = -kp (alpha - target(t)) - kd "
+               "(alpha_dot - target_rate(t)).",
+    "load": "An entry of `loads:` (key: the load name).",
+    "simulation": "The `simulation:` mapping: keyword arguments of `se3dyn.simulate`.",
+    "constant": "Time function `{constant: {...}}`.",
+    "step": "Time function `{step: {...}}`.",
+    "ramp": "Time function `{ramp: {...}}`: zero before start, linear to value at start + "
+            "duration, constant after.",
+    "table": "Time function `{table: {...}}`: `values` is a list of numbers or a list of rows "
+             "(k-vector function).",
+    "sine": "Time function `{sine: {...}}`: offset + amplitude sin(2 pi frequency t + phase).",
+}
+
+
+@dataclass
+class _Obj:
+    values: dict = field(default_factory=dict)
+    lines: dict = field(default_factory=dict)
+    line: int | None = None
+    name: str = ""
+
+
+def _plain(text: str) -> str:
+    """Documentation text without Markdown (for error messages)."""
+    text = re.sub(r", see \[[^]]*\]\([^)]*\)", "", text)
+    return text.replace("\\|", "|").replace("`", "")
+
+
+def _section(ctx: _Ctx, node: Node, sec: str, item: str, prefix: str) -> _Obj:
+    fields = {f.name: f for f in FIELDS[sec]}
+    where = prefix.rstrip(".") or "(fields)"
+    if not isinstance(node, MappingNode):
+        ctx.fail(node, item, where, f"a mapping of {sec} fields ({', '.join(fields)})",
+                 hint="write {} for all defaults" if isinstance(node, ScalarNode)
+                 and node.tag.endswith(":null") else "")
+    obj = _Obj(line=ctx.line(node))
+    for k, v in node.value:
+        if not isinstance(k, ScalarNode):
+            ctx.fail(k, item, where, "field names (plain strings)")
+        key = str(k.value)
+        if key in obj.lines:
+            ctx.fail(k, item, prefix + key, "each field once", _Got(f"a second '{key}'"),
+                     f"'{key}' is already given at line {obj.lines[key]}")
+        obj.lines[key] = ctx.line(k)
+        f = fields.get(key)
+        if f is None:
+            close = difflib.get_close_matches(key, list(fields), n=1)
+            ctx.fail(k, item, prefix + key, f"a {sec} field: " + ", ".join(fields),
+                     _Got(f"unknown field {key!r}"),
+                     f"did you mean '{close[0]}'?" if close else "")
+        if isinstance(v, ScalarNode) and v.tag == "tag:yaml.org,2002:null" and not f.required:
+            continue  # null = not given
+        obj.values[key] = f.type.convert(ctx, v, item, prefix + key)
+    for f in FIELDS[sec]:
+        if f.required and f.name not in obj.values:
+            ctx.fail(node, item, prefix + f.name, f"a value for the required field '{f.name}' "
+                     f"({_plain(f.type.text)})", _Got("nothing"))
+    return obj
+
+
+# =================================================================================================
+# Loading
+# =================================================================================================
+def load_model(path_or_text: str | os.PathLike | bytes) -> tuple[Model, dict]:
+    """Load a model file.
+
+    Parameters
+    ----------
+    path_or_text : str, os.PathLike or bytes
+        A path, or the YAML text itself: ``bytes`` and ``str`` values containing a newline are
+        taken as text, other ``str`` values and path objects as file names.
+
+    Returns
+    -------
+    (Model, dict)
+        The built model and the ``simulation:`` settings as given (keyword arguments of
+        :func:`se3dyn.simulate`; empty when the file has none).
+
+    Raises
+    ------
+    ModelFileError
+        For any invalid file (unreadable, too large, not UTF-8, bad YAML, invalid model).
+    """
+    if isinstance(path_or_text, bytes) or (isinstance(path_or_text, str)
+                                           and "\n" in path_or_text):
+        return loads_model(path_or_text)
+    name = os.fspath(path_or_text)
+    try:
+        size = os.path.getsize(name)
+        if size > MAX_FILE_BYTES:
+            raise ModelFileError(name, None, "file", "size", f"at most {MAX_FILE_BYTES} bytes",
+                                 _Got(f"{size} bytes"))
+        with open(name, "rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)
+    except OSError as e:
+        raise ModelFileError(name, None, "file", "path", "a readable model file",
+                             _Got(f"{type(e).__name__}: {e.strerror or e}")) from None
+    return loads_model(data, filename=name)
+
+
+def loads_model(text: str | bytes, filename: str = "<string>") -> tuple[Model, dict]:
+    """Load a model from YAML text (``str`` or UTF-8 ``bytes``); see :func:`load_model`.
+
+    ``filename`` is only used in error messages.
+    """
+    if isinstance(text, bytes):
+        if len(text) > MAX_FILE_BYTES:
+            raise ModelFileError(filename, None, "file", "size",
+                                 f"at most {MAX_FILE_BYTES} bytes", _Got(f"{len(text)} bytes"))
+        try:
+            text = text.decode("utf-8-sig")
+        except UnicodeDecodeError as e:
+            line = text[: e.start].count(b"\n") + 1
+            raise ModelFileError(filename, line, "file", "encoding", "UTF-8 text",
+                                 _Got(f"byte 0x{text[e.start]:02x} at offset {e.start}"),
+                                 "save the file as UTF-8") from None
+    if not isinstance(text, str):
+        raise ModelFileError(filename, None, "file", "text", "YAML text (str or bytes)",
+                             _Got(type(text).__name__))
+    if len(text) > MAX_FILE_BYTES:
+        raise ModelFileError(filename, None, "file", "size", f"at most {MAX_FILE_BYTES} "
+                             "characters", _Got(f"{len(text)} characters"))
+    loader = None
+    try:
+        loader = _Loader(text)
+        root = loader.get_single_node()
+    except _Reject as r:
+        raise ModelFileError(filename, r.mark.line + 1, "document", r.field, r.expected,
+                             _Got(r.got), r.hint) from None
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        problem = " ".join(s for s in (e.context, e.problem) if s)
+        raise ModelFileError(filename, mark.line + 1 if mark else None, "document", "syntax",
+                             "valid YAML", _Got(problem or "invalid YAML")) from None
+    except yaml.reader.ReaderError as e:  # control characters
+        pos = e.position if isinstance(e.position, int) else 0
+        raise ModelFileError(filename, text[:pos].count("\n") + 1, "document", "syntax",
+                             "valid YAML (printable characters)",
+                             _Got(f"character #x{e.character:04x} at offset {pos}"
+                                  if isinstance(e.character, int) else "a special character"),
+                             "special characters are not allowed") from None
+    except yaml.YAMLError as e:
+        raise ModelFileError(filename, None, "document", "syntax", "valid YAML",
+                             _Got(str(e).splitlines()[0] if str(e) else "invalid YAML")) from None
+    except RecursionError:  # pragma: no cover - bounded by MAX_DEPTH
+        raise ModelFileError(filename, None, "document", "nesting", "less deeply nested YAML",
+                             _Got("too deep")) from None
+    ctx = _Ctx(filename, loader)
+    try:
+        return _load_root(ctx, root)
+    finally:
+        loader.dispose()
+
+
+def _load_root(ctx: _Ctx, root: Node | None) -> tuple[Model, dict]:
+    item = "model"
+    if root is None:
+        ctx.fail(None, item, "se3dyn", f"a mapping starting with 'se3dyn: {FORMAT_VERSION}'",
+                 _Got("an empty document"))
+    if not isinstance(root, MappingNode):
+        ctx.fail(root, item, "(document)",
+                 f"a mapping starting with 'se3dyn: {FORMAT_VERSION}'")
+    # the version first: a newer file gets a version error, not a list of unknown fields
+    ver = [v for k, v in root.value if isinstance(k, ScalarNode) and k.value == "se3dyn"]
+    if not ver:
+        ctx.fail(root, item, "se3dyn", f"the format version 'se3dyn: {FORMAT_VERSION}' at the "
+                 "top", _Got("no 'se3dyn' field"), "every se3dyn model file starts with "
+                 f"'se3dyn: {FORMAT_VERSION}'")
+    Version().convert(ctx, ver[0], item, "se3dyn")
+    top = _section(ctx, root, "model", item, "")
+    return _build(ctx, top)
+
+
+_FIELD_ALIAS = {"node_a": "a", "node_b": "b"}
+
+
+def _rethrow(ctx: _Ctx, e: ModelError, obj: _Obj | None, items: dict[str, int]) -> None:
+    """Re-raise a builder ModelError with the file name and the line of the offending field."""
+    fld = _FIELD_ALIAS.get(e.field, e.field)
+    msg = str(e)
+    if fld != e.field:
+        msg = msg.replace(f"field '{e.field}'", f"field '{fld}'", 1)
+    line = None
+    if obj is None:
+        for key, ln in items.items():
+            if e.item == key or e.item.startswith(key + " "):
+                line = ln
+    else:
+        root = re.split(r"[.\[]", fld)[0]
+        line = obj.lines.get(root, obj.line)
+        if root == "actuator" and root not in obj.lines:
+            line = obj.lines.get("torque", obj.lines.get("force", obj.line))
+    raise ModelFileError(ctx.filename, line, e.item, fld, e.expected, e.got,
+                         message=msg) from None
+
+
+def _build(ctx: _Ctx, top: _Obj) -> tuple[Model, dict]:
+    v = top.values
+    items: dict[str, int] = {}
+    try:
+        mb = ModelBuilder(gravity=v.get("gravity", (0.0, 0.0, 0.0)), name=v.get("name", "model"))
+    except ModelError as e:
+        _rethrow(ctx, e, top, items)
+    for obj in v["nodes"]:
+        items[f"node {obj.name!r}"] = obj.line
+        try:
+            mb.node(obj.name, **obj.values)
+        except ModelError as e:
+            _rethrow(ctx, e, obj, items)
+    for obj in v.get("joints", []):
+        items[f"joint {obj.name!r}"] = obj.line
+        kw = dict(obj.values)
+        if "control" in kw:
+            kw["control"] = PD(**kw["control"].values)
+        try:
+            mb.joint(obj.name, kw.pop("type"), kw.pop("a"), kw.pop("b"), **kw)
+        except ModelError as e:
+            _rethrow(ctx, e, obj, items)
+    for obj in v.get("loads", []):
+        items[f"load {obj.name!r}"] = obj.line
+        kw = dict(obj.values)
+        try:
+            mb.load(obj.name, kw.pop("node"), **kw)
+        except ModelError as e:
+            _rethrow(ctx, e, obj, items)
+    try:
+        model = mb.build()
+    except ModelError as e:
+        _rethrow(ctx, e, None, items)
+    sim = v.get("simulation")
+    return model, (dict(sim.values) if sim is not None else {})
+
+
+# =================================================================================================
+# Saving
+# =================================================================================================
+def _py(x: Any) -> Any:
+    """Plain Python floats/lists for the YAML dumper."""
+    if isinstance(x, np.ndarray):
+        return x.astype(float).tolist()
+    if isinstance(x, list | tuple):
+        return [_py(e) for e in x]
+    if isinstance(x, bool | np.bool_):
+        return bool(x)
+    if isinstance(x, int | float | np.integer | np.floating):
+        return float(x)
+    return x
+
+
+def _component_source(f: TimeFunction) -> TimeFunction | None:
+    """The k-vector function a universal joint's per-hinge component was cut from."""
+    return f.base if isinstance(f, Component) else None
+
+
+def _tf_out(f: Any, item: str, fld: str) -> Any:
+    if isinstance(f, Constant):
+        return _py(f.value)
+    if isinstance(f, Step):
+        d = {"value": _py(f.value), "start": float(f.start)}
+        if math.isfinite(f.stop):
+            d["stop"] = float(f.stop)
+        return {"step": d}
+    if isinstance(f, Ramp):
+        return {"ramp": {"value": _py(f.value), "start": float(f.start),
+                         "duration": float(f.duration)}}
+    if isinstance(f, Table):
+        return {"table": {"times": _py(f.times), "values": _py(f.values)}}
+    if isinstance(f, Sine):
+        return {"sine": {"amplitude": _py(f.amplitude), "frequency": float(f.frequency),
+                         "phase": float(f.phase), "offset": _py(f.offset)}}
+    raise ModelError(item, fld, "a built-in time function (constant, step, ramp, table, sine) "
+                     "to write a model file", getattr(f, "fn", f),
+                     "a Python callable cannot be saved; replace it by a table or another "
+                     "built-in time function")
+
+
+def _node_out(n) -> dict:
+    d: dict[str, Any] = {"position": _py(n.position)}
+    if not np.array_equal(n.orientation, np.eye(3)):
+        d["orientation"] = _py(n.orientation)
+    if n.mass != 0:
+        d["mass"] = float(n.mass)
+    if np.any(n.inertia != 0):
+        # the builder symmetrises full tensors; R J' R^T from principal axes may be asymmetric
+        # in the last bit: write the symmetric part, which is what loading gives anyway
+        J = 0.5 * (n.inertia + n.inertia.T)
+        d["inertia"] = _py(np.diag(J)) if np.array_equal(J, np.diag(np.diag(J))) else _py(J)
+    if n.fixed:
+        d["fixed"] = True
+    if np.any(n.velocity[:3] != 0):
+        d["velocity"] = _py(n.velocity[:3])
+    if np.any(n.velocity[3:] != 0):
+        d["angular_velocity"] = _py(n.velocity[3:])
+    return d
+
+
+def _act_key(type_: str) -> str:
+    return {"hinge": "torque", "spherical": "torque", "universal": "torque",
+            "prismatic": "force"}.get(type_, "actuator")
+
+
+def _joint_out(j, model: Model) -> dict:
+    item = f"joint {j.name!r}"
+    d: dict[str, Any] = {"type": j.type, "a": j.node_a, "b": j.node_b}
+    for key, val in j.params.items():
+        if val is not None:
+            d[key] = _py(val) if key != "pitch" else float(val)
+    for key, arr in (("stiffness", j.stiffness), ("reference", j.reference),
+                     ("damping", j.damping)):
+        if np.any(arr != 0):
+            d[key] = _py(arr)
+    if j.actuator is not None:
+        k = _act_key(j.type)
+        d[k] = _tf_out(j.actuator, item, k)
+    if j.control is not None:
+        c = j.control
+        d["control"] = {"kp": _py(c.kp), "kd": _py(c.kd),
+                        "target": _tf_out(c.target, item, "control.target")}
+        if c.target_rate is not None:
+            d["control"]["target_rate"] = _tf_out(c.target_rate, item, "control.target_rate")
+    return d
+
+
+def _universal_out(name: str, parts: tuple[str, ...], model: Model) -> dict:
+    item = f"joint {name!r}"
+    j1, j2 = (model.joint(p) for p in parts)
+    d: dict[str, Any] = {"type": "universal", "a": j1.node_a, "b": j2.node_b,
+                         "axes": [_py(j1.params["axis"]), _py(j2.params["axis"])]}
+    for key in ("stiffness", "reference", "damping"):
+        a1, a2 = getattr(j1, key), getattr(j2, key)
+        if a1[0] != 0 or a2[0] != 0:
+            d[key] = [float(a1[0]), float(a2[0])]
+
+    def source(f, fld):
+        src = _component_source(f)
+        if src is None:
+            _tf_out(f, item, fld)  # raises for callables
+        return _tf_out(src, item, fld)
+
+    if j1.actuator is not None:
+        d["torque"] = source(j1.actuator, "torque")
+    if j1.control is not None:
+        c1, c2 = j1.control, j2.control
+        d["control"] = {"kp": [float(c1.kp[0]), float(c2.kp[0])],
+                        "kd": [float(c1.kd[0]), float(c2.kd[0])],
+                        "target": source(c1.target, "control.target")}
+        if c1.target_rate is not None:
+            d["control"]["target_rate"] = source(c1.target_rate, "control.target_rate")
+    return d
+
+
+class _Dumper(yaml.SafeDumper):
+    pass
+
+
+def save_model(model: Model, path: str | os.PathLike | None = None,
+               settings: dict | None = None) -> str:
+    """Write ``model`` (and optional simulation ``settings``) as a version-1 model file.
+
+    Returns the YAML text; also writes it to ``path`` when given. ``load_model(save_model(m))``
+    gives a model equal to ``m`` (built-in time functions only).
+
+    Raises
+    ------
+    ModelError
+        When a time function is a Python callable (it cannot be written), naming the joint or
+        load and the field; or when ``settings`` holds a key that is not a simulation field.
+    """
+    doc: dict[str, Any] = {"se3dyn": FORMAT_VERSION, "name": model.name,
+                           "gravity": _py(model.gravity)}
+    cross = {f"{c}:cross" for c in model.composites}
+    doc["nodes"] = {n.name: _node_out(n) for n in model.nodes if n.name not in cross}
+    joints: dict[str, Any] = {}
+    for j in model.joints:
+        if j.composite is not None:
+            if j.composite not in joints:
+                joints[j.composite] = _universal_out(j.composite, model.composites[j.composite],
+                                                     model)
+        else:
+            joints[j.name] = _joint_out(j, model)
+    if joints:
+        doc["joints"] = joints
+    loads: dict[str, Any] = {}
+    for ld in model.loads:
+        d: dict[str, Any] = {"node": ld.node}
+        if ld.force is not None:
+            d["force"] = _tf_out(ld.force, f"load {ld.name!r}", "force")
+        if ld.torque is not None:
+            d["torque"] = _tf_out(ld.torque, f"load {ld.name!r}", "torque")
+        loads[ld.name] = d
+    if loads:
+        doc["loads"] = loads
+    if settings:
+        known = {f.name: f for f in FIELDS["simulation"]}
+        sim = {}
+        for key, val in settings.items():
+            if key not in known:
+                close = difflib.get_close_matches(str(key), list(known), n=1)
+                raise ModelError("simulation", str(key), "one of " + ", ".join(known), key,
+                                 f"did you mean '{close[0]}'?" if close else "")
+            t = known[key].type
+            sim[key] = int(val) if isinstance(t, Num) and t.integer else float(val)
+        doc["simulation"] = sim
+    text = (f"# se3dyn model file, format version {FORMAT_VERSION} (see docs/model-file.md)\n"
+            + yaml.dump(doc, Dumper=_Dumper, sort_keys=False, default_flow_style=None,
+                        width=10_000, allow_unicode=True))
+    # the dumped text must load back: never write a file we could not read
+    if path is not None:
+        Path(path).write_text(text, encoding="utf-8")
+    return text
+
+
+# =================================================================================================
+# JSON Schema and Markdown reference, generated from FIELDS
+# =================================================================================================
+def _section_schema(sec: str) -> dict:
+    fs = FIELDS[sec]
+    props = {}
+    for f in fs:
+        p = dict(f.type.schema())
+        if "$ref" in p:
+            p = {"allOf": [p]}
+        p["description"] = f.doc
+        if f.default is not None and not isinstance(f.default, str) or isinstance(
+                f.default, str) and f.name in ("name", "velocity_frame"):
+            p["default"] = f.default
+        props[f.name] = p
+    d: dict[str, Any] = {"type": "object", "description": _SECTION_DOC[sec],
+                         "properties": props, "additionalProperties": False}
+    req = [f.name for f in fs if f.required]
+    if req:
+        d["required"] = req
+    return d
+
+
+def json_schema() -> dict:
+    """The JSON Schema (draft 2020-12) of the model file format, generated from :data:`FIELDS`.
+
+    Stricter loader checks that a schema cannot express (unit axes, rotations, positive-definite
+    inertias, node names that exist, per-type joint parameters, duplicate keys) are done by
+    :func:`load_model` only.
+    """
+    defs = {sec: _section_schema(sec) for sec in FIELDS if sec != "model"}
+    defs["time_function"] = {
+        "description": "A number or a list (constant), or exactly one of "
+                       "{constant|step|ramp|table|sine: {...}}.",
+        "oneOf": [
+            _NUMBER,
+            {"type": "array", "items": _NUMBER, "minItems": 1, "maxItems": 6},
+            {"type": "object", "minProperties": 1, "maxProperties": 1,
+             "properties": {k: {"$ref": f"#/$defs/{k}"} for k in _TF_KINDS},
+             "additionalProperties": False},
+        ],
+    }
+    root = _section_schema("model")
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema",
+            "$id": "https://se3dyn.invalid/model-file.schema.json",
+            "title": f"se3dyn model file, format version {FORMAT_VERSION}",
+            **root, "$defs": defs}
+
+
+def write_schema(path: str | os.PathLike = "docs/model-file.schema.json") -> str:
+    """Write :func:`json_schema` to ``path`` (2-space JSON, trailing newline); returns the text."""
+    text = json.dumps(json_schema(), indent=2) + "\n"
+    Path(path).write_text(text, encoding="utf-8")
+    return text
+
+
+def _default_text(f: Field) -> str:
+    if f.required:
+        return "required"
+    if f.default is None:
+        return "absent"
+    if isinstance(f.default, bool):
+        return "`true`" if f.default else "`false`"
+    if isinstance(f.default, str):
+        return f.default if f.name not in ("name", "velocity_frame") else f"`{f.default}`"
+    if f.default == {}:
+        return "none"
+    return f"`{json.dumps(f.default)}`"
+
+
+def markdown_reference() -> str:
+    """The field-by-field reference (Markdown) of ``docs/model-file.md``, from :data:`FIELDS`."""
+    out = ["<!-- generated by se3dyn.modelfile.markdown_reference(); do not edit by hand -->",
+           "## Field reference", ""]
+    for sec, fs in FIELDS.items():
+        out += [f"### {sec}", "", _SECTION_DOC[sec], "",
+                "| field | type | default | description |", "|---|---|---|---|"]
+        for f in fs:
+            out.append(f"| `{f.name}` | {f.type.text} | {_default_text(f)} | {f.doc} |")
+        out.append("")
+    out += ["### joint types", "", "| type | parameters | description |", "|---|---|---|"]
+    for key in _JOINT_KEYS:
+        if key == "universal":
+            params, doc = ("axes",), ("two hinges with orthogonal axes through an intermediate "
+                                      "massless node '<name>:cross' (k = 2)")
+        else:
+            params, doc = JOINT_TYPES[key].params, JOINT_TYPES[key].doc
+        out.append(f"| `{key}` | {', '.join(f'`{p}`' for p in params) or '-'} | {doc} |")
+    out.append("")
+    return "\n".join(out)
+
+
+def _main(argv: list[str] | None = None) -> int:
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(prog="python -m se3dyn.modelfile",
+                                 description="se3dyn model files: schema, reference, check")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    s = sub.add_parser("schema", help="write the JSON Schema")
+    s.add_argument("path", nargs="?", default="docs/model-file.schema.json")
+    sub.add_parser("reference", help="print the Markdown field reference")
+    c = sub.add_parser("check", help="load model files and report errors")
+    c.add_argument("files", nargs="+")
+    args = ap.parse_args(argv)
+    if args.cmd == "schema":
+        write_schema(args.path)
+    elif args.cmd == "reference":
+        sys.stdout.write(markdown_reference())
+    else:
+        bad = 0
+        for fname in args.files:
+            try:
+                m, _ = load_model(Path(fname))
+                print(f"{fname}: ok ({len(m.nodes)} nodes, {len(m.joints)} joints)")
+            except ModelFileError as e:
+                bad += 1
+                print(e, file=sys.stderr)
+        return 1 if bad else 0
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(_main())
