@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from se3dyn.system import System
+from se3dyn.system import System  # noqa: F401  (type of the usual layout)
 
 __all__ = ["Results"]
 
@@ -22,6 +22,9 @@ class Results:
     Attributes
     ----------
     system : System
+        Or any object with the layout attributes the accessors use: ``node_names``,
+        ``node_fixed``, ``node_dofadr``, ``joint_names``, ``joint_k``, ``joint_dofadr``,
+        ``joint_multadr``, ``composites`` (so results read from a file need no model).
     t : ndarray (n,)
     H : ndarray (n, M, 4, 4)        node frames
     v, vd : ndarray (n, nq)         velocities and accelerations (material frame, Eq. (4))
@@ -64,7 +67,7 @@ class Results:
 
     def _joints(self, name: str) -> list[int]:
         s = self.system
-        comp = s.model.composites
+        comp = s.composites
         names = list(s.joint_names)
         if name in comp:
             return [names.index(n) for n in comp[name]]

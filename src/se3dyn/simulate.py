@@ -15,12 +15,18 @@ from se3dyn.model import Model
 from se3dyn.results import Results
 from se3dyn.system import LinearSolver, System, compile_model
 
-__all__ = ["simulate"]
+__all__ = ["simulate", "SCALARS"]
+
+
+#: Names of the scalar columns of a stored row, in order (see ``on_output`` of :func:`simulate`).
+SCALARS = ("kinetic", "potential", "spring", "work_actuators", "work_loads", "dissipation",
+           "iterations", "residual", "constraint")
 
 
 class _Recorder:
-    def __init__(self, s: System, capacity: int):
+    def __init__(self, s: System, capacity: int, sink=None):
         self.s = s
+        self.sink = sink
         self.n = 0
         self.t = np.zeros(capacity)
         self.H = np.zeros((capacity, s.M, 4, 4))
@@ -42,6 +48,8 @@ class _Recorder:
         self.scal[i] = (kin, pot, spring, st.work_act, st.work_ext, st.dissipated, iters, res,
                         con)
         self.n += 1
+        if self.sink is not None:
+            self.sink(st, dict(zip(SCALARS, self.scal[i].tolist(), strict=True)))
 
     def results(self, stats: dict) -> Results:
         n = self.n
@@ -58,7 +66,8 @@ class _Recorder:
 def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float = 0.9,
              t_start: float = 0.0, tol_residual: float = 1e-10, tol_constraint: float = 1e-11,
              max_iter: int = 25, output_every: int = 1,
-             progress: Callable[[float, int], None] | None = None) -> Results:
+             progress: Callable[[float, int], None] | None = None,
+             on_output: Callable[[State, dict], None] | None = None) -> Results:
     """Simulate a model from ``t_start`` to ``t_end`` with a fixed step (Eqs. (38)-(46)).
 
     Parameters
@@ -78,6 +87,11 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         Store every k-th step (the initial and the final state are always stored).
     progress : callable(t, step_index), optional
         Called after every step.
+    on_output : callable(state, scalars), optional
+        Called with every stored row as it is computed (the initial state included): the
+        :class:`~se3dyn.integrator.State` and a dict of the scalar columns ``SCALARS``
+        (energies, works, Newton iterations, residual, constraint violation). Used to stream
+        results to a file while the simulation runs.
 
     Returns
     -------
@@ -109,7 +123,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                              tol_constraint=tol_constraint, max_iter=max_iter)
     nsteps = max(1, math.ceil((t_end - t_start) / step - 1e-9))
     solver = LinearSolver(s)
-    rec = _Recorder(s, nsteps // output_every + 2)
+    rec = _Recorder(s, nsteps // output_every + 2, on_output)
     wall0 = time.perf_counter()
     st = integ.init(s, t_start, solver)
     e = energies(s, st, step_inputs(s, t_start))

@@ -123,6 +123,11 @@ class System:
         return self.nq + self.nm
 
     @property
+    def composites(self) -> dict:
+        """Composite joints (e.g. universal): name -> names of their parts."""
+        return self.model.composites
+
+    @property
     def M(self) -> int:
         return len(self.node_names)
 
