@@ -1,0 +1,226 @@
+"""Stable channel names over a :class:`~se3dyn.results.Results` (in memory or read from a file).
+
+A channel is one scalar time history, shape (n,), named by a path (see ``docs/results-file.md``)::
+
+    time
+    node/<node>/position/x|y|z                      m
+    node/<node>/displacement/x|y|z                  m   (position minus the first row)
+    node/<node>/rotation/R11 .. R33                 -   (rotation matrix entries)
+    node/<node>/velocity/material|inertial/x|y|z|wx|wy|wz        m/s, rad/s
+    node/<node>/acceleration/material|inertial/x|y|z|wx|wy|wz    m/s^2, rad/s^2
+    joint/<joint>/alpha/<i>                         rad or m (per coordinate)
+    joint/<joint>/velocity/<i>                      rad/s or m/s
+    joint/<joint>/multiplier/<i>                    N (i mod 6 < 3), N m (otherwise)
+    energy/kinetic|potential|spring|total|balance|work_actuators|work_loads|dissipation   J
+    solver/iterations|residual|constraint           -
+
+Escaping: a node or joint name is written with ``%`` replaced by ``%25`` and ``/`` by ``%2F``
+(in this order), so ``node/a%2Fb/position/x`` is the x position of node ``a/b``. Composite joints
+(e.g. a universal joint) are listed under their own name, with the coordinates of their parts
+side by side as :meth:`Results.joint_coordinates` gives them.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+
+import numpy as np
+
+from se3dyn.results import Results
+
+__all__ = ["list_channels", "get_channel", "channel_unit", "escape_name", "unescape_name",
+           "joint_units"]
+
+_AXES = ("x", "y", "z", "wx", "wy", "wz")
+_ENERGY = ("kinetic", "potential", "spring", "total", "balance", "work_actuators",
+           "work_loads", "dissipation")
+_SOLVER = ("iterations", "residual", "constraint")
+_ROT = tuple(f"R{i}{j}" for i in (1, 2, 3) for j in (1, 2, 3))
+
+
+def escape_name(name: str) -> str:
+    """A node or joint name as it appears in a channel name (``%`` -> ``%25``, ``/`` -> ``%2F``)."""
+    return str(name).replace("%", "%25").replace("/", "%2F")
+
+
+def unescape_name(text: str) -> str:
+    """Inverse of :func:`escape_name`."""
+    return re.sub(r"%(25|2[Ff])", lambda m: "%" if m.group(1) == "25" else "/", text)
+
+
+def _joint_entries(res: Results) -> list[str]:
+    """Joint names as listed: composites by their own name, other joints except their parts."""
+    s = res.system
+    comp = dict(s.composites)
+    parts = {p for ps in comp.values() for p in ps}
+    names = [n for n in s.joint_names if n not in parts]
+    return names + [c for c in comp if c not in names]
+
+
+def _joint_size(res: Results, name: str) -> tuple[int, int]:
+    """(number of coordinates, number of multipliers) of a joint or composite."""
+    s = res.system
+    ids = res._joints(name)
+    return int(sum(int(s.joint_k[j]) for j in ids)), 6 * len(ids)
+
+
+def list_channels(res: Results) -> list[str]:
+    """Every channel name of ``res``, in a stable order."""
+    s = res.system
+    out = ["time"]
+    for name in s.node_names:
+        e = f"node/{escape_name(name)}"
+        out += [f"{e}/position/{a}" for a in _AXES[:3]]
+        out += [f"{e}/displacement/{a}" for a in _AXES[:3]]
+        out += [f"{e}/rotation/{r}" for r in _ROT]
+        for q in ("velocity", "acceleration"):
+            for frame in ("material", "inertial"):
+                out += [f"{e}/{q}/{frame}/{a}" for a in _AXES]
+    for name in _joint_entries(res):
+        e = f"joint/{escape_name(name)}"
+        k, nmult = _joint_size(res, name)
+        out += [f"{e}/alpha/{c}" for c in range(k)]
+        out += [f"{e}/velocity/{c}" for c in range(k)]
+        out += [f"{e}/multiplier/{c}" for c in range(nmult)]
+    out += [f"energy/{x}" for x in _ENERGY]
+    out += [f"solver/{x}" for x in _SOLVER]
+    return out
+
+
+def _unknown(res: Results, name: str, why: str = "") -> KeyError:
+    valid = list_channels(res)
+    close = difflib.get_close_matches(str(name), valid, n=3, cutoff=0.5)
+    msg = f"unknown channel {name!r}"
+    if why:
+        msg += f" ({why})"
+    if close:
+        msg += "; did you mean " + ", ".join(repr(c) for c in close) + "?"
+    else:
+        msg += "; valid names look like " + ", ".join(repr(c) for c in valid[1:4]) + ", ..."
+    return KeyError(msg)
+
+
+def _index(res: Results, name: str, text: str, size: int) -> int:
+    if not re.fullmatch(r"\d+", text) or int(text) >= size:
+        raise _unknown(res, name, f"component must be 0..{size - 1}" if size else
+                       "this joint has no such component")
+    return int(text)
+
+
+def get_channel(res: Results, name: str) -> np.ndarray:
+    """The time history ``(n,)`` of channel ``name`` (see :func:`list_channels`).
+
+    Raises
+    ------
+    KeyError
+        Unknown channel, with close valid names as suggestions.
+    """
+    parts = str(name).split("/")
+    try:
+        if parts == ["time"]:
+            return np.asarray(res.t, dtype=float).copy()
+        if len(parts) == 2 and parts[0] == "energy" and parts[1] in _ENERGY:
+            key = {"total": "total_energy", "balance": "energy_balance"}.get(parts[1], parts[1])
+            return np.asarray(getattr(res, key), dtype=float).copy()
+        if len(parts) == 2 and parts[0] == "solver" and parts[1] in _SOLVER:
+            return np.asarray(getattr(res, parts[1])).copy()
+        if len(parts) >= 4 and parts[0] == "node":
+            node = unescape_name(parts[1])
+            if node not in res.system.node_names:
+                raise _unknown(res, name, f"no node {node!r}")
+            q, rest = parts[2], parts[3:]
+            if q in ("position", "displacement") and len(rest) == 1 and rest[0] in _AXES[:3]:
+                p = res.node_position(node)[:, _AXES.index(rest[0])]
+                return p - p[0] if q == "displacement" and len(p) else p
+            if q == "rotation" and len(rest) == 1 and rest[0] in _ROT:
+                i, j = int(rest[0][1]) - 1, int(rest[0][2]) - 1
+                return res.node_rotation(node)[:, i, j]
+            if (q in ("velocity", "acceleration") and len(rest) == 2
+                    and rest[0] in ("material", "inertial") and rest[1] in _AXES):
+                f = res.node_velocity if q == "velocity" else res.node_acceleration
+                return f(node, frame=rest[0])[:, _AXES.index(rest[1])]
+        if len(parts) == 4 and parts[0] == "joint":
+            joint = unescape_name(parts[1])
+            try:
+                k, nmult = _joint_size(res, joint)
+            except KeyError:
+                raise _unknown(res, name, f"no joint {joint!r}") from None
+            if parts[2] in ("alpha", "velocity"):
+                c = _index(res, name, parts[3], k)
+                f = res.joint_coordinates if parts[2] == "alpha" else res.joint_velocities
+                return f(joint)[:, c]
+            if parts[2] == "multiplier":
+                c = _index(res, name, parts[3], nmult)
+                return res.joint_multipliers(joint)[:, c]
+    except (ValueError, IndexError) as e:
+        raise _unknown(res, name, str(e)) from None
+    raise _unknown(res, name)
+
+
+def channel_unit(name: str, res: Results | None = None) -> str:
+    """Unit of a channel for axis labels: "m", "m/s", "rad", "rad/s", "J", "N", "N m", "s", or
+    "" (counts, dimensionless). Joint coordinates are "rad" or "m" when ``res`` is given (from
+    the joint axes), otherwise "rad | m"."""
+    parts = str(name).split("/")
+    if parts == ["time"]:
+        return "s"
+    if parts[0] == "energy":
+        return "J"
+    if parts[0] == "solver":
+        return ""
+    if parts[0] == "node" and len(parts) >= 4:
+        q, last = parts[2], parts[-1]
+        if q in ("position", "displacement"):
+            return "m"
+        if q == "rotation":
+            return ""
+        rot = last.startswith("w")
+        if q == "velocity":
+            return "rad/s" if rot else "m/s"
+        if q == "acceleration":
+            return "rad/s^2" if rot else "m/s^2"
+    if parts[0] == "joint" and len(parts) == 4:
+        q = parts[2]
+        if q == "multiplier":
+            return "N" if parts[3].isdigit() and int(parts[3]) % 6 < 3 else "N m"
+        unit = "rad | m"
+        if res is not None and parts[3].isdigit():
+            unit = _joint_unit(res, unescape_name(parts[1]), int(parts[3])) or unit
+        if q == "velocity":
+            return " | ".join(u + "/s" for u in unit.split(" | "))
+        return unit
+    return ""
+
+
+def _joint_unit(res: Results, joint: str, c: int) -> str:
+    try:
+        ids = res._joints(joint)
+    except KeyError:
+        return ""
+    s = res.system
+    units = joint_units(s)
+    k = np.asarray(s.joint_k, dtype=int)
+    start = np.cumsum(k) - k
+    cols = [u for j in ids for u in units[start[j]:start[j] + k[j]]]
+    return cols[c] if c < len(cols) else ""
+
+
+def joint_units(system) -> tuple[str, ...]:
+    """"rad" (rotation) or "m" (translation) per joint unknown, joints in order ("" when unknown).
+
+    Uses ``system.joint_units`` (a layout read from a file) or the joint bases A of
+    ``system.model``: a coordinate whose column of A has a rotation part is an angle.
+    """
+    if hasattr(system, "joint_units"):
+        return tuple(system.joint_units)
+    out: list[str] = []
+    model = getattr(system, "model", None)
+    for jj, k in enumerate(system.joint_k):
+        A = None
+        if model is not None:
+            A = np.asarray(model.joints[jj].A, dtype=float).reshape(6, -1)
+        for c in range(int(k)):
+            out.append("" if A is None or A.shape[1] <= c
+                       else ("rad" if np.any(A[3:, c] != 0.0) else "m"))
+    return tuple(out)

@@ -1,0 +1,367 @@
+"""The ``se3dyn`` command: check, run, plot and export multibody models and results.
+
+Exit codes: 0 success, 1 simulation failure (results computed so far are kept in the results
+file), 2 bad input or usage. Errors are one clear line on stderr, never a Python traceback.
+
+    se3dyn check MODEL
+    se3dyn run MODEL [--t-end T] [--step H] [--rho-inf R] [--out DIR] [--quiet]
+    se3dyn channels RESULTS
+    se3dyn plot RESULTS CHANNEL... [-o PNG]
+    se3dyn export RESULTS --csv FILE [CHANNEL...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["main"]
+
+
+class _Usage(Exception):
+    """Bad input or usage: exit code 2."""
+
+
+def _err(msg: str) -> None:
+    print(f"se3dyn: error: {msg}", file=sys.stderr)
+
+
+# ---------------------------------------------------------------------------------------------
+def _load(path: str):
+    from se3dyn.errors import ModelError
+    from se3dyn.modelfile import load_model
+
+    if not Path(path).is_file():
+        raise _Usage(f"{path}: no such model file")
+    try:
+        return load_model(Path(path))
+    except ModelError as exc:
+        raise _Usage(str(exc)) from None
+
+
+def cmd_check(args) -> int:
+    """Validate a model file and print its counts and rank analysis."""
+    import se3dyn as sd
+    from se3dyn.analysis import rank_analysis
+
+    model, settings = _load(args.model)
+    s = sd.compile_model(model)
+    n_free = int(np.sum(~s.node_fixed))
+    bodies = int(np.sum(s.node_mass > 0))
+    print(f"{args.model}: ok")
+    print(f"  model '{model.name}': {len(model.nodes)} nodes ({n_free} free, {bodies} with mass),"
+          f" {len(model.joints)} joints, {len(model.loads)} loads")
+    kinds: dict[str, int] = {}
+    for j in model.joints:
+        kinds[j.type] = kinds.get(j.type, 0) + 1
+    print("  joints by type: " + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items())))
+    print(f"  unknowns {s.nq} (nodal {6 * n_free}, relative {s.nq - 6 * n_free}), "
+          f"multipliers {s.nm}, iteration matrix {s.N} x {s.N}")
+    if s.nq > args.rank_max:
+        print(f"  rank analysis skipped: {s.nq} unknowns > --rank-max {args.rank_max}")
+    else:
+        r = rank_analysis(s)
+        print(f"  constraint Jacobian rank {r.rank} of {r.constraints} equations: "
+              f"degrees of freedom (mobility) {r.dof}")
+        if r.redundant:
+            print(f"  redundant constraint equations ({len(r.redundant)}): "
+                  + "; ".join(r.redundant))
+        else:
+            print("  no redundant constraints")
+    if settings:
+        print("  simulation settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()))
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+class _Progress:
+    """A one-line progress bar on stderr: time reached, steps/s, ETA (terminal only)."""
+
+    def __init__(self, t0: float, t1: float, enabled: bool):
+        self.t0, self.t1 = t0, t1
+        self.enabled = enabled
+        self.start = time.perf_counter()
+        self.last = 0.0
+
+    def __call__(self, t: float, i: int) -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self.last < 0.1 and t < self.t1:
+            return
+        self.last = now
+        frac = (t - self.t0) / (self.t1 - self.t0)
+        el = now - self.start
+        rate = i / el if el > 0 else 0.0
+        eta = el * (1 - frac) / frac if frac > 0 else math.inf
+        bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
+        sys.stderr.write(f"\r  t = {t:10.4f} / {self.t1:g} s [{bar}] {rate:8.1f} steps/s "
+                         f"ETA {eta:6.1f} s ")
+        sys.stderr.flush()
+
+    def done(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def cmd_run(args) -> int:
+    """Simulate a model file, stream the results to an HDF5 file, print a summary."""
+    import se3dyn as sd
+    from se3dyn.errors import ModelError, SimulationError
+    from se3dyn.h5 import ResultsWriter
+
+    model, settings = _load(args.model)
+    cfg = dict(settings)
+    for key, val in (("t_end", args.t_end), ("step", args.step), ("rho_inf", args.rho_inf)):
+        if val is not None:
+            cfg[key] = val
+    for key in ("t_end", "step"):
+        if key not in cfg:
+            raise _Usage(f"{args.model}: no '{key}' in the file's simulation settings; give "
+                         f"--{key.replace('_', '-')}")
+    out = Path(args.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _Usage(f"--out {out}: cannot create the folder ({exc.strerror})") from None
+    path = out / (Path(args.model).stem + ".h5")
+    try:
+        s = sd.compile_model(model)
+    except ModelError as exc:
+        raise _Usage(f"{args.model}: {exc}") from None
+    text = Path(args.model).read_text(encoding="utf-8")  # stored as metadata, as given
+    quiet = args.quiet or not sys.stderr.isatty()
+    prog = _Progress(float(cfg.get("t_start", 0.0)), float(cfg["t_end"]), not quiet)
+    print(f"se3dyn {sd.__version__}: {args.model} -> {path}")
+    print(f"  {len(model.nodes)} nodes, {len(model.joints)} joints; {s.nq} unknowns, {s.nm} "
+          f"multipliers; t_end = {cfg['t_end']} s, h = {cfg['step']} s, "
+          f"rho_inf = {cfg.get('rho_inf', 0.9)}")
+    t0 = time.perf_counter()
+    failed = None
+    with ResultsWriter(path, s, model_text=text, settings=cfg) as writer:
+        try:
+            res = sd.simulate(s, progress=prog, on_output=writer.append, **cfg)
+        except SimulationError as exc:
+            failed = exc
+            res = exc.result
+        except ModelError as exc:
+            prog.done()
+            raise _Usage(f"{args.model}: simulation settings: {exc}") from None
+        except KeyboardInterrupt:
+            prog.done()
+            writer.close(stats={"failed": True, "message": "interrupted"})
+            _err(f"interrupted; results so far kept in {path}")
+            return 130
+        prog.done()
+        stats = dict(res.stats) if res is not None else {}
+        stats.pop("final_state", None)
+        if failed is not None:
+            stats.update(failed=True, message=str(failed))
+        writer.close(stats=stats)
+    wall = time.perf_counter() - t0
+    if failed is not None:
+        n = 0 if res is None else len(res.t) - 1
+        _err(f"{failed}")
+        print(f"  simulation failed; {n} steps kept in {path}", file=sys.stderr)
+        return 1
+    eb = res.energy_balance
+    print(f"  {res.stats['steps']} steps, {res.stats['newton_iterations']} Newton iterations "
+          f"(max {int(res.iterations.max())} per step), wall time {wall:.2f} s")
+    print(f"  energy balance error {np.abs(eb - eb[0]).max():.3e} J (of max energy "
+          f"{np.abs(res.total_energy).max():.3e} J); max constraint violation "
+          f"{res.constraint.max():.2e}")
+    print(f"  results: {path}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+def _read(path: str):
+    from se3dyn.h5 import read_results
+
+    if not Path(path).is_file():
+        raise _Usage(f"{path}: no such results file")
+    try:
+        return read_results(path)
+    except (OSError, ValueError, KeyError) as exc:
+        raise _Usage(f"{path}: not a readable se3dyn results file ({exc})") from None
+    except Exception as exc:  # the reader's own error class
+        from se3dyn.errors import Se3dynError
+
+        if isinstance(exc, Se3dynError):
+            raise _Usage(str(exc)) from None
+        raise
+
+
+def _channels(res, names: list[str]) -> list[tuple[str, np.ndarray]]:
+    """Channel values by name; names with ``* ? [`` are shell-style patterns
+    (e.g. ``node/6/displacement/[xyz]``)."""
+    import fnmatch
+
+    from se3dyn.channels import get_channel, list_channels
+
+    expanded: list[str] = []
+    for name in names:
+        if any(ch in name for ch in "*?["):
+            hits = fnmatch.filter(list_channels(res), name)
+            if not hits:
+                raise _Usage(f"no channel matches the pattern {name!r} (see 'se3dyn channels')")
+            expanded += hits
+        else:
+            expanded.append(name)
+    out = []
+    for name in expanded:
+        try:
+            out.append((name, np.asarray(get_channel(res, name), dtype=float)))
+        except KeyError as exc:
+            raise _Usage(str(exc.args[0]) if exc.args else f"unknown channel {name!r}") from None
+    return out
+
+
+def cmd_channels(args) -> int:
+    """List the channels of a results file."""
+    from se3dyn.channels import list_channels
+
+    res = _read(args.results)
+    for name in list_channels(res):
+        print(name)
+    return 0
+
+
+def cmd_plot(args) -> int:
+    """Plot channels of a results file against time into a PNG."""
+    from se3dyn.channels import channel_unit
+
+    res = _read(args.results)
+    data = _channels(res, args.channels)
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise _Usage("plotting needs matplotlib: pip install 'se3dyn[plot]'") from None
+    png = Path(args.output) if args.output else Path(args.results).with_suffix(".png")
+    fig, ax = plt.subplots(figsize=(7.0, 4.4), dpi=110)
+    for name, y in data:
+        ax.plot(res.t, y, lw=1.3, label=name)
+    units = sorted({channel_unit(n) for n, _ in data} - {""})
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(" | ".join(f"[{u}]" for u in units) if units else "")
+    ax.set_title(args.title or Path(args.results).stem)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    try:
+        fig.savefig(png)
+    except OSError as exc:
+        raise _Usage(f"-o {png}: cannot write ({exc.strerror})") from None
+    finally:
+        plt.close(fig)
+    print(f"wrote {png}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    """Export channels of a results file to CSV (header: time and channel names)."""
+    from se3dyn.channels import list_channels
+
+    res = _read(args.results)
+    names = args.channels or list_channels(res)
+    data = _channels(res, names)
+    cols = np.column_stack([res.t] + [y for _, y in data])
+    header = ",".join(["time"] + [n.replace(",", "%2C") for n, _ in data])
+    try:
+        np.savetxt(args.csv, cols, delimiter=",", header=header, comments="", fmt="%.17g")
+    except OSError as exc:
+        raise _Usage(f"--csv {args.csv}: cannot write ({exc.strerror})") from None
+    print(f"wrote {args.csv}: {cols.shape[0]} rows, {cols.shape[1]} columns")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # usage errors: exit 2 with one line, as argparse does
+        self.print_usage(sys.stderr)
+        _err(message)
+        raise SystemExit(2)
+
+
+def _positive(kind):
+    def conv(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not math.isfinite(v) or (kind == "pos" and v <= 0) or (
+                kind == "rho" and not 0 <= v <= 1):
+            want = {"pos": "a positive number", "rho": "a number in [0, 1]"}[kind]
+            raise argparse.ArgumentTypeError(f"expected {want}, got {text!r}")
+        return v
+
+    return conv
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from se3dyn import __version__
+
+    p = _Parser(prog="se3dyn", description="Multibody dynamics on SE(3).")
+    p.add_argument("--version", action="version", version=f"se3dyn {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    c = sub.add_parser("check", help="validate a model file; counts and rank analysis")
+    c.add_argument("model")
+    c.add_argument("--rank-max", type=int, default=3000,
+                   help="skip the rank analysis above this many unknowns (default 3000)")
+    c.set_defaults(func=cmd_check)
+    r = sub.add_parser("run", help="simulate a model file and write the results file")
+    r.add_argument("model")
+    r.add_argument("--t-end", type=_positive("pos"), help="final time (s)")
+    r.add_argument("--step", type=_positive("pos"), help="time step (s)")
+    r.add_argument("--rho-inf", type=_positive("rho"), help="spectral radius in [0, 1]")
+    r.add_argument("--out", default="out", help="folder of the results file (default: out)")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=cmd_run)
+    ch = sub.add_parser("channels", help="list the channels of a results file")
+    ch.add_argument("results")
+    ch.set_defaults(func=cmd_channels)
+    pl = sub.add_parser("plot", help="plot channels against time (PNG)")
+    pl.add_argument("results")
+    pl.add_argument("channels", nargs="+")
+    pl.add_argument("-o", "--output", help="PNG file (default: next to the results file)")
+    pl.add_argument("--title")
+    pl.set_defaults(func=cmd_plot)
+    ex = sub.add_parser("export", help="export channels to CSV")
+    ex.add_argument("results")
+    ex.add_argument("--csv", required=True, help="CSV file to write")
+    ex.add_argument("channels", nargs="*", help="channels (default: all)")
+    ex.set_defaults(func=cmd_export)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``se3dyn`` console script; returns the exit code."""
+    parser = build_parser()
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        # `export RESULTS --csv FILE CHANNEL...`: channels after the option are still channels
+        if args.command == "export" and not any(e.startswith("-") for e in extra):
+            args.channels = list(args.channels) + extra
+        else:
+            parser.error("unrecognized arguments: " + " ".join(extra))
+    try:
+        return int(args.func(args))
+    except _Usage as exc:
+        _err(str(exc))
+        return 2
+    except KeyboardInterrupt:
+        _err("interrupted")
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
