@@ -191,3 +191,24 @@ def test_channel_patterns_expand_to_the_matching_channels(slider_results, tmp_pa
     data = np.loadtxt(csv, delimiter=",", skiprows=1)
     np.testing.assert_array_equal(data[0, 1:], 0.0)  # displacement from the initial position
     assert run("plot", path, "node/6/nothing*", "-o", tmp_path / "x.png").returncode == 2
+
+
+def test_every_malformed_file_of_the_corpus_is_rejected_by_the_command(tmp_path):
+    # the hand-written corpus of tests/test_modelfile.py, through the real command at once
+    from test_modelfile import CASES
+
+    files = []
+    for cid, text, line, _ in CASES:
+        f = tmp_path / f"{cid}.yaml"
+        f.write_bytes(text if isinstance(text, bytes) else text.encode("utf-8"))
+        files.append((f, line))
+    p = run("check", *[f for f, _ in files], timeout=600)
+    assert p.returncode == 2
+    errors = [ln for ln in p.stderr.splitlines() if ln.startswith("se3dyn: error: ")]
+    assert len(errors) == len(files), p.stderr
+    for f, line in files:
+        mine = [e for e in errors if f"{f}," in e or f"{f}:" in e]
+        assert len(mine) == 1, (f.name, p.stderr)
+        if line is not None:
+            assert f"line {line}:" in mine[0], mine[0]
+    assert f"{len(files)} of {len(files)} model files are invalid" in p.stderr

@@ -3,7 +3,7 @@
 Exit codes: 0 success, 1 simulation failure (results computed so far are kept in the results
 file), 2 bad input or usage. Errors are one clear line on stderr, never a Python traceback.
 
-    se3dyn check MODEL
+    se3dyn check MODEL...
     se3dyn run MODEL [--t-end T] [--step H] [--rho-inf R] [--out DIR] [--quiet]
     se3dyn channels RESULTS
     se3dyn plot RESULTS CHANNEL... [-o PNG]
@@ -45,15 +45,32 @@ def _load(path: str):
 
 
 def cmd_check(args) -> int:
-    """Validate a model file and print its counts and rank analysis."""
+    """Validate model files and print their counts and rank analysis (exit 2 if any is bad)."""
+    bad = 0
+    for path in args.models:
+        try:
+            _check_one(path, args.rank_max)
+        except _Usage as exc:
+            _err(str(exc))
+            bad += 1
+    if bad and len(args.models) > 1:
+        print(f"{bad} of {len(args.models)} model files are invalid", file=sys.stderr)
+    return 2 if bad else 0
+
+
+def _check_one(path: str, rank_max: int) -> None:
     import se3dyn as sd
     from se3dyn.analysis import rank_analysis
+    from se3dyn.errors import ModelError
 
-    model, settings = _load(args.model)
-    s = sd.compile_model(model)
+    model, settings = _load(path)
+    try:
+        s = sd.compile_model(model)
+    except ModelError as exc:
+        raise _Usage(f"{path}: {exc}") from None
     n_free = int(np.sum(~s.node_fixed))
     bodies = int(np.sum(s.node_mass > 0))
-    print(f"{args.model}: ok")
+    print(f"{path}: ok")
     print(f"  model '{model.name}': {len(model.nodes)} nodes ({n_free} free, {bodies} with mass),"
           f" {len(model.joints)} joints, {len(model.loads)} loads")
     kinds: dict[str, int] = {}
@@ -62,8 +79,8 @@ def cmd_check(args) -> int:
     print("  joints by type: " + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items())))
     print(f"  unknowns {s.nq} (nodal {6 * n_free}, relative {s.nq - 6 * n_free}), "
           f"multipliers {s.nm}, iteration matrix {s.N} x {s.N}")
-    if s.nq > args.rank_max:
-        print(f"  rank analysis skipped: {s.nq} unknowns > --rank-max {args.rank_max}")
+    if s.nq > rank_max:
+        print(f"  rank analysis skipped: {s.nq} unknowns > --rank-max {rank_max}")
     else:
         r = rank_analysis(s)
         print(f"  constraint Jacobian rank {r.rank} of {r.constraints} equations: "
@@ -75,7 +92,6 @@ def cmd_check(args) -> int:
             print("  no redundant constraints")
     if settings:
         print("  simulation settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()))
-    return 0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -313,8 +329,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="se3dyn", description="Multibody dynamics on SE(3).")
     p.add_argument("--version", action="version", version=f"se3dyn {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    c = sub.add_parser("check", help="validate a model file; counts and rank analysis")
-    c.add_argument("model")
+    c = sub.add_parser("check", help="validate model files; counts and rank analysis")
+    c.add_argument("models", nargs="+", metavar="MODEL")
     c.add_argument("--rank-max", type=int, default=3000,
                    help="skip the rank analysis above this many unknowns (default 3000)")
     c.set_defaults(func=cmd_check)
