@@ -34,6 +34,7 @@ import numpy as np
 from se3dyn.channels import joint_units
 from se3dyn.errors import Se3dynError
 from se3dyn.results import Results
+from se3dyn.system import LayoutCounts
 
 __all__ = ["ResultsWriter", "read_results", "ResultsLayout", "ResultsFileError", "FORMAT",
            "FORMAT_VERSION", "ENERGIES", "SOLVER"]
@@ -59,7 +60,7 @@ class ResultsFileError(Se3dynError, ValueError):
 
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class ResultsLayout:
+class ResultsLayout(LayoutCounts):
     """The layout attributes of a :class:`~se3dyn.system.System` that :class:`Results` needs,
     read from ``/layout`` (no model compilation).
 
@@ -80,14 +81,6 @@ class ResultsLayout:
     composites: dict = field(default_factory=dict)
     nq: int = 0
     nm: int = 0
-
-    @property
-    def M(self) -> int:
-        return len(self.node_names)
-
-    @property
-    def m(self) -> int:
-        return len(self.joint_names)
 
     @property
     def nk(self) -> int:

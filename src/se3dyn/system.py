@@ -73,8 +73,22 @@ class JointGroup:
     has_nonabelian_spring: bool
 
 
+class LayoutCounts:
+    """Node and joint counts of anything with ``node_names`` and ``joint_names``."""
+
+    @property
+    def M(self) -> int:
+        """Number of nodes."""
+        return len(self.node_names)
+
+    @property
+    def m(self) -> int:
+        """Number of joints."""
+        return len(self.joint_names)
+
+
 @dataclass(frozen=True)
-class System:
+class System(LayoutCounts):
     """Frozen arrays describing a compiled model (see the module docstring for the numbering).
 
     Shapes: M nodes, m joints, nq unknowns, nm = 6 m multipliers, N = nq + nm.
@@ -127,13 +141,6 @@ class System:
         """Composite joints (e.g. universal): name -> names of their parts."""
         return self.model.composites
 
-    @property
-    def M(self) -> int:
-        return len(self.node_names)
-
-    @property
-    def m(self) -> int:
-        return len(self.joint_names)
 
 
 # ---------------------------------------------------------------------------------------------
