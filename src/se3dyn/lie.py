@@ -134,11 +134,21 @@ _C4 = _c4_series()
 _C5 = _c5_series()
 
 
-def _horner(coef: np.ndarray, t2: np.ndarray) -> np.ndarray:
-    out = np.full_like(t2, coef[-1])
-    for c in coef[-2::-1]:
-        out = out * t2 + c
-    return out
+_SERIES = {"c": _C2, "d": _C3, "e": _C4, "f": _C5}
+
+
+def _series(letters: str, t2: np.ndarray) -> dict[str, np.ndarray]:
+    """The Taylor series of the cancelling coefficients at t^2 from one table of powers.
+
+    The terms decay by a factor of at least 15 for t < 1 (module docstring), so summing them in
+    increasing powers loses no more than Horner's rule would.
+    """
+    if not letters:
+        return {}
+    P = t2[..., None] ** np.arange(SERIES_TERMS)  # (..., SERIES_TERMS)
+    # one product per coefficient: the same summation order whichever others are asked for,
+    # so e.g. the T_SO(3) blocks of tangent_se3 equal tangent_so3 bit for bit
+    return {k: P @ _SERIES[k] for k in letters}
 
 
 def _angle(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,29 +170,27 @@ def _coeffs(w: np.ndarray, which: str) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     pos = t > 0
     tp = np.where(pos, t, 1.0)
-    if "a" in which or "c" in which or "d" in which or "e" in which:
-        a = np.where(pos, np.sin(tp) / tp, 1.0)
-        out["a"] = a
-    if "h" in which or "d" in which or "e" in which:
+    if any(k in which for k in "acde"):
+        out["a"] = np.where(pos, np.sin(tp) / tp, 1.0)
+    if any(k in which for k in "hde"):
         half = 0.5 * tp
         s = np.where(pos, np.sin(half) / half, 1.0)
         out["h"] = 0.5 * s * s
-    if "c" in which or "e" in which:
+    ser = _series("".join(k for k in "cdef" if k in which or (k == "c" and "e" in which)), t2)
+    if any(k in which for k in "cde"):
         ab = np.sin(tb) / tb
+        hb = 0.5 * (np.sin(0.5 * tb) / (0.5 * tb)) ** 2
         c_big = (1.0 - ab) / tb2
-        out["c"] = np.where(small, _horner(_C2, t2), c_big)
-    if "d" in which:
-        ab = np.sin(tb) / tb
-        hb = 0.5 * (np.sin(0.5 * tb) / (0.5 * tb)) ** 2
-        out["d"] = np.where(small, _horner(_C3, t2), (2.0 * hb - ab) / tb2)
-    if "e" in which:
-        ab = np.sin(tb) / tb
-        hb = 0.5 * (np.sin(0.5 * tb) / (0.5 * tb)) ** 2
-        out["e"] = np.where(small, _horner(_C4, t2), (hb - 3.0 * (1.0 - ab) / tb2) / tb2)
+        if "c" in ser:
+            out["c"] = np.where(small, ser["c"], c_big)
+        if "d" in ser:
+            out["d"] = np.where(small, ser["d"], (2.0 * hb - ab) / tb2)
+        if "e" in ser:
+            out["e"] = np.where(small, ser["e"], (hb - 3.0 * c_big) / tb2)
     if "f" in which:
         x = 0.5 * tb
         f_big = (1.0 - x * np.cos(x) / np.sin(x)) / tb2
-        out["f"] = np.where(small, _horner(_C5, t2), f_big)
+        out["f"] = np.where(small, ser["f"], f_big)
     return out
 
 
