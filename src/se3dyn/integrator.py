@@ -24,7 +24,7 @@ import numpy as np
 
 from se3dyn import lie
 from se3dyn.errors import ModelError, NewtonError, SimulationError
-from se3dyn.system import LinearSolver, System, evaluate, matrix_values
+from se3dyn.system import LinearSolver, System, evaluate, fill_log_coordinates, matrix_values
 
 __all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "energies"]
 
@@ -293,7 +293,7 @@ class GeneralizedAlpha:
         it = 0
         er0 = 1.0
         while True:
-            ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs)
+            ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, full_alpha=False)
             fs = max(ev.f_scale, 1e-300)
             er = float(np.abs(ev.r).max(initial=0.0)) / fs
             ep = float(np.abs(ev.phi).max(initial=0.0))
@@ -325,10 +325,12 @@ class GeneralizedAlpha:
             # round-off stagnation: correction at the level of the increment's last digits
             if (ep <= ltol and np.abs(dn).max(initial=0.0)
                     <= 4e-16 * max(np.abs(n).max(initial=0.0), 1e-300)):
-                ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, None)
+                ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, None,
+                              full_alpha=False)
                 er = float(np.abs(ev.r).max(initial=0.0)) / max(ev.f_scale, 1e-300)
                 ep = float(np.abs(ev.phi).max(initial=0.0))
                 break
+        fill_log_coordinates(s, ev.HJ, ev.alpha)  # coordinates of non-abelian joints
         a = a + (1 - af) / (1 - am) * vd  # Eq. (43), with the predictor part already in a
         new = State(t=t1, H=ev.H, HJ=ev.HJ, v=v, vd=vd, a=a, lam=lam, alpha=ev.alpha,
                     work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated)

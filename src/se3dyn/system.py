@@ -342,7 +342,8 @@ def _lam_matrix(lam: np.ndarray) -> np.ndarray:
 
 def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n: np.ndarray,
              v: np.ndarray, vd: np.ndarray, lam: np.ndarray, inputs: dict,
-             coef: tuple[float, float, float] | None = None) -> Evaluation:
+             coef: tuple[float, float, float] | None = None, *,
+             full_alpha: bool = True) -> Evaluation:
     """Evaluate the residual, the constraints and (if ``coef``) the scaled iteration matrix.
 
     Parameters
@@ -365,6 +366,9 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
         for the scaled Newton matrix; ``(1, 0, 0)`` for the initial accelerations). When None,
         the matrix is not evaluated; :func:`matrix_values` evaluates it later from the cached
         intermediates.
+    full_alpha : bool
+        Compute the log coordinates of non-abelian joints even where no spring needs them
+        (False inside Newton iterations; see :func:`fill_log_coordinates`).
 
     Returns
     -------
@@ -431,12 +435,10 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
             rj = np.einsum("jik,ji->jk", g.A, lg)
             # relative coordinates: Eq. (60) for abelian joints; log coordinates otherwise
             a_ab = alpha_n[jd] + n[jd]
-            if np.all(g.abelian):
-                a_g = a_ab
+            if np.all(g.abelian) or not (full_alpha or g.has_nonabelian_spring):
+                a_g = a_ab  # non-abelian entries filled by log_coordinates() when asked
             else:
-                lg_rel = lie.log_se3(lie.inverse(g.H0) @ HJg)
-                a_log = np.einsum("jki,ji->jk", g.Apinv, lg_rel)
-                a_g = np.where(g.abelian[:, None], a_ab, a_log)
+                a_g = np.where(g.abelian[:, None], a_ab, log_coordinates(g, HJg))
             alpha[jd] = a_g
             K = s.dof_stiffness[jd]
             C = s.dof_damping[jd]
@@ -460,6 +462,23 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     if coef is not None:
         ev.values = matrix_values(s, ev, coef)
     return ev
+
+
+def log_coordinates(g: JointGroup, HJ: np.ndarray) -> np.ndarray:
+    """Log coordinates of joints in the basis A: ``A^+ log(H_J0^-1 H_J)``, shape (nj, k).
+
+    For abelian joints they equal the relative coordinates of Eq. (60) modulo 2 pi; for
+    non-abelian joints (spherical, planar) they are *the* coordinates (|rotation| <= pi).
+    """
+    return np.einsum("jki,ji->jk", g.Apinv, lie.log_se3(lie.inverse(g.H0) @ HJ))
+
+
+def fill_log_coordinates(s: System, HJ: np.ndarray, alpha: np.ndarray) -> None:
+    """Write the log coordinates of all non-abelian joints into ``alpha`` (nq,), in place."""
+    for g in s.groups:
+        if g.k and not np.all(g.abelian):
+            sel = ~g.abelian
+            alpha[g.jdof[sel]] = log_coordinates(g, HJ[g.ids])[sel]
 
 
 def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float]) -> np.ndarray:
