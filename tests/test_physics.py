@@ -823,3 +823,13 @@ def test_joint_multipliers_are_the_support_wrench_on_node_b():
     np.testing.assert_allclose(res.joint_multipliers("beam"),
                                np.tile([0, 0, m * G, 0, 0, 0], (len(res.t), 1)), atol=1e-10)
     assert np.abs(res.node_position("tip") - [L, 0.0, 0.0]).max() < 1e-12
+
+
+def test_spherical_joint_coordinates_are_the_relative_rotation_vector():
+    # for a non-abelian joint the coordinates are log(H_J0^-1 H_J) in the basis A: with
+    # coinciding, initially aligned nodes 4 and 5 (Table 2) that is log_so3(R_4^T R_5)
+    res = _crank(1e-2, 1.0)
+    rel = np.einsum("nji,njk->nik", res.node_rotation("4"), res.node_rotation("5"))
+    np.testing.assert_allclose(res.joint_coordinates("4"), sd.lie.log_so3(rel), rtol=0,
+                               atol=1e-10)
+    assert np.abs(res.joint_coordinates("4")).max() > 1.0  # a large relative rotation
