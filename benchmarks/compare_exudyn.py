@@ -85,22 +85,11 @@ def se3_slider_crank():
 
 
 def se3_chain_model(n_links: int):
-    import se3dyn as sd
+    """The se3dyn chain of benchmarks/chain_scaling.py (one model definition for both scripts)."""
+    sys.path.insert(0, str(HERE))
+    from chain_scaling import chain
 
-    mb = sd.ModelBuilder(gravity=G, name=f"chain{n_links}")
-    mb.node("ground", position=(0.0, 0.0, 0.0), fixed=True)
-    J = 1.0 * 0.1**2 / 12.0
-    prev = "ground"
-    for i in range(n_links):
-        x0 = 0.1 * i
-        mb.node(f"p{i}", position=(x0, 0.0, 0.0))
-        mb.node(f"b{i}", position=(x0 + 0.05, 0.0, 0.0), mass=1.0, inertia=(1e-4 * J, J, J))
-        mb.node(f"e{i}", position=(x0 + 0.1, 0.0, 0.0))
-        mb.joint(f"s{i}", "spherical", prev, f"p{i}")
-        mb.joint(f"r{i}", "rigid", f"p{i}", f"b{i}")
-        mb.joint(f"t{i}", "rigid", f"b{i}", f"e{i}")
-        prev = f"e{i}"
-    return mb.build()
+    return chain(n_links)
 
 
 def se3_chain(n_links: int, t_end: float):
