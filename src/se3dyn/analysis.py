@@ -18,7 +18,8 @@ import scipy.linalg as sla
 from se3dyn.integrator import step_inputs
 from se3dyn.system import LinearSolver, System, evaluate
 
-__all__ = ["RankReport", "rank_analysis", "constraint_jacobian"]
+__all__ = ["RankReport", "rank_analysis", "constraint_jacobian", "loop_joints",
+           "redundant_equations"]
 
 _COMPONENT = ("x-translation", "y-translation", "z-translation", "x-rotation", "y-rotation",
               "z-rotation")
@@ -50,13 +51,59 @@ class RankReport:
     singular_values: np.ndarray
 
 
-def constraint_jacobian(s: System) -> np.ndarray:
-    """Dense constraint Jacobian ``Phi_q`` (6 m, nq) at the initial configuration (Eq. (58))."""
+def constraint_jacobian(s: System, H: np.ndarray | None = None,
+                        HJ: np.ndarray | None = None) -> np.ndarray:
+    """Dense constraint Jacobian ``Phi_q`` (6 m, nq) (Eq. (58)) at the configuration (H, HJ),
+    by default the initial one."""
+    return _jacobian(s, H, HJ).toarray()
+
+
+def _jacobian(s: System, H=None, HJ=None):
+    H = s.node_H0 if H is None else H
+    HJ = s.joint_H0 if HJ is None else HJ
     zero = np.zeros(s.nq)
-    ev = evaluate(s, s.node_H0, s.joint_H0, zero, zero, zero, zero, np.zeros(s.nm),
-                  step_inputs(s, 0.0), (1.0, 0.0, 0.0))
+    ev = evaluate(s, H, HJ, zero, zero, zero, zero, np.zeros(s.nm), step_inputs(s, 0.0),
+                  (0.0, 0.0, 0.0))
     A = LinearSolver(s, dense_max=0).matrix(ev.values).tocsr()
-    return A[s.nq:, :s.nq].toarray()
+    return A[s.nq:, :s.nq]
+
+
+def loop_joints(s: System) -> np.ndarray:
+    """Indices of the joints that lie on closed loops (the 2-core of the joint graph, clamped
+    nodes merged into one ground node). Only these can carry redundant constraints: a joint on
+    a tree branch is the only path of its wrench to the rest of the system."""
+    node = np.where(s.node_fixed, -1, np.arange(s.M))
+    a = node[s.joint_a]
+    b = node[s.joint_b]
+    alive = np.ones(s.m, dtype=bool)
+    while True:
+        deg: dict[int, int] = {}
+        for j in np.flatnonzero(alive):
+            deg[int(a[j])] = deg.get(int(a[j]), 0) + 1
+            deg[int(b[j])] = deg.get(int(b[j]), 0) + 1
+        leaf = [j for j in np.flatnonzero(alive)
+                if deg[int(a[j])] == 1 or deg[int(b[j])] == 1]
+        if not leaf:
+            return np.flatnonzero(alive)
+        alive[leaf] = False
+
+
+def redundant_equations(s: System, H: np.ndarray | None = None, HJ: np.ndarray | None = None,
+                        rtol: float = 1e-9) -> np.ndarray:
+    """Constraint equations (indices into the 6 m multipliers) that depend on the others at the
+    configuration (H, HJ), by column-pivoted QR of ``Phi_q^T`` restricted to the joints on closed
+    loops (:func:`loop_joints`); empty for tree-structured systems (no Jacobian is formed)."""
+    loops = loop_joints(s)
+    if loops.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    rows = (6 * loops[:, None] + np.arange(6)).ravel()
+    P = _jacobian(s, H, HJ)[rows]
+    cols = np.unique(P.indices)
+    P = P[:, cols].toarray()
+    _, R, piv = sla.qr(P.T, mode="economic", pivoting=True)
+    d = np.abs(np.diag(R))
+    r = int(np.sum(d > rtol * d[0])) if d.size and d[0] > 0 else 0
+    return np.sort(rows[piv[r:]])
 
 
 def rank_analysis(s: System, rtol: float = 1e-10) -> RankReport:
@@ -71,6 +118,8 @@ def rank_analysis(s: System, rtol: float = 1e-10) -> RankReport:
     Returns
     -------
     RankReport
+        The redundant equations named are those :func:`redundant_equations` finds, i.e. the
+        ones a simulation leaves out (with zero multipliers).
     """
     P = constraint_jacobian(s)
     nm, nq = P.shape
@@ -78,10 +127,11 @@ def rank_analysis(s: System, rtol: float = 1e-10) -> RankReport:
         return RankReport(nq, nm, 0, nq, (), np.zeros(0))
     sv = np.linalg.svd(P, compute_uv=False)
     r = int(np.sum(sv > rtol * sv[0])) if sv.size and sv[0] > 0 else 0
-    redundant: list[str] = []
-    if r < nm:
-        _, _, piv = sla.qr(P.T, mode="economic", pivoting=True)
-        for row in sorted(piv[r:]):
-            j, c = divmod(int(row), 6)
-            redundant.append(f"joint '{s.joint_names[j]}' constraint {c} ({_COMPONENT[c]})")
+    redundant = [equation_name(s, int(row)) for row in redundant_equations(s)]
     return RankReport(nq, nm, r, nq - r, tuple(redundant), sv)
+
+
+def equation_name(s: System, row: int) -> str:
+    """``joint 'J' constraint c (component)`` for a multiplier index."""
+    j, c = divmod(int(row), 6)
+    return f"joint '{s.joint_names[j]}' constraint {c} ({_COMPONENT[c]})"

@@ -4,7 +4,7 @@ Exit codes: 0 success, 1 simulation failure (results computed so far are kept in
 file), 2 bad input or usage. Errors are one clear line on stderr, never a Python traceback.
 
     se3dyn check MODEL...
-    se3dyn run MODEL [--t-end T] [--step H] [--rho-inf R] [--out DIR] [--quiet]
+    se3dyn run MODEL [--t-end T] [--step H] [--rho-inf R] [--formulation F] [--out DIR] [--quiet]
     se3dyn channels RESULTS
     se3dyn plot RESULTS CHANNEL... [-o PNG]
     se3dyn export RESULTS --csv FILE [CHANNEL...]
@@ -134,7 +134,8 @@ def cmd_run(args) -> int:
 
     model, settings = _load(args.model)
     cfg = dict(settings)
-    for key, val in (("t_end", args.t_end), ("step", args.step), ("rho_inf", args.rho_inf)):
+    for key, val in (("t_end", args.t_end), ("step", args.step), ("rho_inf", args.rho_inf),
+                     ("formulation", args.formulation)):
         if val is not None:
             cfg[key] = val
     for key in ("t_end", "step"):
@@ -157,7 +158,7 @@ def cmd_run(args) -> int:
     print(f"se3dyn {sd.__version__}: {args.model} -> {path}")
     print(f"  {len(model.nodes)} nodes, {len(model.joints)} joints; {s.nq} unknowns, {s.nm} "
           f"multipliers; t_end = {cfg['t_end']} s, h = {cfg['step']} s, "
-          f"rho_inf = {cfg.get('rho_inf', 0.9)}")
+          f"rho_inf = {cfg.get('rho_inf', 0.9)}, {cfg.get('formulation', 'index2')}")
     t0 = time.perf_counter()
     failed = None
     with ResultsWriter(path, s, model_text=text, settings=cfg) as writer:
@@ -339,6 +340,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--t-end", type=_positive("pos"), help="final time (s)")
     r.add_argument("--step", type=_positive("pos"), help="time step (s)")
     r.add_argument("--rho-inf", type=_positive("rho"), help="spectral radius in [0, 1]")
+    r.add_argument("--formulation", choices=("index2", "index3"),
+                   help="stabilized index-2 (default) or the paper's index-3 form")
     r.add_argument("--out", default="out", help="folder of the results file (default: out)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=cmd_run)

@@ -44,6 +44,8 @@ class State:
     work_act, work_ext, dissipated : float
         Accumulated actuator work (incl. PD laws), work of external loads, damper dissipation.
     power : ndarray (3,)       (actuator, external, dissipation) powers at t (trapezoidal rule)
+    dropped : ndarray (nr,)    redundant constraint equations left out (multiplier indices);
+                               their multipliers stay zero (see :func:`GeneralizedAlpha.init`)
     """
 
     t: float
@@ -58,6 +60,7 @@ class State:
     work_ext: float = 0.0
     dissipated: float = 0.0
     power: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+    dropped: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
 
     def copy(self) -> State:
         return dataclasses.replace(self, **{f.name: np.copy(getattr(self, f.name))
@@ -167,12 +170,29 @@ class GeneralizedAlpha:
         Newton tolerance on ``||Phi||_inf`` (Eq. (40)), in units of the model's length scale.
     max_iter : int
         Maximum Newton iterations per step.
+    formulation : {"index2", "index3"}
+        ``"index2"`` (default): the stabilized index-2 formulation of Arnold, Brüls & Cardona
+        (Numer. Math. 129 (2015) 149-179), which adds the velocity constraints
+        ``Phi_q(q_{n+1}) v_{n+1} = 0`` and corrects the increment by ``B_n^T xi``::
+
+            n_{n+1} = h v_n + h^2 (1/2 - beta) a_n + h^2 beta a_{n+1} + B_n^T xi_{n+1}
+
+        (``B_n = Phi_q(q_n)``, Eq. (58); ``xi`` a new multiplier with the units of an
+        increment). Positions, velocities, accelerations and multipliers are then all second
+        order accurate, without the O(h) transients of the index-3 form, and the multipliers
+        stay bounded for ``rho_inf = 1``. ``"index3"``: the paper's Eqs. (38)-(46) as written.
+    redundant : {"drop", "error"}
+        What to do with redundant constraint equations found at the initial configuration
+        (:func:`se3dyn.analysis.redundant_equations`): leave them out with zero multipliers
+        (default) or raise :class:`ModelError` naming them.
     """
 
     rho_inf: float = 0.9
     tol_residual: float = 1e-10
     tol_constraint: float = 1e-11
     max_iter: int = 25
+    formulation: str = "index2"
+    redundant: str = "drop"
 
     def __post_init__(self):
         r = self.rho_inf
@@ -184,6 +204,25 @@ class GeneralizedAlpha:
                 raise ModelError("integrator", fld, "a positive tolerance below 1", v)
         if not (isinstance(self.max_iter, int) and self.max_iter >= 1):
             raise ModelError("integrator", "max_iter", "a positive integer", self.max_iter)
+        if self.formulation not in ("index2", "index3"):
+            raise ModelError("integrator", "formulation", "'index2' or 'index3'",
+                             self.formulation)
+        if self.redundant not in ("drop", "error"):
+            raise ModelError("integrator", "redundant", "'drop' or 'error'", self.redundant)
+
+    @property
+    def index2(self) -> bool:
+        return self.formulation == "index2"
+
+    def solver(self, s: System, st: State) -> LinearSolver:
+        """A linear solver for the steps of this integrator from state ``st``."""
+        return LinearSolver(s, index2=self.index2, drop=st.dropped)
+
+    def _solver_for(self, s: System, st: State, solver: LinearSolver | None) -> LinearSolver:
+        if (solver is None or solver.index2 != self.index2
+                or not np.array_equal(solver.drop, st.dropped)):
+            return self.solver(s, st)
+        return solver
 
     @property
     def params(self) -> tuple[float, float, float, float]:
@@ -198,13 +237,28 @@ class GeneralizedAlpha:
     # -----------------------------------------------------------------------------------------
     def init(self, s: System, t0: float = 0.0, solver: LinearSolver | None = None) -> State:
         """Initial state: frames from the model, velocities made consistent with the velocity
-        constraints, consistent accelerations and multipliers at t0 (Eqs. (36)-(37))."""
-        solver = solver or LinearSolver(s)
+        constraints, consistent accelerations and multipliers at t0 (Eqs. (36)-(37)).
+
+        Redundant constraint equations are found first by rank analysis of the loop joints
+        (:func:`se3dyn.analysis.redundant_equations`) and left out (``State.dropped``), so
+        overconstrained mechanisms simulate with well-defined multipliers: those of the left-out
+        equations are zero, the others unique. ``solver`` is accepted for compatibility and
+        not used (the initial solve needs the index-3 layout)."""
+        from se3dyn.analysis import equation_name, redundant_equations
+
         nq, nm = s.nq, s.nm
+        dropped = redundant_equations(s) if nm else np.zeros(0, np.int64)
+        if dropped.size and self.redundant == "error":
+            names = [equation_name(s, r) for r in dropped]
+            raise ModelError("model", "joints", "independent constraint equations",
+                             f"{len(names)} redundant: " + ", ".join(names[:12])
+                             + (" ..." if len(names) > 12 else ""),
+                             hint="remove the duplicated freedom or use redundant='drop'")
+        solver = LinearSolver(s, drop=dropped)
         v = np.zeros(nq)
         v[s.node_dofidx] = s.node_v0[s.node_free]
         st = State(t=t0, H=s.node_H0.copy(), HJ=s.joint_H0.copy(), v=v, vd=np.zeros(nq),
-                   a=np.zeros(nq), lam=np.zeros(nm), alpha=np.zeros(nq))
+                   a=np.zeros(nq), lam=np.zeros(nm), alpha=np.zeros(nq), dropped=dropped)
         inputs = step_inputs(s, t0)
         zero = np.zeros(nq)
         ev = evaluate(s, st.H, st.HJ, st.alpha, zero, v, zero, st.lam, inputs, (1.0, 0.0, 0.0))
@@ -214,6 +268,7 @@ class GeneralizedAlpha:
                           (1.0, 0.0, 0.0))
         # [M Phi_q^T; Phi_q 0][vd; lam] = [-b; ad(v_J) Ad v_A]  (acceleration-level constraints)
         rhs = np.concatenate([-ev.r, self._accel_rhs(s, st)])
+        rhs[nq + dropped] = 0.0
         solver.factor(ev.values, f"t={t0:.6g} (initial accelerations)")
         sol = solver.solve(rhs)
         st.vd = sol[:nq]
@@ -271,11 +326,20 @@ class GeneralizedAlpha:
     # -----------------------------------------------------------------------------------------
     def step(self, s: System, st: State, h: float, solver: LinearSolver | None = None,
              ) -> tuple[State, StepInfo]:
-        """Advance one step of size h; raises :class:`NewtonError` when Newton fails."""
-        solver = solver or LinearSolver(s)
+        """Advance one step of size h; raises :class:`NewtonError` when Newton fails.
+
+        Newton unknowns: the increment n (nq), the scaled multipliers ``lambda / beta'`` (nm)
+        and, for the index-2 formulation, ``xi`` (nm). Velocities and accelerations follow the
+        part ``m = n - B_n^T xi`` of the increment: ``dv = gamma' dm``, ``dvd = beta' dm``.
+        Rows: dynamics / beta' (Eq. (39)), constraints (Eq. (40)) and, for index 2, velocity
+        constraints / gamma'; all O(1) whatever h.
+        """
+        solver = self._solver_for(s, st, solver)
         am, af, g, b = self.params
         t1 = st.t + h
-        nq = s.nq
+        nq, nm = s.nq, s.nm
+        idx2 = self.index2
+        drop = st.dropped
         try:
             inputs = step_inputs(s, t1)
         except SimulationError as exc:
@@ -289,14 +353,20 @@ class GeneralizedAlpha:
         bp = (1 - am) / (b * h * h * (1 - af))
         gp = g / (b * h)
         coef = (1.0, gp / bp, 1.0 / bp)
+        stab = None
+        if idx2 and nm:
+            stab = dict(cv=1.0 / gp, Adn=[lie.adjoint_inv(st.HJ[gr.ids]) for gr in s.groups])
         ltol = self.tol_constraint * s.length_scale
         it = 0
         er0 = 1.0
         while True:
-            ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, full_alpha=False)
+            ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, full_alpha=False,
+                          velocity=stab is not None)
             fs = max(ev.f_scale, 1e-300)
             er = float(np.abs(ev.r).max(initial=0.0)) / fs
             ep = float(np.abs(ev.phi).max(initial=0.0))
+            if stab is not None:
+                ep = max(ep, float(np.abs(ev.psi).max(initial=0.0)) / gp)
             if not (np.isfinite(er) and np.isfinite(ep)):
                 self._fail(s, t1, h, it, ev, "the iterate became non-finite")
             if er <= self.tol_residual and ep <= ltol:
@@ -310,30 +380,42 @@ class GeneralizedAlpha:
             if it == 0:
                 er0 = er
             try:
-                solver.factor(matrix_values(s, ev, coef), f"t={t1:.9g}")
+                solver.factor(matrix_values(s, ev, coef, stab), f"t={t1:.9g}")
             except SimulationError as exc:
-                self._fail(s, t1, h, it, ev, "the iteration matrix is singular (redundant "
-                           "constraints, a massless node no joint determines, or a diverged "
-                           f"iterate) [{exc}]")
-            d = solver.solve(-np.concatenate([ev.r / bp, ev.phi]))
-            dn = d[:nq]
+                self._fail(s, t1, h, it, ev, "the iteration matrix is singular (a mechanism "
+                           "in a singular configuration, a massless node no joint determines, "
+                           f"or a diverged iterate) [{exc}]")
+            phi = ev.phi.copy()
+            phi[drop] = 0.0
+            if stab is not None:
+                psi = ev.psi / gp
+                psi[drop] = 0.0
+                d = solver.solve(-np.concatenate([ev.r / bp, phi, psi]))
+                dn = d[:nq]
+                dm = dn - self._BnT(s, stab["Adn"], d[nq + nm:])
+            else:
+                d = solver.solve(-np.concatenate([ev.r / bp, phi]))
+                dn = dm = d[:nq]
             n += dn
-            v += gp * dn
-            vd += bp * dn
-            lam += bp * d[nq:]
+            v += gp * dm
+            vd += bp * dm
+            lam += bp * d[nq:nq + nm]
             it += 1
             # round-off stagnation: correction at the level of the increment's last digits
             if (ep <= ltol and np.abs(dn).max(initial=0.0)
                     <= 4e-16 * max(np.abs(n).max(initial=0.0), 1e-300)):
                 ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, None,
-                              full_alpha=False)
+                              full_alpha=False, velocity=stab is not None)
                 er = float(np.abs(ev.r).max(initial=0.0)) / max(ev.f_scale, 1e-300)
                 ep = float(np.abs(ev.phi).max(initial=0.0))
+                if stab is not None:
+                    ep = max(ep, float(np.abs(ev.psi).max(initial=0.0)) / gp)
                 break
         fill_log_coordinates(s, ev.HJ, ev.alpha)  # coordinates of non-abelian joints
         a = a + (1 - af) / (1 - am) * vd  # Eq. (43), with the predictor part already in a
         new = State(t=t1, H=ev.H, HJ=ev.HJ, v=v, vd=vd, a=a, lam=lam, alpha=ev.alpha,
-                    work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated)
+                    work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated,
+                    dropped=drop)
         e = energies(s, new, inputs)
         p = e["power"]
         new.power = p
@@ -342,6 +424,20 @@ class GeneralizedAlpha:
         new.work_ext += 0.5 * h * (st.power[1] + p[1])
         new.dissipated += 0.5 * h * (st.power[2] + p[2])
         return new, StepInfo(it, er, ep, e)
+
+    @staticmethod
+    def _BnT(s: System, Adn: list, xi: np.ndarray) -> np.ndarray:
+        """``B_n^T xi`` (nq,): the increment correction of the index-2 formulation (Eq. (58))."""
+        out = np.zeros(s.nq + 1)
+        for gr, Ad in zip(s.groups, Adn, strict=True):
+            x = xi[gr.mult]
+            out += np.bincount(np.where(gr.dof_a < 0, s.nq, gr.dof_a).ravel(),
+                               np.einsum("jki,jk->ji", Ad, x).ravel(), s.nq + 1)
+            out -= np.bincount(np.where(gr.dof_b < 0, s.nq, gr.dof_b).ravel(), x.ravel(),
+                               s.nq + 1)
+            if gr.k:
+                out[gr.jdof.ravel()] += np.einsum("jik,ji->jk", gr.A, x).ravel()
+        return out[:s.nq]
 
     def _fail(self, s: System, t: float, h: float, it: int, ev, why: str):
         r = np.abs(ev.r)

@@ -661,6 +661,11 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("tol_constraint", Num(exclusive_minimum=0), 1e-11, "Constraint tolerance."),
         Field("max_iter", Num(minimum=1, integer=True), 25, "Newton iterations per step."),
         Field("output_every", Num(minimum=1, integer=True), 1, "Store every k-th step."),
+        Field("formulation", Str(("index2", "index3")), "index2", "Stabilized index-2 "
+              "(second order in positions, velocities and multipliers) or the paper's index-3 "
+              "form."),
+        Field("redundant", Str(("drop", "error")), "drop", "Redundant constraint equations: "
+              "left out with zero multipliers, or an error."),
     ),
     "constant": (
         Field("value", _VALUE, None, "f(t) = value (required).", True),

@@ -9,11 +9,12 @@ from collections.abc import Callable
 
 import numpy as np
 
+from se3dyn.analysis import equation_name
 from se3dyn.errors import ModelError, SimulationError
 from se3dyn.integrator import GeneralizedAlpha, State, energies, step_inputs
 from se3dyn.model import Model
 from se3dyn.results import Results
-from se3dyn.system import LinearSolver, System, compile_model
+from se3dyn.system import System, compile_model
 
 __all__ = ["simulate", "SCALARS"]
 
@@ -65,7 +66,8 @@ class _Recorder:
 
 def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float = 0.9,
              t_start: float = 0.0, tol_residual: float = 1e-10, tol_constraint: float = 1e-11,
-             max_iter: int = 25, output_every: int = 1,
+             max_iter: int = 25, output_every: int = 1, formulation: str = "index2",
+             redundant: str = "drop",
              progress: Callable[[float, int], None] | None = None,
              on_output: Callable[[State, dict], None] | None = None) -> Results:
     """Simulate a model from ``t_start`` to ``t_end`` with a fixed step (Eqs. (38)-(46)).
@@ -83,6 +85,12 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         Spectral radius at infinite frequency (Eq. (44)).
     tol_residual, tol_constraint, max_iter :
         Newton settings, see :class:`~se3dyn.integrator.GeneralizedAlpha`.
+    formulation : {"index2", "index3"}
+        Stabilized index-2 (default; second order in positions, velocities and multipliers)
+        or the paper's index-3 form, see :class:`~se3dyn.integrator.GeneralizedAlpha`.
+    redundant : {"drop", "error"}
+        Redundant constraint equations are left out with zero multipliers (default; their
+        names are in ``stats["redundant"]``) or reported as an error.
     output_every : int
         Store every k-th step (the initial and the final state are always stored).
     progress : callable(t, step_index), optional
@@ -120,18 +128,21 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool):
         rho_inf = float(rho_inf)
     integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,
-                             tol_constraint=tol_constraint, max_iter=max_iter)
+                             tol_constraint=tol_constraint, max_iter=max_iter,
+                             formulation=formulation, redundant=redundant)
     nsteps = max(1, math.ceil((t_end - t_start) / step - 1e-9))
-    solver = LinearSolver(s)
     rec = _Recorder(s, nsteps // output_every + 2, on_output)
     wall0 = time.perf_counter()
-    st = integ.init(s, t_start, solver)
+    st = integ.init(s, t_start)
+    solver = integ.solver(s, st)
     e = energies(s, st, step_inputs(s, t_start))
     rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
     total_it = 0
     stats = dict(steps=0, newton_iterations=0, rho_inf=rho_inf, step=step, t_start=t_start,
                  t_end=t_end, tol_residual=tol_residual, tol_constraint=tol_constraint,
-                 unknowns=s.nq, multipliers=s.nm, matrix_size=s.N,
+                 unknowns=s.nq, multipliers=s.nm, matrix_size=solver.N,
+                 formulation=formulation,
+                 redundant=[equation_name(s, r) for r in st.dropped],
                  linear_solver="dense LU" if solver.dense else "sparse LU (SuperLU)")
     for i in range(1, nsteps + 1):
         t1 = t_start + i * step if i < nsteps else t_end

@@ -35,7 +35,7 @@ from se3dyn.errors import ModelError, SimulationError
 from se3dyn.model import Model
 
 __all__ = ["System", "JointGroup", "compile_model", "Evaluation", "evaluate", "matrix_values",
-           "LinearSolver"]
+           "LinearSolver", "pattern"]
 
 _COMP6 = ("U_x", "U_y", "U_z", "Omega_x", "Omega_y", "Omega_z")
 
@@ -263,9 +263,7 @@ def compile_model(model: Model) -> System:
         gravity=model.gravity.copy(), actuators=tuple(actuators), controls=tuple(controls),
         loads=loads, labels=tuple(labels), items=tuple(items), length_scale=max(L, 1.0),
         pattern={})
-    s = System(**sysd)
-    s.pattern.update(_pattern(s))
-    return s
+    return System(**sysd)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -278,23 +276,56 @@ def _block(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return R.ravel(), C.ravel()
 
 
-def _pattern(s: System) -> dict:
-    """Fixed sparsity pattern: the (row, col) of every value produced by :func:`evaluate`, in the
-    same order, and the map of each value to its slot in CSC storage (duplicates summed)."""
-    N, nq = s.N, s.nq
+def _joint_pairs(s: System) -> np.ndarray:
+    """Pairs of joints sharing a free node, for the block ``B_{n+1} B_n^T`` of the stabilized
+    index-2 matrix: rows ``(i, side_i, j, side_j)`` with side 0 = node A, 1 = node B."""
+    att: dict[int, list[tuple[int, int]]] = {}
+    for j in range(s.m):
+        for side, node in ((0, s.joint_a[j]), (1, s.joint_b[j])):
+            if not s.node_fixed[node]:
+                att.setdefault(int(node), []).append((j, side))
+    pairs = [(i, si, j, sj) for lst in att.values() for i, si in lst for j, sj in lst]
+    return np.array(pairs, dtype=np.int64).reshape(-1, 4)
+
+
+def _pattern(s: System, index2: bool = False) -> dict:
+    """Fixed sparsity pattern: the (row, col) of every value produced by :func:`matrix_values`, in
+    the same order, and the map of each value to its slot in CSC storage (duplicates summed).
+
+    The index-3 matrix has ``N = nq + nm`` rows (unknowns, multipliers); the stabilized index-2
+    matrix ``nq + 2 nm`` (unknowns, multipliers, velocity-constraint multipliers xi)."""
+    nq, nm = s.nq, s.nm
+    N = nq + (2 * nm if index2 else nm)
     rows, cols = [], []
-    r, c = _block(s.node_dofidx, s.node_dofidx)
-    rows.append(r)
-    cols.append(c)
+
+    def add(rr, cc):
+        r, c = _block(rr, cc)
+        rows.append(r)
+        cols.append(c)
+
+    add(s.node_dofidx, s.node_dofidx)
     for g in s.groups:
         mrow = nq + g.mult
         for rr, cc in ((mrow, g.dof_a), (mrow, g.dof_b), (mrow, g.jdof), (g.dof_a, mrow),
                        (g.dof_b, mrow), (g.jdof, mrow), (g.dof_a, g.jdof), (g.jdof, g.jdof)):
-            r, c = _block(rr, cc)
-            rows.append(r)
-            cols.append(c)
-    rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
-    cols = np.concatenate(cols) if cols else np.zeros(0, np.int64)
+            add(rr, cc)
+    diag = np.arange(nq, nq + nm)[:, None]
+    add(diag, diag)  # zero, or 1 for dropped redundant equations
+    pairs = np.zeros((0, 4), np.int64)
+    if index2:
+        X = nq + nm
+        for g in s.groups:
+            xrow = X + g.mult
+            for rr, cc in ((g.dof_a, xrow), (g.dof_b, xrow), (g.jdof, xrow), (xrow, g.dof_a),
+                           (xrow, g.dof_b), (xrow, g.jdof)):
+                add(rr, cc)
+        pairs = _joint_pairs(s)
+        mult6 = 6 * np.arange(s.m)[:, None] + np.arange(6)
+        add(X + mult6[pairs[:, 0]], X + mult6[pairs[:, 2]])
+        add(X + mult6, X + mult6)  # A A^T of each joint
+        add(diag + nm, diag + nm)
+    rows = np.concatenate(rows)
+    cols = np.concatenate(cols)
     keep = np.flatnonzero((rows >= 0) & (cols >= 0))
     key = cols[keep] * N + rows[keep]  # column-major: CSC order after sorting
     uniq, inv = np.unique(key, return_inverse=True)
@@ -303,7 +334,16 @@ def _pattern(s: System) -> dict:
     indptr = np.searchsorted(colnum, np.arange(N + 1)).astype(np.int32)
     dense_key = rows[keep] * N + cols[keep]
     return dict(keep=keep, inv=inv, nnz=len(uniq), indices=indices, indptr=indptr,
-                dense_key=dense_key, nvals=len(rows))
+                dense_key=dense_key, nvals=len(rows), N=N, rows=rows[keep], cols=cols[keep],
+                pairs=pairs)
+
+
+def pattern(s: System, index2: bool = False) -> dict:
+    """The (cached) pattern of the index-3 or the stabilized index-2 iteration matrix."""
+    key = "index2" if index2 else "index3"
+    if key not in s.pattern:
+        s.pattern[key] = _pattern(s, index2)
+    return s.pattern[key]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -318,6 +358,7 @@ class Evaluation:
     alpha : (nq,) relative coordinates (joint unknowns; zero on node unknowns)
     f_scale : float, magnitude of the forces entering r (for relative tolerances)
     values : (nvals,) iteration-matrix values in pattern order, or None
+    psi : (nm,) velocity constraints ``Phi_q v`` (only when asked for), or None
     """
 
     H: np.ndarray
@@ -328,6 +369,7 @@ class Evaluation:
     f_scale: float
     values: np.ndarray | None = None
     cache: dict | None = field(default=None, repr=False)
+    psi: np.ndarray | None = None
 
 
 def _lam_matrix(lam: np.ndarray) -> np.ndarray:
@@ -343,7 +385,7 @@ def _lam_matrix(lam: np.ndarray) -> np.ndarray:
 def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n: np.ndarray,
              v: np.ndarray, vd: np.ndarray, lam: np.ndarray, inputs: dict,
              coef: tuple[float, float, float] | None = None, *,
-             full_alpha: bool = True) -> Evaluation:
+             full_alpha: bool = True, velocity: bool = False) -> Evaluation:
     """Evaluate the residual, the constraints and (if ``coef``) the scaled iteration matrix.
 
     Parameters
@@ -369,6 +411,9 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     full_alpha : bool
         Compute the log coordinates of non-abelian joints even where no spring needs them
         (False inside Newton iterations; see :func:`fill_log_coordinates`).
+    velocity : bool
+        Also evaluate the velocity constraints ``psi = Phi_q v`` (nm,) (Eq. (58) applied to v:
+        ``Ad_{H_J^-1} v_A - v_B + A v_J`` per joint) for the stabilized index-2 formulation.
 
     Returns
     -------
@@ -406,6 +451,7 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     m = s.m
     HJ = np.zeros((m, 4, 4))
     phi = np.zeros(s.nm)
+    psi = np.zeros(s.nm) if velocity else None
     alpha = np.zeros(nq)
     lam_max = float(np.abs(lam).max(initial=0.0))
     gint_max = 0.0
@@ -454,10 +500,16 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
             gint = fs + C * vj + kp * (a_g - inputs["ref"][jd]) + kd * (vj - inputs["rate"][jd])
             gint_max = max(gint_max, float(np.abs(gint).max(initial=0.0)))
             r[jd] += rj + gint - inputs["tau"][jd]  # Eqs. (62), (64), (66)
-        cache["groups"].append((G, Ad, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT))
+        w = None
+        if velocity:
+            vA = np.where(g.dof_a < 0, 0.0, v[np.maximum(g.dof_a, 0)])
+            vB = np.where(g.dof_b < 0, 0.0, v[np.maximum(g.dof_b, 0)])
+            w = np.einsum("jik,jk->ji", Ad, vA)
+            psi[g.mult] = w - vB + (np.einsum("jik,jk->ji", g.A, v[g.jdof]) if k else 0.0)
+        cache["groups"].append((G, Ad, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, w))
     f_scale = max(f_scale, lam_max, gint_max,
                   float(np.abs(inputs["tau"]).max(initial=0.0)))
-    ev = Evaluation(H=H, HJ=HJ, r=r[:nq], phi=phi, alpha=alpha, f_scale=f_scale)
+    ev = Evaluation(H=H, HJ=HJ, r=r[:nq], phi=phi, alpha=alpha, f_scale=f_scale, psi=psi)
     ev.cache = cache
     if coef is not None:
         ev.values = matrix_values(s, ev, coef)
@@ -481,16 +533,24 @@ def fill_log_coordinates(s: System, HJ: np.ndarray, alpha: np.ndarray) -> None:
             alpha[g.jdof[sel]] = log_coordinates(g, HJ[g.ids])[sel]
 
 
-def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float]) -> np.ndarray:
+def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float],
+                  stab: dict | None = None) -> np.ndarray:
     """Values of the scaled iteration matrix (Eq. (46)) at an evaluated iterate, pattern order.
 
     Parameters
     ----------
     s : System
     ev : Evaluation
-        From :func:`evaluate` at the same iterate.
+        From :func:`evaluate` at the same iterate (with ``velocity=True`` when ``stab``).
     coef : (cM, cC, cK)
         Coefficients of M, C_T and K_T T (see :func:`evaluate`).
+    stab : dict or None
+        For the stabilized index-2 matrix (pattern ``pattern(s, index2=True)``): ``cv`` =
+        1/gamma' (float) and ``Adn`` = list over ``s.groups`` of ``Ad_{H_J,n^-1}`` (nj, 6, 6)
+        at the start of the step (the correction direction ``B_n^T``). The extra blocks are
+        ``-(cM M + cC C) B_n^T`` (dynamic rows, xi columns), ``B + cv d(B v)/dn`` (velocity
+        constraint rows, increment columns) and ``-B B_n^T`` (velocity constraint rows, xi
+        columns); see :mod:`se3dyn.integrator`.
 
     Returns
     -------
@@ -510,14 +570,15 @@ def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float]) -
         CT[:, :3, 3:] = -mass[:, None, None] * lie.hat3(vU)
         CT[:, 3:, 3:] = lie.hat3(vO) @ J - lie.hat3(JO)
         blk += cC * CT
+    blk_m = blk.copy() if stab is not None else None  # d r / d m (velocity-level part)
     if cK:
         # tangent stiffness of the external forces, Eq. (67), times T_SE(3)(n_I)
         KT = np.zeros((nf, 6, 6))
         KT[:, :3, 3:] = -lie.hat3(RtF)
         blk += cK * (KT @ Tn[s.node_free])
     vals = [blk.ravel()]
-    for g, (G, Ad, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT) in zip(s.groups, ev.cache["groups"],
-                                                                 strict=True):
+    for g, (G, Ad, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, _w) in zip(
+            s.groups, ev.cache["groups"], strict=True):
         k, nj = g.k, len(g.ids)
         RG = G[:, :3, :3]
         Dv = np.zeros((nj, 6, 6))
@@ -545,7 +606,49 @@ def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float]) -
                 sel = ~g.abelian
                 KJ[sel] = Knon[sel]
             vals.append(KJ.ravel())
+    vals.append(np.zeros(s.nm))  # multiplier diagonal (used for dropped equations)
+    if stab is not None:
+        vals += _stab_values(s, ev, blk_m, coef, stab)
     return np.concatenate(vals)
+
+
+def _stab_values(s: System, ev: Evaluation, blk_m: np.ndarray, coef, stab: dict) -> list:
+    """Extra values of the stabilized index-2 matrix, in the order of :func:`_pattern`."""
+    cC = coef[1]
+    cv = stab["cv"]
+    free_pos = np.maximum(s.node_dofadr, 0) // 6  # node -> index among free nodes
+    vals = []
+    Ad_all = np.zeros((s.m, 6, 6))
+    Adn_all = np.zeros((s.m, 6, 6))
+    for g, cg, Adn in zip(s.groups, ev.cache["groups"], stab["Adn"], strict=True):
+        G, Ad, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, w = cg
+        k, nj = g.k, len(g.ids)
+        Ad_all[g.ids] = Ad
+        Adn_all[g.ids] = Adn
+        AdnT = np.swapaxes(Adn, 1, 2)
+        # dynamic rows x xi columns: -(dr/dm) B_n^T
+        vals.append((-blk_m[free_pos[g.a]] @ AdnT).ravel())
+        vals.append(blk_m[free_pos[g.b]].ravel())
+        if k:
+            cj = (cC * (C + kd))[:, :, None] * np.swapaxes(g.A, 1, 2)
+            vals.append((-cj).ravel())
+        # velocity constraint rows x increment columns: B + cv d(B v)/dn
+        vals += [Ad.ravel(), np.broadcast_to(-np.eye(6), (nj, 6, 6)).ravel()]
+        if k:
+            vals.append((g.A + cv * (lie.ad6(w) @ TJ)).ravel())
+    # velocity constraint rows x xi columns: -B B_n^T over joints sharing a free node
+    pairs = pattern(s, True)["pairs"]
+    eye = np.eye(6)
+    Bi = np.where((pairs[:, 1] == 0)[:, None, None], Ad_all[pairs[:, 0]], -eye)
+    Bj = np.where((pairs[:, 3] == 0)[:, None, None], Adn_all[pairs[:, 2]], -eye)
+    vals.append((-Bi @ np.swapaxes(Bj, 1, 2)).ravel())
+    AAt = np.zeros((s.m, 6, 6))
+    for g in s.groups:
+        if g.k:
+            AAt[g.ids] = g.A @ np.swapaxes(g.A, 1, 2)
+    vals.append((-AAt).ravel())
+    vals.append(np.zeros(s.nm))
+    return vals
 
 
 # ---------------------------------------------------------------------------------------------
@@ -555,17 +658,44 @@ class LinearSolver:
     Dense LU (LAPACK) for N <= ``dense_max``, sparse LU (SuperLU, COLAMD ordering) above. The
     threshold is low on purpose: a multithreaded BLAS on a busy machine makes dense LU of a few
     hundred unknowns 20-30 times slower (measured: 83 ms vs 3 ms for N = 390 on 2 cores).
+
+    Parameters
+    ----------
+    s : System
+    dense_max : int
+    index2 : bool
+        The stabilized index-2 matrix (size ``nq + 2 nm``) instead of the index-3 one.
+    drop : sequence of int
+        Constraint equations (indices into the nm multipliers) left out as redundant: their
+        rows and columns are replaced by the identity, so their multipliers stay zero.
     """
 
-    def __init__(self, s: System, dense_max: int = 150):
+    def __init__(self, s: System, dense_max: int = 150, *, index2: bool = False,
+                 drop=()):
         self.s = s
-        self.N = s.N
+        self.index2 = index2
+        self.pat = pattern(s, index2)
+        self.N = self.pat["N"]
         self.dense = self.N <= dense_max
         self._lu = None
+        self.drop = np.unique(np.asarray(drop, dtype=np.int64))
+        self._mask = None
+        if self.drop.size:
+            nq, nm = s.nq, s.nm
+            dropped = np.zeros(self.N, dtype=bool)
+            dropped[nq + self.drop] = True
+            if index2:
+                dropped[nq + nm + self.drop] = True
+            rows, cols = self.pat["rows"], self.pat["cols"]
+            self._mask = ~(dropped[rows] | dropped[cols])
+            self._one = (dropped[rows] & (rows == cols)).astype(float)
 
     def matrix(self, values: np.ndarray):
-        p = self.s.pattern
+        """The matrix (dense ndarray or scipy CSC) from the values in pattern order."""
+        p = self.pat
         v = values[p["keep"]]
+        if self._mask is not None:
+            v = np.where(self._mask, v, 0.0) + self._one
         if self.dense:
             return np.bincount(p["dense_key"], weights=v, minlength=self.N * self.N).reshape(
                 self.N, self.N)
@@ -587,8 +717,9 @@ class LinearSolver:
         except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
             raise SimulationError(
                 f"{where}: the iteration matrix is singular ({exc}); typical causes: redundant "
-                "constraints (a joint duplicated, an overconstrained loop), a free massless node "
-                "whose motion no joint determines, or a non-finite state") from None
+                "constraints not detected at the start (a mechanism started in a singular "
+                "configuration), a free massless node whose motion no joint determines, or a "
+                "non-finite state") from None
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         if self.dense:
