@@ -1,0 +1,177 @@
+"""Run the gallery models and write the comparison plots ``docs/gallery/<name>.png``.
+
+Usage (from the repository root)::
+
+    python3 docs/gallery/make_plots.py [a01 a02 a04 a05] [--a02-t-end T]
+
+Each problem is run from its model file ``examples/<name>.yaml`` with the file's settings and
+compared with the exact / independently computed solution used by ``tests/test_gallery.py``
+(imported from there, so the plots and the tests share one definition). The measured numbers
+(error against the reference, steps, Newton iterations, wall time) are printed; the pages in this
+folder quote them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+import se3dyn as sd  # noqa: E402
+from se3dyn.errors import NewtonError  # noqa: E402
+from se3dyn.modelfile import load_model  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+OUT = Path(__file__).resolve().parent
+sys.path.insert(0, str(ROOT / "tests"))
+import test_gallery as ref  # noqa: E402
+
+
+def _run(name, **override):
+    model, settings = load_model(ROOT / "examples" / f"{name}.yaml")
+    settings.update(override)
+    try:
+        res = sd.simulate(model, **settings)
+        failed = None
+    except NewtonError as exc:
+        res, failed = exc.result, str(exc).splitlines()[0]
+    st = res.stats
+    print(f"\n== {name}: t_end={settings['t_end']} h={settings['step']} "
+          f"rho_inf={settings['rho_inf']}")
+    print(f"   steps {st['steps']}, Newton iterations {st['newton_iterations']} "
+          f"({st['newton_iterations'] / max(st['steps'], 1):.2f}/step), "
+          f"wall time {st['wall_time']:.1f} s, unknowns {st['unknowns']}, "
+          f"multipliers {st['multipliers']}")
+    if failed:
+        print(f"   FAILED: {failed}")
+    return model, res
+
+
+def a01():
+    _, res = _run("a01_simple_pendulum")
+    th = ref._pendulum_exact(res.t)
+    p = res.node_position("P1")
+    ex, ey = p[:, 0] - np.sin(th), p[:, 1] + np.cos(th)
+    T = 4 * math.sqrt(1 / ref.G) * ref.ellipk(0.5)
+    tc = ref._crossings(res.t, p[:, 0])
+    T_num = (tc[-1] - tc[0]) / ((len(tc) - 1) / 2)
+    E = res.total_energy
+    print(f"   max |x - x_exact| {np.abs(ex).max():.2e} m, max |y - y_exact| "
+          f"{np.abs(ey).max():.2e} m (allowed 1e-3)")
+    print(f"   period {T_num:.7f} s, exact {T:.7f} s, relative error {abs(T_num - T) / T:.1e}")
+    print(f"   energy drift max |E - E0| {np.abs(E - E[0]).max():.2e} J of m g L = 9.81 J")
+    fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    ax[0].plot(res.t, p[:, 0], label="x se3dyn")
+    ax[0].plot(res.t, p[:, 1], label="y se3dyn")
+    ax[0].plot(res.t, np.sin(th), "k--", lw=0.8, label="exact")
+    ax[0].plot(res.t, -np.cos(th), "k--", lw=0.8)
+    ax[0].set_ylabel("P1 (m)")
+    ax[0].legend(loc="upper right", fontsize=8)
+    ax[1].semilogy(res.t, np.abs(ex) + 1e-16, label="|x error|")
+    ax[1].semilogy(res.t, np.abs(ey) + 1e-16, label="|y error|")
+    ax[1].axhline(1e-3, color="r", lw=0.8, label="allowed (high precision)")
+    ax[1].set_xlabel("t (s)")
+    ax[1].set_ylabel("error (m)")
+    ax[1].legend(loc="lower right", fontsize=8)
+    fig.suptitle("A01 simple pendulum: P1 vs the exact solution")
+    fig.tight_layout()
+    fig.savefig(OUT / "a01_simple_pendulum.png", dpi=110)
+
+
+def a02(t_end):
+    model, res = _run("a02_n_four_bar", t_end=t_end)
+    n = (sum(nd.mass > 0 for nd in model.nodes) - 1) // 2
+    psi, psid = ref._four_bar_exact(n, res.t)
+    B0 = res.node_position("b0")
+    v = res.node_velocity("b0", frame="inertial")[:, :3]
+    ep = max(np.abs(B0[:, 0] - np.sin(psi)).max(), np.abs(B0[:, 1] - np.cos(psi)).max())
+    ev = max(np.abs(v[:, 0] - np.cos(psi) * psid).max(),
+             np.abs(v[:, 1] + np.sin(psi) * psid).max())
+    print(f"   N = {n}; max B0 position error {ep:.2e} m, velocity error {ev:.2e} m/s "
+          f"(max speed {np.abs(psid).max():.2f} m/s); revolutions {psi[-1] / (2 * math.pi):.2f}")
+    fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    ax[0].plot(res.t, B0[:, 0], label="x se3dyn")
+    ax[0].plot(res.t, B0[:, 1], label="y se3dyn")
+    ax[0].plot(res.t, np.sin(psi), "k--", lw=0.8, label="exact (1-dof reduction)")
+    ax[0].plot(res.t, np.cos(psi), "k--", lw=0.8)
+    ax[0].set_ylabel("B0 (m)")
+    ax[0].legend(loc="upper right", fontsize=8)
+    ax[1].plot(res.t, v[:, 0], label="vx se3dyn")
+    ax[1].plot(res.t, v[:, 1], label="vy se3dyn")
+    ax[1].plot(res.t, np.cos(psi) * psid, "k--", lw=0.8, label="exact")
+    ax[1].plot(res.t, -np.sin(psi) * psid, "k--", lw=0.8)
+    ax[1].set_xlabel("t (s)")
+    ax[1].set_ylabel("B0 velocity (m/s)")
+    ax[1].legend(loc="upper right", fontsize=8)
+    fig.suptitle(f"A02 N-four-bar (N = {n}): B0 vs the exact motion")
+    fig.tight_layout()
+    fig.savefig(OUT / "a02_n_four_bar.png", dpi=110)
+
+
+def a04():
+    _, res = _run("a04_bricard")
+    P3 = res.node_position("p3")
+    E = res.total_energy
+    print(f"   energy drift max |E - E0| {np.abs(E - E[0]).max():.2e} J; P3 range "
+          f"{np.ptp(P3, axis=0).round(3)} m")
+    fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    for k, c in enumerate("xyz"):
+        ax[0].plot(res.t, P3[:, k], label=f"P3 {c}")
+    ax[0].set_ylabel("P3 (m)")
+    ax[0].legend(loc="upper right", fontsize=8)
+    ax[1].plot(res.t, E - E[0])
+    ax[1].set_xlabel("t (s)")
+    ax[1].set_ylabel("E - E0 (J)")
+    fig.suptitle("A04 Bricard mechanism: P3 and the energy variation")
+    fig.tight_layout()
+    fig.savefig(OUT / "a04_bricard.png", dpi=110)
+
+
+def a05():
+    model, res = _run("a05_flyball_governor")
+    s_ref, w_ref, L = ref._flyball_rigid_limit(res.t)
+    s = res.node_position("slider")[:, 2]
+    w = res.node_velocity("shaft")[:, 5]
+    Lz = ref._axial_momentum(model, res)
+    eb = res.energy_balance
+    print(f"   max |s - s_rigid| {np.abs(s - s_ref).max():.2e} m, max |w - w_rigid| "
+          f"{np.abs(w - w_ref).max():.2e} rad/s; momentum drift {np.abs(Lz - L).max() / L:.1e} "
+          f"(relative); energy balance error {np.abs(eb - eb[0]).max():.2e} J of {eb[0]:.1f} J; "
+          f"dissipated {res.dissipation[-1]:.2e} J")
+    fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    ax[0].plot(res.t, s, label="slider s, se3dyn (K = 8e5 N/m)")
+    ax[0].plot(res.t, s_ref, "k--", lw=0.8, label="rigid-strut limit")
+    ax[0].set_ylabel("s (m)")
+    ax[0].legend(loc="upper right", fontsize=8)
+    ax[1].plot(res.t, w, label="shaft rate, se3dyn")
+    ax[1].plot(res.t, w_ref, "k--", lw=0.8, label="rigid-strut limit")
+    ax[1].set_xlabel("t (s)")
+    ax[1].set_ylabel("omega (rad/s)")
+    ax[1].legend(loc="upper right", fontsize=8)
+    fig.suptitle("A05 stiff flyball governor")
+    fig.tight_layout()
+    fig.savefig(OUT / "a05_flyball_governor.png", dpi=110)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("problems", nargs="*", default=["a01", "a02", "a04", "a05"])
+    ap.add_argument("--a02-t-end", type=float, default=20.0,
+                    help="A02 horizon (the library's 20 s take long with N = 40)")
+    args = ap.parse_args()
+    for p in args.problems:
+        if p == "a02":
+            a02(args.a02_t_end)
+        else:
+            {"a01": a01, "a04": a04, "a05": a05}[p]()
+
+
+if __name__ == "__main__":
+    main()
