@@ -2,13 +2,16 @@
 
 Usage (from the repository root)::
 
-    python3 docs/gallery/make_plots.py [a01 a02 a04 a05] [--a02-t-end T]
+    python3 docs/gallery/make_plots.py [a01 a02 a04 a05] [--a01-t-end T] [--a02-t-end T]
+                                       [--rho-inf R] [--formulation index2|index3] [--no-plot]
 
 Each problem is run from its model file ``examples/<name>.yaml`` with the file's settings and
 compared with the exact / independently computed solution used by ``tests/test_gallery.py``
 (imported from there, so the plots and the tests share one definition). The measured numbers
-(error against the reference, steps, Newton iterations, wall time) are printed; the pages in this
-folder quote them.
+(error against the reference, steps, Newton iterations, wall time, redundant equations left
+out, constraint violation) are printed; the pages in this folder quote them. ``--rho-inf`` and
+``--formulation`` override the model files' settings (the comparisons quoted on the pages);
+``--no-plot`` leaves the PNGs untouched.
 """
 
 from __future__ import annotations
@@ -33,10 +36,20 @@ OUT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT / "tests"))
 import test_gallery as ref  # noqa: E402
 
+OVERRIDE = {}  # settings from the command line (--rho-inf, --formulation)
+SAVE = True  # write the PNGs (--no-plot: print the numbers only)
+
+
+def _save(fig, name):
+    if SAVE:
+        fig.savefig(OUT / name, dpi=110)
+    plt.close(fig)
+
 
 def _run(name, **override):
     model, settings = load_model(ROOT / "examples" / f"{name}.yaml")
     settings.update(override)
+    settings.update(OVERRIDE)
     try:
         res = sd.simulate(model, **settings)
         failed = None
@@ -44,18 +57,20 @@ def _run(name, **override):
         res, failed = exc.result, str(exc).splitlines()[0]
     st = res.stats
     print(f"\n== {name}: t_end={settings['t_end']} h={settings['step']} "
-          f"rho_inf={settings['rho_inf']}")
+          f"rho_inf={settings['rho_inf']} formulation={st.get('formulation')}")
     print(f"   steps {st['steps']}, Newton iterations {st['newton_iterations']} "
           f"({st['newton_iterations'] / max(st['steps'], 1):.2f}/step), "
           f"wall time {st['wall_time']:.1f} s, unknowns {st['unknowns']}, "
           f"multipliers {st['multipliers']}")
+    print(f"   redundant equations left out {len(st.get('redundant', []))}; max constraint "
+          f"violation (solver's measure, all equations) {res.constraint.max():.1e}")
     if failed:
         print(f"   FAILED: {failed}")
     return model, res
 
 
-def a01():
-    _, res = _run("a01_simple_pendulum")
+def a01(t_end=None):
+    _, res = _run("a01_simple_pendulum", **({} if t_end is None else {"t_end": t_end}))
     th = ref._pendulum_exact(res.t)
     p = res.node_position("P1")
     ex, ey = p[:, 0] - np.sin(th), p[:, 1] + np.cos(th)
@@ -67,6 +82,10 @@ def a01():
           f"{np.abs(ey).max():.2e} m (allowed 1e-3)")
     print(f"   period {T_num:.7f} s, exact {T:.7f} s, relative error {abs(T_num - T) / T:.1e}")
     print(f"   energy drift max |E - E0| {np.abs(E - E[0]).max():.2e} J of m g L = 9.81 J")
+    win = [np.abs(E - E[0])[(res.t > a) & (res.t <= a + 10)].max()
+           for a in np.arange(0.0, res.t[-1] - 1e-9, 10.0)]
+    print(f"   max |E - E0| per 10 s window: {', '.join(f'{w:.2e}' for w in win)} J; "
+          f"E - E0 at the end {E[-1] - E[0]:.2e} J")
     fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
     ax[0].plot(res.t, p[:, 0], label="x se3dyn")
     ax[0].plot(res.t, p[:, 1], label="y se3dyn")
@@ -82,7 +101,7 @@ def a01():
     ax[1].legend(loc="lower right", fontsize=8)
     fig.suptitle("A01 simple pendulum: P1 vs the exact solution")
     fig.tight_layout()
-    fig.savefig(OUT / "a01_simple_pendulum.png", dpi=110)
+    _save(fig, "a01_simple_pendulum.png")
 
 
 def a02(t_end):
@@ -96,6 +115,27 @@ def a02(t_end):
              np.abs(v[:, 1] + np.sin(psi) * psid).max())
     print(f"   N = {n}; max B0 position error {ep:.2e} m, velocity error {ev:.2e} m/s "
           f"(max speed {np.abs(psid).max():.2f} m/s); revolutions {psi[-1] / (2 * math.pi):.2f}")
+    # geometry: crank and coupler lengths (1 m) and parallel cranks, everywhere and near the
+    # horizontal (singular) positions psi = pi/2 mod pi, |cos psi| < 0.05 (within 2.9 deg)
+    B = [res.node_position(f"b{i}") for i in range(n + 1)]
+    crank = max(np.abs(np.linalg.norm(B[i] - (i, 0.0, 0.0), axis=1) - 1).max()
+                for i in range(n + 1))
+    coupler = max(np.abs(np.linalg.norm(B[i] - B[i - 1], axis=1) - 1).max()
+                  for i in range(1, n + 1))
+    par = np.max([np.abs(B[i] - (i, 0.0, 0.0) - B[0]).max(axis=1) for i in range(1, n + 1)],
+                 axis=0)
+    sing = np.abs(np.cos(psi)) < 0.05
+    eps = max(np.abs(B0[sing, 0] - np.sin(psi[sing])).max(initial=0),
+              np.abs(B0[sing, 1] - np.cos(psi[sing])).max(initial=0))
+    passes = np.count_nonzero(np.diff(np.floor(psi / math.pi - 0.5)) > 0)
+    E = res.total_energy
+    print(f"   link length errors: cranks {crank:.1e} m, couplers {coupler:.1e} m; cranks parallel "
+          f"to {par.max():.1e} m; energy drift max |E - E0| {np.abs(E - E[0]).max():.2e} J "
+          f"(E0 = {E[0]:.2f} J)")
+    print(f"   singular (horizontal) positions passed: {passes}; closest |cos psi| at an output "
+          f"step {np.abs(np.cos(psi)).min():.1e}; within |cos psi| < 0.05 ({sing.sum()} steps): "
+          f"constraint violation {res.constraint[sing].max(initial=0):.1e}, cranks parallel "
+          f"to {par[sing].max(initial=0):.1e} m, B0 position error {eps:.1e} m")
     fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
     ax[0].plot(res.t, B0[:, 0], label="x se3dyn")
     ax[0].plot(res.t, B0[:, 1], label="y se3dyn")
@@ -112,15 +152,20 @@ def a02(t_end):
     ax[1].legend(loc="upper right", fontsize=8)
     fig.suptitle(f"A02 N-four-bar (N = {n}): B0 vs the exact motion")
     fig.tight_layout()
-    fig.savefig(OUT / "a02_n_four_bar.png", dpi=110)
+    _save(fig, "a02_n_four_bar.png")
 
 
 def a04():
     _, res = _run("a04_bricard")
     P3 = res.node_position("p3")
     E = res.total_energy
-    print(f"   energy drift max |E - E0| {np.abs(E - E[0]).max():.2e} J; P3 range "
-          f"{np.ptp(P3, axis=0).round(3)} m")
+    print(f"   energy drift max |E - E0| {np.abs(E - E[0]).max():.2e} J (E0 = {E[0]:.2f} J); "
+          f"P3 range {np.ptp(P3, axis=0).round(3)} m")
+    pts = [res.node_position(f"p{i}") for i in range(6)]
+    rods = max(np.abs(np.linalg.norm(b - a, axis=1) - 1).max()
+               for a, b in zip(pts[:-1], pts[1:], strict=True))
+    print(f"   rod length errors {rods:.1e} m; P5 hinge stays at (0, 0, 1) to "
+          f"{np.abs(pts[5] - (0.0, 0.0, 1.0)).max():.1e} m")
     fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
     for k, c in enumerate("xyz"):
         ax[0].plot(res.t, P3[:, k], label=f"P3 {c}")
@@ -131,7 +176,7 @@ def a04():
     ax[1].set_ylabel("E - E0 (J)")
     fig.suptitle("A04 Bricard mechanism: P3 and the energy variation")
     fig.tight_layout()
-    fig.savefig(OUT / "a04_bricard.png", dpi=110)
+    _save(fig, "a04_bricard.png")
 
 
 def a05():
@@ -157,7 +202,7 @@ def a05():
     ax[1].legend(loc="upper right", fontsize=8)
     fig.suptitle("A05 stiff flyball governor")
     fig.tight_layout()
-    fig.savefig(OUT / "a05_flyball_governor.png", dpi=110)
+    _save(fig, "a05_flyball_governor.png")
 
 
 def main():
@@ -165,10 +210,23 @@ def main():
     ap.add_argument("problems", nargs="*", default=["a01", "a02", "a04", "a05"])
     ap.add_argument("--a02-t-end", type=float, default=20.0,
                     help="A02 horizon (the library's 20 s take long with N = 40)")
+    ap.add_argument("--a01-t-end", type=float, help="A01 horizon (default: the model file's)")
+    ap.add_argument("--rho-inf", type=float, help="override the model files' rho_inf")
+    ap.add_argument("--formulation", choices=("index2", "index3"),
+                    help="override the integrator formulation (default: simulate's, index2)")
+    ap.add_argument("--no-plot", action="store_true", help="print the numbers only")
     args = ap.parse_args()
+    global SAVE
+    SAVE = not args.no_plot
+    if args.rho_inf is not None:
+        OVERRIDE["rho_inf"] = args.rho_inf
+    if args.formulation:
+        OVERRIDE["formulation"] = args.formulation
     for p in args.problems:
         if p == "a02":
             a02(args.a02_t_end)
+        elif p == "a01":
+            a01(args.a01_t_end)
         else:
             {"a01": a01, "a04": a04, "a05": a05}[p]()
 
