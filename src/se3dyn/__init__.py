@@ -6,15 +6,20 @@ generalized-alpha integrator. Conventions are written once in :mod:`se3dyn.lie`.
 >>> import se3dyn as sd
 >>> model = sd.examples.slider_crank()
 >>> result = sd.simulate(model, t_end=5.0, step=1e-2, rho_inf=0.9)  # doctest: +SKIP
+
+Beyond dynamics: :func:`static_equilibrium` (load stepping), :func:`assemble` (inconsistent
+initial configurations), :func:`kinematics` (driven mechanisms, inverse dynamics).
 """
 
 from se3dyn import examples, lie
 from se3dyn.errors import ModelError, NewtonError, Se3dynError, SimulationError
 from se3dyn.integrator import GeneralizedAlpha, State
 from se3dyn.joints import JOINT_TYPES
+from se3dyn.kinematics import Assembly, AssemblyError, KinematicsResult, assemble, kinematics
 from se3dyn.model import PD, JointSpec, LoadSpec, Model, ModelBuilder, NodeSpec
 from se3dyn.results import Results
 from se3dyn.simulate import simulate
+from se3dyn.statics import StaticResult, static_equilibrium
 from se3dyn.system import System, compile_model
 from se3dyn.timefunc import Callable, Component, Constant, Ramp, Sine, Step, Table
 
@@ -25,4 +30,6 @@ __all__ = [
     "System", "compile_model", "simulate", "Results", "GeneralizedAlpha", "State",
     "Constant", "Step", "Ramp", "Table", "Sine", "Callable", "Component", "JOINT_TYPES",
     "Se3dynError", "ModelError", "SimulationError", "NewtonError", "__version__",
+    "static_equilibrium", "StaticResult", "assemble", "Assembly", "AssemblyError",
+    "kinematics", "KinematicsResult",
 ]

@@ -4,7 +4,8 @@ Exit codes: 0 success, 1 simulation failure (results computed so far are kept in
 file), 2 bad input or usage. Errors are one clear line on stderr, never a Python traceback.
 
     se3dyn check MODEL...
-    se3dyn run MODEL [--t-end T] [--step H] [--rho-inf R] [--formulation F] [--out DIR] [--quiet]
+    se3dyn run MODEL [--t-end T] [--step H] [--rho-inf R] [--formulation F]
+                  [--tol TOL] [--output-step DT] [--out DIR] [--quiet]
     se3dyn channels RESULTS
     se3dyn plot RESULTS CHANNEL... [-o PNG]
     se3dyn export RESULTS --csv FILE [CHANNEL...]
@@ -135,7 +136,8 @@ def cmd_run(args) -> int:
     model, settings = _load(args.model)
     cfg = dict(settings)
     for key, val in (("t_end", args.t_end), ("step", args.step), ("rho_inf", args.rho_inf),
-                     ("formulation", args.formulation)):
+                     ("formulation", args.formulation), ("tol", args.tol),
+                     ("output_step", args.output_step)):
         if val is not None:
             cfg[key] = val
     for key in ("t_end", "step"):
@@ -342,6 +344,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--rho-inf", type=_positive("rho"), help="spectral radius in [0, 1]")
     r.add_argument("--formulation", choices=("index2", "index3"),
                    help="stabilized index-2 (default) or the paper's index-3 form")
+    r.add_argument("--tol", type=_positive("pos"),
+                   help="adaptive steps: position error tolerance over the run (m, rad)")
+    r.add_argument("--output-step", type=_positive("pos"),
+                   help="store results every OUTPUT_STEP seconds (dense output)")
     r.add_argument("--out", default="out", help="folder of the results file (default: out)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=cmd_run)

@@ -26,7 +26,7 @@ from se3dyn import lie
 from se3dyn.errors import ModelError, NewtonError, SimulationError
 from se3dyn.system import LinearSolver, System, evaluate, fill_log_coordinates, matrix_values
 
-__all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "energies"]
+__all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "energies", "interpolate"]
 
 
 @dataclass
@@ -46,6 +46,7 @@ class State:
     power : ndarray (3,)       (actuator, external, dissipation) powers at t (trapezoidal rule)
     dropped : ndarray (nr,)    redundant constraint equations left out (multiplier indices);
                                their multipliers stay zero (see :func:`GeneralizedAlpha.init`)
+    h_last : float             size of the step that produced this state (0 initially)
     """
 
     t: float
@@ -61,6 +62,7 @@ class State:
     dissipated: float = 0.0
     power: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
     dropped: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
+    h_last: float = 0.0
 
     def copy(self) -> State:
         return dataclasses.replace(self, **{f.name: np.copy(getattr(self, f.name))
@@ -70,13 +72,17 @@ class State:
 
 @dataclass(frozen=True)
 class StepInfo:
-    """Outcome of one step: Newton iterations, final scaled residual and constraint norms, and
-    the energies of the new state (see :func:`energies`)."""
+    """Outcome of one step: Newton iterations, final scaled residual and constraint norms, the
+    energies of the new state (see :func:`energies`), the converged increment ``n`` (nq,) of
+    Eq. (41) and the local error estimate ``error`` (nq,) of the positions (see
+    :meth:`GeneralizedAlpha.step`)."""
 
     iterations: int
     residual: float
     constraint: float
     energies: dict | None = None
+    increment: np.ndarray | None = None
+    error: np.ndarray | None = None
 
 
 def _sample(f, t: float, shape: tuple[int, ...], item: str, what: str) -> np.ndarray:
@@ -344,11 +350,17 @@ class GeneralizedAlpha:
             inputs = step_inputs(s, t1)
         except SimulationError as exc:
             raise SimulationError(f"step h={h:.6g} to {exc}") from None
+        # a_n approximates vd(t_n + (alpha_m - alpha_f) h) (Arnold & Brüls 2007): after a
+        # change of step size it is moved to the new h, a_n = vd_n + (h / h_last)(a_n - vd_n),
+        # which keeps variable steps second order
+        a_n = st.a
+        if st.h_last > 0 and h != st.h_last:
+            a_n = st.vd + (h / st.h_last) * (st.a - st.vd)
         # predictor: vd_{n+1} = 0
         vd = np.zeros(nq)
-        a = (af * st.vd - am * st.a) / (1 - am)
-        v = st.v + h * (1 - g) * st.a + h * g * a
-        n = h * st.v + h * h * (0.5 - b) * st.a + h * h * b * a
+        a = (af * st.vd - am * a_n) / (1 - am)
+        v = st.v + h * (1 - g) * a_n + h * g * a
+        n = h * st.v + h * h * (0.5 - b) * a_n + h * h * b * a
         lam = st.lam.copy()
         bp = (1 - am) / (b * h * h * (1 - af))
         gp = g / (b * h)
@@ -413,9 +425,14 @@ class GeneralizedAlpha:
                 break
         fill_log_coordinates(s, ev.HJ, ev.alpha)  # coordinates of non-abelian joints
         a = a + (1 - af) / (1 - am) * vd  # Eq. (43), with the predictor part already in a
+        # local truncation error of the increment (Zienkiewicz-Xie): the position update
+        # n = h v + h^2 ((1/2 - beta) a_n + beta a_{n+1}) reproduces the Taylor term
+        # h^3 q^(3) / 6
+        # as beta h^2 (a_{n+1} - a_n) ~ beta h^3 q^(3), leaving (beta - 1/6) h^2 (a_{n+1} - a_n)
+        err = (b - 1.0 / 6.0) * h * h * (a - a_n)
         new = State(t=t1, H=ev.H, HJ=ev.HJ, v=v, vd=vd, a=a, lam=lam, alpha=ev.alpha,
                     work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated,
-                    dropped=drop)
+                    dropped=drop, h_last=h)
         e = energies(s, new, inputs)
         p = e["power"]
         new.power = p
@@ -423,7 +440,7 @@ class GeneralizedAlpha:
         new.work_act += 0.5 * h * (st.power[0] + p[0])
         new.work_ext += 0.5 * h * (st.power[1] + p[1])
         new.dissipated += 0.5 * h * (st.power[2] + p[2])
-        return new, StepInfo(it, er, ep, e)
+        return new, StepInfo(it, er, ep, e, n, err)
 
     @staticmethod
     def _BnT(s: System, Adn: list, xi: np.ndarray) -> np.ndarray:
@@ -462,3 +479,61 @@ class GeneralizedAlpha:
         raise NewtonError(msg, t=t, h=h, iterations=it,
                           residual_norm=float(np.nanmax(rs, initial=0.0)),
                           constraint_norm=float(np.nanmax(phi, initial=0.0)), item=item)
+
+
+def interpolate(s: System, st0: State, st1: State, n: np.ndarray, theta: float) -> State:
+    """State at ``t0 + theta h`` inside a converged step (dense output), ``0 <= theta <= 1``.
+
+    Positions: a cubic Hermite curve in the increment space of each node and joint,
+    ``H(theta) = H_0 exp(Delta(theta))`` with ``Delta(0) = 0``, ``Delta'(0) = h v_0``,
+    ``Delta(1) = n`` (the step's increment, Eq. (38)) and ``Delta'(1) = h T(n)^-1 v_1``
+    (Eq. (21)), so frames and their velocities match both ends; third-order accurate, like the
+    step itself. Relative coordinates of abelian joints by the same Hermite curve (Eq. (60)),
+    of non-abelian joints as log coordinates of the interpolated H_J. Velocities: cubic
+    Hermite with the accelerations as slopes; accelerations, multipliers and accumulated works:
+    linear.
+
+    Parameters
+    ----------
+    s : System
+    st0, st1 : State
+        The states at the start and the end of the step.
+    n : ndarray (nq,)
+        The step's converged increment (``StepInfo.increment``).
+    theta : float
+    """
+    h = st1.t - st0.t
+    th = float(theta)
+    h10 = th ** 3 - 2 * th ** 2 + th
+    h01 = -2 * th ** 3 + 3 * th ** 2
+    h11 = th ** 3 - th ** 2
+    h00 = 2 * th ** 3 - 3 * th ** 2 + 1
+    H = st0.H.copy()
+    if len(s.node_free):
+        nI = n[s.node_dofidx]
+        v0 = st0.v[s.node_dofidx]
+        v1 = np.einsum("nij,nj->ni", lie.tangent_se3_inv(nI), st1.v[s.node_dofidx])
+        D = h10 * h * v0 + h01 * nI + h11 * h * v1
+        H[s.node_free] = st0.H[s.node_free] @ lie.exp_se3(D)
+    HJ = st0.HJ.copy()
+    alpha = st0.alpha.copy()
+    for g in s.groups:
+        if not g.k:
+            continue
+        jd = g.jdof
+        nJ = np.einsum("jik,jk->ji", g.A, n[jd])
+        vJ0 = np.einsum("jik,jk->ji", g.A, st0.v[jd])
+        vJ1 = np.einsum("jil,jl->ji", lie.tangent_se3_inv(nJ),
+                        np.einsum("jik,jk->ji", g.A, st1.v[jd]))
+        D = h10 * h * vJ0 + h01 * nJ + h11 * h * vJ1
+        HJ[g.ids] = st0.HJ[g.ids] @ lie.exp_se3(D)
+        alpha[jd] = st0.alpha[jd] + h10 * h * st0.v[jd] + h01 * n[jd] + h11 * h * st1.v[jd]
+    fill_log_coordinates(s, HJ, alpha)
+    v = h00 * st0.v + h10 * h * st0.vd + h01 * st1.v + h11 * h * st1.vd
+    lin = lambda x0, x1: (1 - th) * x0 + th * x1  # noqa: E731
+    return State(t=st0.t + th * h, H=H, HJ=HJ, v=v, vd=lin(st0.vd, st1.vd),
+                 a=lin(st0.a, st1.a), lam=lin(st0.lam, st1.lam), alpha=alpha,
+                 work_act=lin(st0.work_act, st1.work_act),
+                 work_ext=lin(st0.work_ext, st1.work_ext),
+                 dissipated=lin(st0.dissipated, st1.dissipated),
+                 power=lin(st0.power, st1.power), dropped=st1.dropped)

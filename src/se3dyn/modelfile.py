@@ -666,6 +666,13 @@ FIELDS: dict[str, tuple[Field, ...]] = {
               "form."),
         Field("redundant", Str(("drop", "error")), "drop", "Redundant constraint equations: "
               "left out with zero multipliers, or an error."),
+        Field("tol", Num(exclusive_minimum=0), None, "Adaptive time stepping: tolerance on the "
+              "position error over the run (m, rad); `step` is then the initial step."),
+        Field("h_min", Num(exclusive_minimum=0), "1e-12 x duration", "Smallest adaptive step "
+              "(s)."),
+        Field("h_max", Num(exclusive_minimum=0), "duration / 10", "Largest adaptive step (s)."),
+        Field("output_step", Num(exclusive_minimum=0), None, "Store results every output_step "
+              "seconds (dense output), whatever the internal steps."),
     ),
     "constant": (
         Field("value", _VALUE, None, "f(t) = value (required).", True),

@@ -10,8 +10,8 @@ from collections.abc import Callable
 import numpy as np
 
 from se3dyn.analysis import equation_name
-from se3dyn.errors import ModelError, SimulationError
-from se3dyn.integrator import GeneralizedAlpha, State, energies, step_inputs
+from se3dyn.errors import ModelError, NewtonError, SimulationError
+from se3dyn.integrator import GeneralizedAlpha, State, energies, interpolate, step_inputs
 from se3dyn.model import Model
 from se3dyn.results import Results
 from se3dyn.system import System, compile_model
@@ -37,8 +37,15 @@ class _Recorder:
         self.alpha = np.zeros((capacity, s.nq))
         self.scal = np.zeros((capacity, 9))
 
+    def _grow(self):
+        for name in ("t", "H", "v", "vd", "lam", "alpha", "scal"):
+            arr = getattr(self, name)
+            setattr(self, name, np.concatenate([arr, np.zeros_like(arr)]))
+
     def add(self, st: State, kin: float, pot: float, spring: float, iters: int, res: float,
             con: float):
+        if self.n == len(self.t):
+            self._grow()
         i = self.n
         self.t[i] = st.t
         self.H[i] = st.H
@@ -67,10 +74,12 @@ class _Recorder:
 def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float = 0.9,
              t_start: float = 0.0, tol_residual: float = 1e-10, tol_constraint: float = 1e-11,
              max_iter: int = 25, output_every: int = 1, formulation: str = "index2",
-             redundant: str = "drop",
+             redundant: str = "drop", tol: float | None = None, h_min: float | None = None,
+             h_max: float | None = None, output_step: float | None = None,
              progress: Callable[[float, int], None] | None = None,
              on_output: Callable[[State, dict], None] | None = None) -> Results:
-    """Simulate a model from ``t_start`` to ``t_end`` with a fixed step (Eqs. (38)-(46)).
+    """Simulate a model from ``t_start`` to ``t_end`` (Eqs. (38)-(46)), with a fixed step or,
+    when ``tol`` is given, with adaptive steps.
 
     Parameters
     ----------
@@ -79,20 +88,37 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     t_end : float
         Final time (s).
     step : float
-        Time step h (s). When ``(t_end - t_start)/step`` is not an integer the last step is
-        shortened to land on ``t_end``.
+        Time step h (s); the initial step when ``tol`` is given. With a fixed step, when
+        ``(t_end - t_start)/step`` is not an integer the last step is shortened to land on
+        ``t_end``.
     rho_inf : float
         Spectral radius at infinite frequency (Eq. (44)).
     tol_residual, tol_constraint, max_iter :
         Newton settings, see :class:`~se3dyn.integrator.GeneralizedAlpha`.
+    output_every : int
+        Store every k-th step (the initial and the final state are always stored).
     formulation : {"index2", "index3"}
         Stabilized index-2 (default; second order in positions, velocities and multipliers)
         or the paper's index-3 form, see :class:`~se3dyn.integrator.GeneralizedAlpha`.
     redundant : {"drop", "error"}
         Redundant constraint equations are left out with zero multipliers (default; their
         names are in ``stats["redundant"]``) or reported as an error.
-    output_every : int
-        Store every k-th step (the initial and the final state are always stored).
+    tol : float, optional
+        Adaptive time stepping: tolerance on the error of the positions (m for translations,
+        rad for rotations and joint angles) over the whole run. Every step's local error
+        estimate ``(beta - 1/6) h^2 (a_{n+1} - a_n)`` (max norm over the unknowns) is held
+        below ``tol * h / (t_end - t_start)`` (error per unit step), so that the local errors
+        add up to at most ``tol``; rejected steps are repeated with a smaller step, the next
+        step is ``h (tol_h / err)^(1/2)`` (safety 0.9, change limited to [0.2, 2]). A step
+        whose Newton iterations fail is retried with h / 4.
+    h_min, h_max : float, optional
+        Step bounds for adaptive stepping (default ``1e-12 (t_end - t_start)`` and
+        ``(t_end - t_start) / 10``). Falling below ``h_min`` stops the run with a
+        :class:`~se3dyn.errors.SimulationError` naming the time and the cause.
+    output_step : float, optional
+        Store the results on the grid ``t_start + k output_step`` (and ``t_end``) by dense
+        output (:func:`~se3dyn.integrator.interpolate`), whatever the internal steps; without
+        it every (``output_every``-th) step is stored.
     progress : callable(t, step_index), optional
         Called after every step.
     on_output : callable(state, scalars), optional
@@ -104,12 +130,14 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     Returns
     -------
     Results
+        ``stats`` holds steps, rejected steps, Newton iterations, smallest/largest step, etc.
 
     Raises
     ------
     NewtonError
-        When a step fails; its ``result`` attribute holds the results up to the last converged
-        step, and the message names the time, the step, the norms and the worst item.
+        When a step fails (fixed step) or the step falls below ``h_min`` (adaptive); its
+        ``result`` attribute holds the results up to the last converged step, and the message
+        names the time, the step, the norms and the worst item.
     """
     s = model if isinstance(model, System) else compile_model(model)
     for fld, val in (("t_end", t_end), ("step", step), ("t_start", t_start)):
@@ -125,46 +153,133 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         output_every = int(output_every)
     if not (isinstance(output_every, int) and output_every >= 1):
         raise ModelError("simulate", "output_every", "a positive integer", output_every)
+    span = t_end - t_start
+    opt = {}
+    for fld, val, default in (("tol", tol, None), ("h_min", h_min, 1e-12 * span),
+                              ("h_max", h_max, span / 10), ("output_step", output_step, None)):
+        if val is None:
+            opt[fld] = default
+            continue
+        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
+                or not (math.isfinite(float(val)) and float(val) > 0)):
+            raise ModelError("simulate", fld, "a positive number", val)
+        opt[fld] = float(val)
+    if opt["h_min"] > opt["h_max"]:
+        raise ModelError("simulate", "h_min", f"at most h_max={opt['h_max']:g}", opt["h_min"])
     if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool):
         rho_inf = float(rho_inf)
     integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,
                              tol_constraint=tol_constraint, max_iter=max_iter,
                              formulation=formulation, redundant=redundant)
-    nsteps = max(1, math.ceil((t_end - t_start) / step - 1e-9))
-    rec = _Recorder(s, nsteps // output_every + 2, on_output)
+    adaptive = opt["tol"] is not None
+    grid = None
+    if opt["output_step"] is not None:
+        k = max(1, math.ceil(span / opt["output_step"] - 1e-9))
+        grid = np.minimum(t_start + opt["output_step"] * np.arange(k + 1), t_end)
+        grid[-1] = t_end
+        capacity = len(grid)
+    elif adaptive:
+        capacity = 1024
+    else:
+        capacity = max(1, math.ceil(span / step - 1e-9)) // output_every + 2
+    rec = _Recorder(s, capacity, on_output)
     wall0 = time.perf_counter()
     st = integ.init(s, t_start)
     solver = integ.solver(s, st)
     e = energies(s, st, step_inputs(s, t_start))
     rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
-    total_it = 0
-    stats = dict(steps=0, newton_iterations=0, rho_inf=rho_inf, step=step, t_start=t_start,
-                 t_end=t_end, tol_residual=tol_residual, tol_constraint=tol_constraint,
-                 unknowns=s.nq, multipliers=s.nm, matrix_size=solver.N,
-                 formulation=formulation,
+    gi = 1  # next grid time to fill
+    stats = dict(steps=0, rejected=0, newton_iterations=0, rho_inf=rho_inf, step=step,
+                 t_start=t_start, t_end=t_end, tol_residual=tol_residual,
+                 tol_constraint=tol_constraint, unknowns=s.nq, multipliers=s.nm,
+                 matrix_size=solver.N, formulation=formulation,
                  redundant=[equation_name(s, r) for r in st.dropped],
-                 linear_solver="dense LU" if solver.dense else "sparse LU (SuperLU)")
-    for i in range(1, nsteps + 1):
-        t1 = t_start + i * step if i < nsteps else t_end
-        h = t1 - st.t
-        try:
-            st, info = integ.step(s, st, h, solver)
-        except SimulationError as exc:
-            stats.update(steps=i - 1, newton_iterations=total_it, failed=True,
-                         wall_time=time.perf_counter() - wall0)
-            if rec.n and rec.t[rec.n - 1] != st.t:
-                e = energies(s, st, step_inputs(s, st.t))
-                rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
-            exc.result = rec.results(stats)
-            raise
-        st.t = t1  # exact grid times, no drift
-        total_it += info.iterations
-        if i % output_every == 0 or i == nsteps:
+                 linear_solver="dense LU" if solver.dense else "sparse LU (SuperLU)",
+                 adaptive=adaptive, tol=opt["tol"], h_min_used=math.inf, h_max_used=0.0)
+    nsteps = max(1, math.ceil(span / step - 1e-9))
+    h = min(step, opt["h_max"]) if adaptive else step
+    i = 0
+
+    def fail(exc: SimulationError):
+        stats.update(steps=i, failed=True, wall_time=time.perf_counter() - wall0)
+        if grid is None and rec.n and rec.t[rec.n - 1] != st.t:
+            e = energies(s, st, step_inputs(s, st.t))
+            rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
+        exc.result = rec.results(stats)
+        raise exc
+
+    while st.t < t_end and (adaptive or i < nsteps):
+        if adaptive:
+            h = min(h, t_end - st.t)
+            if t_end - st.t - h < 1e-9 * h:
+                h = t_end - st.t
+            try:
+                new, info = integ.step(s, st, h, solver)
+            except SimulationError as exc:
+                if not isinstance(exc, NewtonError):
+                    fail(exc)
+                if h / 4 < opt["h_min"]:
+                    fail(NewtonError(f"{exc}; the step cannot be reduced below h_min="
+                                     f"{opt['h_min']:.3g}", **_err_kwargs(exc)))
+                stats["rejected"] += 1
+                h /= 4
+                continue
+            tol_h = opt["tol"] * h / span
+            err = float(np.abs(info.error).max(initial=0.0)) / tol_h
+            if err > 1.0:
+                if h <= opt["h_min"] * (1 + 1e-9):
+                    worst = int(np.argmax(np.abs(info.error)))
+                    fail(SimulationError(
+                        f"t={st.t:.9g}: the local error estimate {err * tol_h:.3e} exceeds the "
+                        f"tolerance {tol_h:.3e} (tol={opt['tol']:g} per {span:g} s) at the "
+                        f"minimum step h_min={opt['h_min']:.3g}; worst: {s.labels[worst]} "
+                        "(a discontinuous input, or a tolerance too tight for the model)"))
+                stats["rejected"] += 1
+                stats["newton_iterations"] += info.iterations
+                h = max(opt["h_min"], h * min(0.9, max(0.2, 0.9 * err ** -0.5)))
+                continue
+            t1 = st.t + h if t_end - st.t - h > 1e-12 * span else t_end
+        else:
+            t1 = t_start + (i + 1) * step if i + 1 < nsteps else t_end
+            h = t1 - st.t
+            try:
+                new, info = integ.step(s, st, h, solver)
+            except SimulationError as exc:
+                fail(exc)
+        new.t = t1  # exact times, no drift
+        i += 1
+        stats["newton_iterations"] += info.iterations
+        stats["h_min_used"] = min(stats["h_min_used"], h)
+        stats["h_max_used"] = max(stats["h_max_used"], h)
+        if grid is not None:
+            while gi < len(grid) and grid[gi] <= t1 + 1e-12 * span:
+                tg = grid[gi]
+                if abs(tg - t1) <= 1e-12 * span:
+                    out = new
+                else:
+                    out = interpolate(s, st, new, info.increment, (tg - st.t) / h)
+                    out.t = tg
+                ei = energies(s, out, step_inputs(s, tg))
+                out.power = ei["power"]
+                rec.add(out, ei["kinetic"], ei["potential"], ei["spring"], info.iterations,
+                        info.residual, info.constraint)
+                gi += 1
+        elif i % output_every == 0 or t1 >= t_end:
             e = info.energies
-            rec.add(st, e["kinetic"], e["potential"], e["spring"], info.iterations,
+            rec.add(new, e["kinetic"], e["potential"], e["spring"], info.iterations,
                     info.residual, info.constraint)
+        st = new
         if progress is not None:
             progress(st.t, i)
-    stats.update(steps=nsteps, newton_iterations=total_it, failed=False,
-                 wall_time=time.perf_counter() - wall0, final_state=st)
+        if adaptive:
+            h = min(opt["h_max"], h * min(2.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.5)))
+    stats.update(steps=i, failed=False, wall_time=time.perf_counter() - wall0, final_state=st)
     return rec.results(stats)
+
+
+def _err_kwargs(exc) -> dict:
+    if isinstance(exc, NewtonError):
+        return dict(t=exc.t, h=exc.h, iterations=exc.iterations,
+                    residual_norm=exc.residual_norm, constraint_norm=exc.constraint_norm,
+                    item=exc.item)
+    return {}
