@@ -67,7 +67,8 @@ def main() -> None:
         row = dict(tol=kw.get("tol"), fixed=not kw, step=None if kw else h,
                    steps=r.stats["steps"], position_error_m=ep, crank_angle_error_rad=ea)
         out["slider_crank"].append(row)
-        print(f"slider-crank {'tol %g' % kw['tol'] if kw else 'fixed h %g' % h}: "
+        label = f"tol {kw['tol']:g}" if kw else f"fixed h {h:g}"
+        print(f"slider-crank {label}: "
               f"{row['steps']} steps, position error {ep:.2e} m, crank angle error {ea:.2e} rad",
               flush=True)
     p = ROOT / "benchmarks" / "results" / "adaptive_steps.json"
