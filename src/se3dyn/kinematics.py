@@ -37,6 +37,7 @@ from se3dyn import lie
 from se3dyn.errors import ModelError, SimulationError
 from se3dyn.integrator import step_inputs
 from se3dyn.model import Model
+from se3dyn.results import node_dofs
 from se3dyn.system import LinearSolver, System, compile_model, evaluate, matrix_values
 from se3dyn.timefunc import (
     Callable,
@@ -231,19 +232,7 @@ class _Accessors:
         return self._out(self._H[:, self._node(name)].copy())
 
     def _node_dof(self, name: str, arr: np.ndarray, frame: str) -> np.ndarray:
-        i = self._node(name)
-        s = self.system
-        if frame not in ("material", "inertial"):
-            raise ValueError(f"frame: expected 'material' or 'inertial', got {frame!r}")
-        if s.node_fixed[i]:
-            return self._out(np.zeros((len(arr), 6)))
-        d = s.node_dofadr[i]
-        out = arr[:, d:d + 6].copy()
-        if frame == "inertial":
-            R = self._H[:, i, :3, :3]
-            out[:, :3] = np.einsum("nij,nj->ni", R, out[:, :3])
-            out[:, 3:] = np.einsum("nij,nj->ni", R, out[:, 3:])
-        return self._out(out)
+        return self._out(node_dofs(self.system, self._H, arr, self._node(name), frame))
 
     def _joint_cols(self, name: str, arr: np.ndarray) -> np.ndarray:
         s = self.system

@@ -15,6 +15,23 @@ from se3dyn.system import System  # noqa: F401  (type of the usual layout)
 __all__ = ["Results"]
 
 
+def node_dofs(s, H: np.ndarray, arr: np.ndarray, i: int, frame: str) -> np.ndarray:
+    """The 6 unknowns of node i in every row of ``arr`` (n, nq), shape (n, 6); ``frame=
+    "inertial"`` rotates both parts by the node rotation of ``H`` (n, M, 4, 4) (Eq. (4));
+    zeros for a clamped node."""
+    if frame not in ("material", "inertial"):
+        raise ValueError(f"frame: expected 'material' or 'inertial', got {frame!r}")
+    if s.node_fixed[i]:
+        return np.zeros((len(arr), 6))
+    d = s.node_dofadr[i]
+    out = arr[:, d:d + 6].copy()
+    if frame == "inertial":
+        R = H[:, i, :3, :3]
+        out[:, :3] = np.einsum("nij,nj->ni", R, out[:, :3])
+        out[:, 3:] = np.einsum("nij,nj->ni", R, out[:, 3:])
+    return out
+
+
 @dataclass
 class Results:
     """Time histories of a simulation (one row per stored step, the initial state included).
@@ -91,19 +108,7 @@ class Results:
         return self.H[:, self._node(name)].copy()
 
     def _node_dof(self, name: str, arr: np.ndarray, frame: str) -> np.ndarray:
-        i = self._node(name)
-        s = self.system
-        if frame not in ("material", "inertial"):
-            raise ValueError(f"frame: expected 'material' or 'inertial', got {frame!r}")
-        if s.node_fixed[i]:
-            return np.zeros((len(self.t), 6))
-        d = s.node_dofadr[i]
-        out = arr[:, d:d + 6].copy()
-        if frame == "inertial":
-            R = self.H[:, i, :3, :3]
-            out[:, :3] = np.einsum("nij,nj->ni", R, out[:, :3])
-            out[:, 3:] = np.einsum("nij,nj->ni", R, out[:, 3:])
-        return out
+        return node_dofs(self.system, self.H, arr, self._node(name), frame)
 
     def node_velocity(self, name: str, frame: str = "material") -> np.ndarray:
         """Velocity ``(U, Omega)`` of a node, shape (n, 6).
