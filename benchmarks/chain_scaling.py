@@ -1,14 +1,18 @@
 """Cost per time step of an N-link spatial pendulum chain (the shape of issue 6's benchmark).
 
 Links of 0.1 m and 1 kg (slender rod inertia), spherical joints, the first to a fixed node,
-released horizontal under gravity; 0.05 s at h = 1e-3, rho_inf = 0.9. Prints ms per step, Newton
-iterations per step and the fitted exponent of cost vs N (measured in this one run).
+released horizontal under gravity; h = 1e-3, rho_inf = 0.9, both formulations. Prints ms per
+step (set-up excluded: the difference of a 0.2 s and a 0.02 s run), Newton iterations and
+factorisations per step and the fitted exponent of cost vs N (measured in this one run); writes
+benchmarks/results/chain_scaling.json. ``--memory N`` instead runs 1 s of the N-link chain
+(every 10th step stored) and prints the peak resident memory.
 
-Run:  python benchmarks/chain_scaling.py [N ...]
+Run:  python benchmarks/chain_scaling.py [N ...] | --memory 10000
 """
 
 from __future__ import annotations
 
+import os
 import platform
 import sys
 import time
@@ -20,7 +24,23 @@ import se3dyn as sd
 
 
 def chain(n_links: int) -> sd.Model:
-    """Chain model: per link a joint node, a body node at the centre, an end node (rigid)."""
+    """Chain model: one node per link at its centre, spherical joints attached to the bodies at
+    the link ends (``at=``), the first to a fixed node: 6 N + 3 N unknowns, 6 N multipliers."""
+    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81), name=f"chain{n_links}")
+    mb.node("ground", position=(0.0, 0.0, 0.0), fixed=True)
+    J = 1.0 * 0.1**2 / 12.0
+    prev = "ground"
+    for i in range(n_links):
+        x0 = 0.1 * i
+        mb.node(f"b{i}", position=(x0 + 0.05, 0.0, 0.0), mass=1.0, inertia=(1e-4 * J, J, J))
+        mb.joint(f"s{i}", "spherical", prev, f"b{i}", at=(x0, 0.0, 0.0))
+        prev = f"b{i}"
+    return mb.build()
+
+
+def chain_nodes(n_links: int) -> sd.Model:
+    """The same chain in the paper's rigid-constraint form (Sec. 5): per link a joint node, a
+    body node at the centre and an end node, joined by rigid joints."""
     mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81), name=f"chain{n_links}")
     mb.node("ground", position=(0.0, 0.0, 0.0), fixed=True)
     J = 1.0 * 0.1**2 / 12.0
@@ -37,26 +57,88 @@ def chain(n_links: int) -> sd.Model:
     return mb.build()
 
 
-def main(argv: list[str]) -> int:
-    sizes = [int(a) for a in argv] or [10, 30, 100, 300, 1000]
-    print(f"se3dyn {sd.__version__}, numpy {np.__version__}, scipy {scipy.__version__}, "
-          f"Python {platform.python_version()}, {platform.machine()}")
-    rows = []
-    for n in sizes:
-        system = sd.compile_model(chain(n))
+def tip(res, n_links: int) -> np.ndarray:
+    """Tip of the chain (end of the last link) at every stored time, (nt, 3)."""
+    H = res.H[:, res.system.node_names.index(f"b{n_links - 1}")]
+    return H[:, :3, 3] + H[:, :3, 0] * 0.05
+
+
+def per_step(system, formulation: str, h: float = 1e-3, long: float = 0.2,
+             short: float = 0.02) -> dict:
+    """Cost per step without the set-up: (wall(long run) - wall(short run)) / extra steps."""
+    sd.simulate(system, t_end=h, step=h, formulation=formulation)  # set-up, kernels loaded
+    walls = {}
+    for t_end in (short, long):
         t0 = time.perf_counter()
-        res = sd.simulate(system, t_end=0.05, step=1e-3, rho_inf=0.9)
-        wall = time.perf_counter() - t0
-        steps = res.stats["steps"]
-        ms = 1e3 * wall / steps
-        rows.append((n, ms))
-        print(f"N = {n:5d} links: {system.N:7d} equations, {ms:8.2f} ms/step, "
-              f"{res.stats['newton_iterations'] / steps:.2f} Newton iterations/step, "
-              f"{res.stats['linear_solver']}")
-    if len(rows) >= 2:
-        n, ms = np.array(rows).T
-        slope = np.polyfit(np.log(n), np.log(ms), 1)[0]
-        print(f"fitted exponent of cost per step vs N: {slope:.2f}")
+        res = sd.simulate(system, t_end=t_end, step=h, rho_inf=0.9, formulation=formulation,
+                          output_every=100)
+        walls[t_end] = time.perf_counter() - t0
+        walls[f"its{t_end}"] = res.stats["newton_iterations"]
+        walls[f"fac{t_end}"] = res.stats.get("factorizations", 0)
+    nsteps = round((long - short) / h)
+    return {"ms_per_step": 1e3 * (walls[long] - walls[short]) / nsteps,
+            "newton_per_step": (walls[f"its{long}"] - walls[f"its{short}"]) / nsteps,
+            "factorizations_per_step": (walls[f"fac{long}"] - walls[f"fac{short}"]) / nsteps,
+            "wall_long_s": walls[long], "wall_short_s": walls[short],
+            "engine": res.stats["engine"], "linear_solver": res.stats["linear_solver"],
+            "matrix_size": res.stats["matrix_size"]}
+
+
+def peak_memory(n_links: int, t_end: float = 1.0, output_every: int = 10) -> dict:
+    """Run the chain in this process and report the peak resident set size."""
+    import resource
+
+    t0 = time.perf_counter()
+    system = sd.compile_model(chain(n_links))
+    res = sd.simulate(system, t_end=t_end, step=1e-3, rho_inf=0.9, output_every=output_every)
+    wall = time.perf_counter() - t0
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB -> MB on Linux
+    return {"N": n_links, "t_end": t_end, "output_every": output_every,
+            "stored_rows": len(res.t), "peak_rss_MB": rss, "wall_s": wall,
+            "tip_final": tip(res, n_links)[-1].tolist()}
+
+
+def main(argv: list[str]) -> int:
+    import argparse
+    import json
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("sizes", nargs="*", type=int, default=[100, 300, 1000, 3000, 10000])
+    ap.add_argument("--memory", type=int, help="only: peak RSS of a 1 s run with N links")
+    ap.add_argument("--out", default=str(Path(__file__).parent / "results" /
+                                          "chain_scaling.json"))
+    a = ap.parse_args(argv)
+    if a.memory:
+        print(json.dumps(peak_memory(a.memory)))
+        return 0
+    print(f"se3dyn {sd.__version__}, numpy {np.__version__}, scipy {scipy.__version__}, "
+          f"Python {platform.python_version()}, {platform.machine()}, {os.cpu_count()} CPUs")
+    report = {"machine": platform.platform(), "python": platform.python_version(),
+              "numpy": np.__version__, "scipy": scipy.__version__, "se3dyn": sd.__version__,
+              "h": 1e-3, "method": "(wall(0.2 s) - wall(0.02 s)) / 180 steps", "rows": []}
+    for n in a.sizes:
+        t0 = time.perf_counter()
+        system = sd.compile_model(chain(n))
+        build = time.perf_counter() - t0
+        for form in ("index3", "index2"):
+            r = per_step(system, form)
+            r.update(N=n, formulation=form, build_s=build)
+            report["rows"].append(r)
+            print(f"N = {n:5d} {form}: matrix {r['matrix_size']:7d}, {r['ms_per_step']:9.3f} "
+                  f"ms/step, {r['newton_per_step']:.2f} Newton iterations and "
+                  f"{r['factorizations_per_step']:.2f} factorisations per step", flush=True)
+    for form in ("index3", "index2"):
+        rows = [r for r in report["rows"] if r["formulation"] == form]
+        if len(rows) >= 2:
+            n = np.array([r["N"] for r in rows], float)
+            ms = np.array([r["ms_per_step"] for r in rows])
+            slope = float(np.polyfit(np.log(n), np.log(ms), 1)[0])
+            report[f"exponent_{form}"] = slope
+            print(f"{form}: fitted exponent of cost per step vs N "
+                  f"({int(n.min())}..{int(n.max())}): {slope:.3f}")
+    Path(a.out).write_text(json.dumps(report, indent=2) + "\n")
+    print(f"wrote {a.out}")
     return 0
 
 

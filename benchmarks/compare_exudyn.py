@@ -60,18 +60,22 @@ def at_time(t: np.ndarray, values: np.ndarray, t_query: float) -> np.ndarray:
 
 # ------------------------------------------------------------------------------------------------
 # se3dyn
-def se3_slider_crank():
+def se3_slider_crank(model: str = "bodies", formulation: str = "index2"):
+    """se3dyn slider-crank: ``bodies`` = three rigid bodies with joints attached at their
+    points (``examples.slider_crank_bodies``, the same model EXUDYN builds), ``paper`` = the
+    node/rigid-joint form of Sec. 11 (``examples.slider_crank``)."""
     import se3dyn as sd
-    from se3dyn.examples import slider_crank
+    from se3dyn.examples import slider_crank, slider_crank_bodies
 
     t0 = time.perf_counter()
-    system = sd.compile_model(slider_crank())
+    system = sd.compile_model(slider_crank_bodies() if model == "bodies" else slider_crank())
     build = time.perf_counter() - t0
     t0 = time.perf_counter()
-    res = sd.simulate(system, t_end=5.0, step=1e-2, rho_inf=RHO)
+    res = sd.simulate(system, t_end=5.0, step=1e-2, rho_inf=RHO, formulation=formulation)
     solve = time.perf_counter() - t0
     t = res.t
     out = {
+        "model": model, "formulation": formulation,
         "build_s": build, "solve_s": solve,
         "rod_com_t1": at_time(t, res.node_position("6"), 1.0).tolist(),
         "crank_angle_t2": float(at_time(t, crank_angle(res.node_rotation("3")), 2.0)),
@@ -79,33 +83,42 @@ def se3_slider_crank():
         "rod_com_t5": res.node_position("6")[-1].tolist(),
         "steps": int(res.stats["steps"]),
         "newton_iterations": int(res.stats["newton_iterations"]),
-        "equations": int(system.N),
+        "factorizations": int(res.stats.get("factorizations", 0)),
+        "equations": int(res.stats["matrix_size"]),
+        "engine": res.stats["engine"],
     }
     return out
 
 
 def se3_chain_model(n_links: int):
-    """The se3dyn chain of benchmarks/chain_scaling.py (one model definition for both scripts)."""
+    """The se3dyn chain of benchmarks/chain_scaling.py (one model definition for both scripts):
+    one node per link, spherical joints attached at the link ends."""
     sys.path.insert(0, str(HERE))
     from chain_scaling import chain
 
     return chain(n_links)
 
 
-def se3_chain(n_links: int, t_end: float):
+def se3_chain(n_links: int, t_end: float, formulation: str = "index3"):
     import se3dyn as sd
+
+    sys.path.insert(0, str(HERE))
+    from chain_scaling import tip
 
     t0 = time.perf_counter()
     system = sd.compile_model(se3_chain_model(n_links))
+    sd.simulate(system, t_end=1e-3, step=1e-3, formulation=formulation)  # block-LU set-up
     build = time.perf_counter() - t0
     t0 = time.perf_counter()
-    res = sd.simulate(system, t_end=t_end, step=1e-3, rho_inf=RHO)
+    res = sd.simulate(system, t_end=t_end, step=1e-3, rho_inf=RHO, formulation=formulation,
+                      output_every=10)
     solve = time.perf_counter() - t0
-    return {"build_s": build, "solve_s": solve,
-            "tip_final": res.node_position(f"e{n_links - 1}")[-1].tolist(),
+    return {"build_s": build, "solve_s": solve, "formulation": formulation,
+            "tip_final": tip(res, n_links)[-1].tolist(),
             "t_final": float(res.t[-1]), "steps": int(res.stats["steps"]),
             "newton_iterations": int(res.stats["newton_iterations"]),
-            "equations": int(system.N)}
+            "factorizations": int(res.stats.get("factorizations", 0)),
+            "equations": int(res.stats["matrix_size"])}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -322,6 +335,9 @@ def main(argv):
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-1000", action="store_true", help="skip N = 1000")
     ap.add_argument("--repeats-1000", type=int, default=1)
+    ap.add_argument("--n10000", action="store_true", help="also N = 10000 (both codes)")
+    ap.add_argument("--t-10000", type=float, default=0.1, help="model time for N = 10000")
+    ap.add_argument("--memory", action="store_true", help="peak RSS of the N = 10000 chain")
     ap.add_argument("--out", default=str(HERE / "results" / "compare_exudyn.json"))
     a = ap.parse_args(argv)
 
@@ -379,6 +395,22 @@ def main(argv):
           f"{ex['crank_angle_t2']:.6f} rad  |diff| {d_ang:.2e} rad "
           f"(se3dyn hinge coordinate {se['crank_joint_coordinate_t2']:.6f})")
     print(f"rod COM at t=5: |diff| {d_rod5:.2e} m")
+    sc["se3dyn_variants"] = {}
+    print("se3dyn variants (model/formulation): solve, ratio to EXUDYN, Newton its, "
+          "factorisations, matrix size, rod COM t=1 vs EXUDYN")
+    for model, form in (("bodies", "index2"), ("bodies", "index3"), ("paper", "index2"),
+                        ("paper", "index3")):
+        v = se if (model, form) == ("bodies", "index2") else repeat(
+            se3_slider_crank, a.repeats, model, form)
+        dv = float(np.linalg.norm(np.subtract(v["rod_com_t1"], ex["rod_com_t1"])))
+        sc["se3dyn_variants"][f"{model}/{form}"] = {
+            "solve_s": v["solve_s"], "ratio": v["solve_s"] / ex["solve_s"],
+            "newton_iterations": v["newton_iterations"],
+            "factorizations": v["factorizations"], "equations": v["equations"],
+            "rod_com_t1_diff_m": dv}
+        print(f"  {model + '/' + form:15s} {v['solve_s']*1e3:8.1f} ms  ratio "
+              f"{v['solve_s'] / ex['solve_s']:5.2f}  its {v['newton_iterations']:5d}  "
+              f"fact {v['factorizations']:5d}  N {v['equations']:3d}  diff {dv:.2e} m")
     ref = slider_crank_refined(1e-3, 2e-4)
     sc["refined_check"] = ref
     r = ref["exudyn_ref"]
@@ -402,26 +434,39 @@ def main(argv):
     # 2. chains ---------------------------------------------------------------------------------
     cases = [(10, 1.0, a.repeats), (100, 1.0, a.repeats)]
     if not a.no_1000:
-        cases.append((1000, 0.1, a.repeats_1000))
+        cases.append((1000, 1.0, a.repeats_1000))
+    if a.n10000:
+        cases.append((10000, a.t_10000, 1))
     report["chain"] = []
     print("\n== N-link spherical chain: h = 1e-3, rho_inf = 0.9 ==")
-    print(f"{'N':>5} {'t_end':>5} {'se3dyn s':>10} {'EXUDYN s':>10} {'ratio':>7} "
+    print(f"{'N':>5} {'t_end':>5} {'form':>6} {'se3dyn s':>10} {'EXUDYN s':>10} {'ratio':>7} "
           f"{'se3 ms/step':>11} {'exu ms/step':>11} {'tip |diff| m':>12}")
     for n, t_end, rep in cases:
         ex = repeat(exu_chain, rep, n, t_end)
-        se = repeat(se3_chain, rep, n, t_end)
-        d_tip = float(np.linalg.norm(np.subtract(se["tip_final"], ex["tip_final"])))
-        row = {"N": n, "t_end": t_end, "h": 1e-3, "repeats": rep, "se3dyn": se, "exudyn": ex,
-               "solve_ratio_se3dyn_over_exudyn": se["solve_s"] / ex["solve_s"],
-               "tip_final_diff_m": d_tip}
-        report["chain"].append(row)
-        print(f"{n:5d} {t_end:5.1f} {se['solve_s']:10.3f} {ex['solve_s']:10.3f} "
-              f"{row['solve_ratio_se3dyn_over_exudyn']:7.2f} "
-              f"{1e3*se['solve_s']/se['steps']:11.3f} {1e3*ex['solve_s']/ex['steps']:11.3f} "
-              f"{d_tip:12.2e}")
+        for form in ("index3", "index2"):
+            se = repeat(se3_chain, rep, n, t_end, form)
+            d_tip = float(np.linalg.norm(np.subtract(se["tip_final"], ex["tip_final"])))
+            row = {"N": n, "t_end": t_end, "h": 1e-3, "repeats": rep, "formulation": form,
+                   "se3dyn": se, "exudyn": ex,
+                   "solve_ratio_se3dyn_over_exudyn": se["solve_s"] / ex["solve_s"],
+                   "tip_final_diff_m": d_tip}
+            report["chain"].append(row)
+            print(f"{n:5d} {t_end:5.2f} {form:>6} {se['solve_s']:10.3f} {ex['solve_s']:10.3f} "
+                  f"{row['solve_ratio_se3dyn_over_exudyn']:7.3f} "
+                  f"{1e3*se['solve_s']/se['steps']:11.3f} "
+                  f"{1e3*ex['solve_s']/ex['steps']:11.3f} {d_tip:12.2e}", flush=True)
         print(f"      tip se3dyn {np.round(se['tip_final'], 6)}  EXUDYN "
               f"{np.round(ex['tip_final'], 6)}; Newton its se3dyn {se['newton_iterations']} "
-              f"EXUDYN {ex['newton_iterations']}")
+              f"(factorisations {se['factorizations']}) EXUDYN {ex['newton_iterations']}")
+
+    # 3. memory of the N = 10000 chain (own process) --------------------------------------------
+    if a.memory:
+        out = subprocess.run([sys.executable, str(HERE / "chain_scaling.py"), "--memory",
+                              "10000"], check=True, capture_output=True, text=True)
+        mem = json.loads(out.stdout.strip().splitlines()[-1])
+        report["memory_N10000"] = mem
+        print(f"\npeak RSS, N = 10000 chain, 1 s, every 10th step stored: "
+              f"{mem['peak_rss_MB']:.0f} MB ({mem['wall_s']:.1f} s)")
 
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)

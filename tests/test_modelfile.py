@@ -76,7 +76,7 @@ def assert_models_equal(m1: sd.Model, m2: sd.Model):
         assert set(a.params) == set(b.params), w
         for k in a.params:
             _eq(a.params[k], b.params[k], f"{w} param {k}")
-        for f in ("A", "stiffness", "reference", "damping"):
+        for f in ("A", "stiffness", "reference", "damping", "at"):
             _eq(getattr(a, f), getattr(b, f), f"{w} {f}")
         _tf_eq(a.actuator, b.actuator, f"{w} actuator")
         assert (a.control is None) == (b.control is None), w
@@ -100,7 +100,7 @@ def _rot(axis, angle):
 
 def everything_model() -> sd.Model:
     """Every joint type, springs, dampers, every built-in time function, PD control, loads,
-    orientations, principal axes, full tensors and initial velocities."""
+    orientations, principal axes, full tensors, initial velocities and attachment points."""
     mb = sd.ModelBuilder(gravity=(0.1, -0.2, -9.81), name="everything")
     mb.node("ground", position=(0, 0, 0), fixed=True)
     R = _rot((1, 2, 3), 0.7)
@@ -114,6 +114,7 @@ def everything_model() -> sd.Model:
             inertia=[[2.0, 0.1, 0.0], [0.1, 3.0, 0.2], [0.0, 0.2, 4.0]],
             velocity=(0, 0, -1), angular_velocity=(0.3, 0.2, 0.1))
     mb.node("massless", position=(0.5, 0.5, 0.5))
+    mb.node("arm", position=(1.2, 1.0, 1.4), mass=0.3, inertia=(1e-3, 1e-3, 1e-3))
     mb.joint("rigid", "rigid", "ground", "b1")
     mb.joint("hinge", "hinge", "ground", "b2", axis=(0, 0, 1), stiffness=2.5, reference=0.1,
              damping=0.3, torque=sd.Ramp(1.5, start=0.5, duration=2.0))
@@ -139,8 +140,11 @@ def everything_model() -> sd.Model:
     mb.joint("general1", "general", "b8", "massless", A=[0, 0, 0, 1, 0, 0])
     mb.joint("cardan", "universal", "ground", "b9", axes=[(1, 0, 0), (0, 1, 0)],
              stiffness=(1.0, 2.0), damping=0.1, torque=sd.Sine([1.0, 2.0], 1.0),
-             control=sd.PD(kp=(3.0, 4.0), kd=0.5, target=sd.Step([0.1, 0.2], 0.0, 1.0)))
-    mb.joint("weld", "rigid", "b9", "oriented")
+             control=sd.PD(kp=(3.0, 4.0), kd=0.5, target=sd.Step([0.1, 0.2], 0.0, 1.0)),
+             at=(0.85, 0.2, -2.5))
+    mb.joint("weld", "rigid", "b9", "oriented", at=(1.0, 0.5, 0.0))
+    mb.joint("offset_hinge", "hinge", "oriented", "arm", axis=(0, 0, 1), at=(1.1, 1.0, 1.2),
+             damping=0.2)
     mb.load("push", "b2", force=sd.Sine([0.0, 0.0, 1.0], 2.0, offset=[1.0, 0.0, 0.0]),
             torque=sd.Ramp([0.0, 0.1, 0.0], duration=0.5))
     mb.load("constant", "b3", force=(0.0, 0.0, 1.0))

@@ -1,7 +1,8 @@
 """Structural analysis of a compiled system: mobility and redundant constraints by rank analysis.
 
 The constraint Jacobian at the initial configuration is ``Phi_q = [Ad_{H_J^-1}, -I, A]`` per joint
-(Eq. (58)), a ``(6 m) x nq`` matrix. Its numerical rank r (SVD, relative tolerance) gives
+(Eq. (58); ``[Ad_{H_J^-1} PA, -PB, A]`` for a joint with attachment offsets, ``PA = Ad(X_A^-1)``,
+``PB = Ad(X_B^-1)``), a ``(6 m) x nq`` matrix. Its numerical rank r (SVD, relative tolerance) gives
 
 * the mobility (degrees of freedom) ``nq - r``;
 * the number of redundant constraint equations ``6 m - r``, named by a column-pivoted QR of
@@ -73,19 +74,27 @@ def loop_joints(s: System) -> np.ndarray:
     nodes merged into one ground node). Only these can carry redundant constraints: a joint on
     a tree branch is the only path of its wrench to the rest of the system."""
     node = np.where(s.node_fixed, -1, np.arange(s.M))
-    a = node[s.joint_a]
-    b = node[s.joint_b]
+    a = node[s.joint_a].tolist()
+    b = node[s.joint_b].tolist()
+    inc: dict[int, list[int]] = {}
+    for j in range(s.m):
+        inc.setdefault(a[j], []).append(j)
+        inc.setdefault(b[j], []).append(j)
+    deg = {v: len(js) for v, js in inc.items()}
     alive = np.ones(s.m, dtype=bool)
-    while True:
-        deg: dict[int, int] = {}
-        for j in np.flatnonzero(alive):
-            deg[int(a[j])] = deg.get(int(a[j]), 0) + 1
-            deg[int(b[j])] = deg.get(int(b[j]), 0) + 1
-        leaf = [j for j in np.flatnonzero(alive)
-                if deg[int(a[j])] == 1 or deg[int(b[j])] == 1]
-        if not leaf:
-            return np.flatnonzero(alive)
-        alive[leaf] = False
+    # peel leaves (nodes of degree 1) one at a time: O(m) in all
+    queue = [v for v, d in deg.items() if d == 1]
+    while queue:
+        v = queue.pop()
+        if deg[v] != 1:
+            continue
+        j = next(j for j in inc[v] if alive[j])
+        alive[j] = False
+        for w in (a[j], b[j]):
+            deg[w] -= 1
+            if deg[w] == 1:
+                queue.append(w)
+    return np.flatnonzero(alive)
 
 
 def redundant_equations(s: System, H: np.ndarray | None = None, HJ: np.ndarray | None = None,

@@ -191,6 +191,19 @@ class GeneralizedAlpha:
         What to do with redundant constraint equations found at the initial configuration
         (:func:`se3dyn.analysis.redundant_equations`): leave them out with zero multipliers
         (default) or raise :class:`ModelError` naming them.
+    engine : {"auto", "compiled", "numpy"}
+        ``"auto"`` (default): the compiled kernels of :mod:`se3dyn.fast` (numba; Newton
+        iterations in machine code, O(N) block LU of :mod:`se3dyn.blocklu`) where they apply,
+        the vectorised numpy implementation otherwise (springs on non-abelian joints) and for
+        any step the kernels cannot finish (a singular block pivot; a failing step is repeated
+        by numpy, which names the cause). ``"numpy"``: always the numpy implementation (the
+        reference the kernels are tested against). ``"compiled"``: like auto, but an error
+        when the kernels do not apply.
+    newton : {"modified", "full"}
+        Compiled engine only: ``"modified"`` (default) keeps the factorised iteration matrix
+        across iterations and steps while Newton contracts by at least a factor 5 per
+        iteration, and refactorises at the current iterate otherwise (or when h changes);
+        ``"full"`` refactorises at every iteration. Both converge to the same tolerances.
     """
 
     rho_inf: float = 0.9
@@ -199,6 +212,8 @@ class GeneralizedAlpha:
     max_iter: int = 25
     formulation: str = "index2"
     redundant: str = "drop"
+    engine: str = "auto"
+    newton: str = "modified"
 
     def __post_init__(self):
         r = self.rho_inf
@@ -215,6 +230,24 @@ class GeneralizedAlpha:
                              self.formulation)
         if self.redundant not in ("drop", "error"):
             raise ModelError("integrator", "redundant", "'drop' or 'error'", self.redundant)
+        if self.newton not in ("modified", "full"):
+            raise ModelError("integrator", "newton", "'modified' or 'full'", self.newton)
+        if self.engine not in ("auto", "compiled", "numpy"):
+            raise ModelError("integrator", "engine", "'auto', 'compiled' or 'numpy'",
+                             self.engine)
+
+    def compiled(self, s: System) -> bool:
+        """Whether steps of this system run in the compiled kernels (:mod:`se3dyn.fast`)."""
+        if self.engine == "numpy":
+            return False
+        from se3dyn import fast
+
+        ok = fast.supported(s)
+        if not ok and self.engine == "compiled":
+            raise ModelError("integrator", "engine", "a model the compiled kernels cover "
+                             "(no springs on non-abelian joints)", "compiled",
+                             hint="use engine='auto' or 'numpy'")
+        return ok
 
     @property
     def index2(self) -> bool:
@@ -286,6 +319,10 @@ class GeneralizedAlpha:
 
     @staticmethod
     def _accel_rhs(s: System, st: State) -> np.ndarray:
+        """Right-hand side ``ad(A v_J) Ad_{H_J^-1} PA v_A`` (nm,) of the acceleration-level
+        constraints ``Ad PA vd_A - PB vd_B + A vd_J = ad(A v_J) Ad PA v_A``: the time
+        derivative of the velocity constraints (Eq. (58) applied to v), with
+        ``d/dt Ad_{H_J^-1} = -ad(A v_J) Ad_{H_J^-1}`` and constant offsets PA, PB."""
         out = np.zeros(s.nm)
         for g in s.groups:
             if not g.k:
@@ -293,6 +330,8 @@ class GeneralizedAlpha:
             vJ = np.einsum("jik,jk->ji", g.A, st.v[g.jdof])
             vA = np.where(g.dof_a[:, :1] < 0, 0.0, st.v[np.maximum(g.dof_a, 0)])
             Ad = lie.adjoint_inv(st.HJ[g.ids])
+            if g.offset:
+                Ad = Ad @ g.PA  # velocity of the attachment frame X_A: PA v_A
             out[g.mult] = np.einsum("jil,jl->ji", lie.ad6(vJ) @ Ad, vA)
         return out
 
@@ -340,6 +379,10 @@ class GeneralizedAlpha:
         Rows: dynamics / beta' (Eq. (39)), constraints (Eq. (40)) and, for index 2, velocity
         constraints / gamma'; all O(1) whatever h.
         """
+        if self.compiled(s):
+            out = self._fast_step(s, st, h)
+            if out is not None:
+                return out
         solver = self._solver_for(s, st, solver)
         am, af, g, b = self.params
         t1 = st.t + h
@@ -442,15 +485,50 @@ class GeneralizedAlpha:
         new.dissipated += 0.5 * h * (st.power[2] + p[2])
         return new, StepInfo(it, er, ep, e, n, err)
 
+    def _fast_step(self, s: System, st: State, h: float):
+        """The step in the compiled kernels; None when they could not finish it (the numpy
+        implementation then repeats it, and reports or recovers)."""
+        from se3dyn import fast
+
+        t1 = st.t + h
+        try:
+            inputs = step_inputs(s, t1)
+        except SimulationError as exc:
+            raise SimulationError(f"step h={h:.6g} to {exc}") from None
+        stp = fast.stepper(s, self.index2, st.dropped)
+        status, a_n, H, HJ, alpha, v, vd, a, lam, n = stp.step(
+            st, h, self.params, inputs, self.tol_residual,
+            self.tol_constraint * s.length_scale, self.max_iter, self.newton == "modified")
+        if status != 0:
+            return None
+        stp.log_coordinates(HJ, alpha)
+        e = stp.energies(H, alpha, v, inputs)
+        new = State(t=t1, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
+                    work_act=st.work_act + 0.5 * h * (st.power[0] + e[3]),
+                    work_ext=st.work_ext + 0.5 * h * (st.power[1] + e[4]),
+                    dissipated=st.dissipated + 0.5 * h * (st.power[2] + e[5]),
+                    power=e[3:6].copy(), dropped=st.dropped, h_last=h)
+        b = self.params[3]
+        err = (b - 1.0 / 6.0) * h * h * (a - a_n)
+        it, er, ep = stp.info[:3]
+        en = dict(kinetic=float(e[0]), potential=float(e[1]), spring=float(e[2]),
+                  power=new.power)
+        return new, StepInfo(int(it), float(er), float(ep), en, n, err)
+
     @staticmethod
     def _BnT(s: System, Adn: list, xi: np.ndarray) -> np.ndarray:
-        """``B_n^T xi`` (nq,): the increment correction of the index-2 formulation (Eq. (58))."""
+        """``B_n^T xi`` (nq,): the increment correction of the index-2 formulation (Eq. (58)):
+        ``(Ad_n PA)^T xi`` on node A, ``-PB^T xi`` on node B, ``A^T xi`` on the joint
+        coordinates (``Ad_n = Ad_{H_J,n^-1}``, ``PA = Ad(X_A^-1)``, ``PB = Ad(X_B^-1)``)."""
         out = np.zeros(s.nq + 1)
         for gr, Ad in zip(s.groups, Adn, strict=True):
             x = xi[gr.mult]
+            if gr.offset:
+                Ad = Ad @ gr.PA
             out += np.bincount(np.where(gr.dof_a < 0, s.nq, gr.dof_a).ravel(),
                                np.einsum("jki,jk->ji", Ad, x).ravel(), s.nq + 1)
-            out -= np.bincount(np.where(gr.dof_b < 0, s.nq, gr.dof_b).ravel(), x.ravel(),
+            xb = np.einsum("jki,jk->ji", gr.PB, x) if gr.offset else x
+            out -= np.bincount(np.where(gr.dof_b < 0, s.nq, gr.dof_b).ravel(), xb.ravel(),
                                s.nq + 1)
             if gr.k:
                 out[gr.jdof.ravel()] += np.einsum("jik,ji->jk", gr.A, x).ravel()

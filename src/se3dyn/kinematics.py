@@ -4,7 +4,8 @@ Both work directly on the unknowns of the dynamic formulation (Sec. 3.3, Eq. (14
 increments ``n`` of the free nodes (6 each) and of the joint relative coordinates (k each), with
 the configuration updated on the group, ``H <- H exp(n)`` (Eq. (38)), and the frames re-based after
 every correction so that the tangent operator is ``T(0) = I`` (Eqs. (25)-(27)). The constraints
-are the vectorial map of Eq. (55), ``Phi_I = vect(H_B^-1 H_A H_J)``, and the constraint Jacobian
+are the vectorial map of Eq. (55), ``Phi_I = vect(H_B^-1 H_A H_J)`` (``vect((H_B X_B)^-1 H_A X_A
+H_J)`` for joints with attachment offsets), and the constraint Jacobian
 ``B`` is its exact linearisation (Eq. (58) when ``Phi = 0``), obtained from
 :func:`se3dyn.system.matrix_values` with coefficients ``(0, 0, 0)``.
 
@@ -247,7 +248,8 @@ class _Accessors:
 
     def joint_multipliers(self, name: str) -> np.ndarray:
         """Multipliers of a joint: the reaction wrench (force, moment) on node B in its material
-        frame with the sign of Eq. (36), shape (n, 6) / (6,) (6 per part for a composite)."""
+        frame (in its attachment frame ``H_B X_B`` for a joint with ``at``) with the sign of
+        Eq. (36), shape (n, 6) / (6,) (6 per part for a composite)."""
         s = self.system
         lam = self._lam
         return self._out(np.concatenate([lam[:, s.joint_multadr[j]:s.joint_multadr[j] + 6]
@@ -280,15 +282,23 @@ def _model_at(s: System, H: np.ndarray, alpha: np.ndarray, v: np.ndarray) -> Mod
     unchanged), inertial velocities ``(R v_U, R v_Omega)``. Joint coordinates restart at 0: spring
     references and PD targets are shifted by the coordinates alpha reached (exact for abelian
     joints, Eq. (60); for non-abelian joints with springs the shift is exact only to first order).
+
+    A joint with an attachment point gets the point where the attachment frame of node B,
+    ``H_B X_B``, is in H: its orientation there is ``Q_B = R_B R_B0^T``, so with the new
+    ``X_B' = H_B^-1 H(I, at')`` we have ``H_B X_B = H_B X_B' H(Q_B, 0)`` and the joint basis
+    rotated by ``Q_B`` (like the axes of joints between node frames) describes the same
+    constraint; ``X_A' = H_A^-1 H(I, at')`` then follows from ``H_B X_B = H_A X_A H_J``.
     """
     model = s.model
     nodes = []
     Q = {}
+    Rn = {}
     for i, n in enumerate(model.nodes):
         R = H[i, :3, :3]
         # orthonormalise exactly (the product of many exponentials drifts at round-off level)
         U, _, Vt = np.linalg.svd(R)
         R = U @ Vt
+        Rn[n.name] = R
         Qi = R @ n.orientation.T  # rotation from the old to the new initial frame
         Q[n.name] = Qi
         vel = np.zeros(6)
@@ -311,6 +321,9 @@ def _model_at(s: System, H: np.ndarray, alpha: np.ndarray, v: np.ndarray) -> Mod
         if params.get("A") is not None:
             params["A"] = A.copy()
         upd = dict(A=A, params=params)
+        if j.at is not None:
+            ib = s.joint_b[jj]
+            upd["at"] = H[ib, :3, 3] + Rn[j.node_b] @ s.joint_XB[jj, :3, 3]
         if j.k:
             d = s.joint_dofadr[jj]
             a = alpha[d:d + j.k]

@@ -1,14 +1,22 @@
 """Model description: frozen, named specs built by :class:`ModelBuilder` and validated on build.
 
 A model is what the user describes, with names, not numbers: nodes (frames with optional mass and
-inertia, Sec. 2 and 6), kinematic joints between two nodes (``H_B = H_A H_J``, Eq. (7)) with their
-force elements (springs Eq. (62), dampers Eq. (64), actuators Eq. (66), PD control laws), nodal
-loads (Eq. (66)) and gravity. :func:`se3dyn.system.compile_model` turns it into arrays.
+inertia, Sec. 2 and 6), kinematic joints between two nodes (``H_B = H_A H_J``, Eq. (7), or, with
+an attachment point ``at``, ``H_B X_B = H_A X_A H_J``) with their force elements (springs
+Eq. (62), dampers Eq. (64), actuators Eq. (66), PD control laws), nodal loads (Eq. (66)) and
+gravity. :func:`se3dyn.system.compile_model` turns it into arrays.
 
 Initial configuration (Sec. 5.2): node frames are ``H(R0, x0)`` with ``R0`` the identity unless
 an ``orientation`` is given; joint transformations start at ``H_J0 = H_A0^-1 H_B0`` so that the
 constraints hold exactly; joint axes are given in the inertial frame of the initial configuration
 and expressed in the material frame of node B by the compiler.
+
+Joint offsets. A joint given an attachment point ``at = p`` (inertial frame, initial
+configuration) connects constant attachment frames of its nodes instead of the node frames: with
+``P = H(I, p)``, ``X_A = H_A0^-1 P`` and ``X_B = H_B0^-1 P`` (4 x 4, constant), the joint imposes
+``H_B X_B = H_A X_A H_J`` (Eq. (7) between the attachment frames), ``H_J0 = I``, and its axes
+(inertial frame, initial configuration) are already expressed in the attachment frame of B. A rigid
+body with several joints then needs a single node; without ``at`` a joint is exactly the paper's.
 """
 
 from __future__ import annotations
@@ -83,7 +91,8 @@ class NodeSpec:
 
 @dataclass(frozen=True)
 class JointSpec:
-    """A kinematic joint ``H_B = H_A H_J`` with ``H_J`` in the subgroup spanned by A (Eqs. 7-9).
+    """A kinematic joint ``H_B = H_A H_J`` with ``H_J`` in the subgroup spanned by A (Eqs. 7-9),
+    or ``H_B X_B = H_A X_A H_J`` between attachment frames when ``at`` is given.
 
     Attributes
     ----------
@@ -100,6 +109,10 @@ class JointSpec:
         PD law, normalised: kp, kd arrays (k,), target and target_rate TimeFunctions.
     composite : str or None
         Name of the composite joint (e.g. a universal joint) this joint belongs to.
+    at : ndarray, shape (3,), or None
+        Attachment point in the inertial frame of the initial configuration: the joint connects
+        the frames ``X_A = H_A0^-1 H(I, at)`` and ``X_B = H_B0^-1 H(I, at)`` rigidly attached to
+        nodes A and B (see the module docstring). None: the node frames themselves (Eq. (7)).
     """
 
     name: str
@@ -114,6 +127,7 @@ class JointSpec:
     actuator: TimeFunction | None
     control: PD | None
     composite: str | None = None
+    at: np.ndarray | None = None
 
     @property
     def k(self) -> int:
@@ -344,8 +358,9 @@ class ModelBuilder:
               axes: Any = None, normal: Any = None, pitch: Any = None, A: Any = None,
               stiffness: Any = None, reference: Any = None, damping: Any = None,
               actuator: Any = None, torque: Any = None, force: Any = None,
-              control: PD | None = None) -> None:
-        """Add a kinematic joint ``H_B = H_A H_J`` (Eq. (7)) between nodes A and B.
+              control: PD | None = None, at: Any = None) -> None:
+        """Add a kinematic joint ``H_B = H_A H_J`` (Eq. (7)) between nodes A and B, or between
+        frames attached to them at the point ``at``.
 
         Parameters
         ----------
@@ -376,6 +391,16 @@ class ModelBuilder:
             ``force`` are aliases, for readability.
         control : PD, optional
             PD control law on the relative coordinates (abelian joints only).
+        at : array_like, shape (3,), optional
+            Where the joint sits: a point in the inertial frame of the initial configuration.
+            The joint then connects two frames rigidly attached to nodes A and B, both at ``at``
+            with the inertial orientation at t0: ``X_A = H_A0^-1 P``, ``X_B = H_B0^-1 P`` with
+            ``P = H(I, at)`` (constant 4 x 4 offsets), and imposes ``H_B X_B = H_A X_A H_J``
+            (Eq. (7) between the attachment frames; constraints ``vect((H_B X_B)^-1 H_A X_A
+            H_J)``, Eq. (55)), ``H_J0 = I``. The nodes may be anywhere (e.g. at the mass
+            centres), so a rigid body with several joints needs one node. Without ``at`` the
+            joint acts between the node frames, as in the paper (``X_A = X_B = I``). A
+            universal joint puts both hinges and its cross at ``at``.
         """
         jt_keys = sorted(list(JOINT_TYPES) + ["universal"])
         item = f"joint {name!r} ({type})"
@@ -399,9 +424,10 @@ class ModelBuilder:
         if len(acts) > 1:
             raise ModelError(item, acts[1][0], "only one of actuator/torque/force", acts[1][1])
         act_field, act = acts[0] if acts else ("actuator", None)
+        p = _vec(at, 3, item, "at", allow_none=True)
         if type == "universal":
             self._universal(name, node_a, node_b, axes, stiffness, reference, damping,
-                            act_field, act, control)
+                            act_field, act, control, p)
             return
         given = {"axis": axis, "axes": axes, "normal": normal, "pitch": pitch, "A": A}
         jt = JOINT_TYPES[type]
@@ -415,10 +441,10 @@ class ModelBuilder:
                 raise ModelError(item, key, f"a value (required for a {type} joint)", None)
         A_ = jt.make_A(item, **params)
         self._add_joint(name, type, node_a, node_b, params, A_, stiffness, reference, damping,
-                        act_field, act, control)
+                        act_field, act, control, at=p)
 
     def _add_joint(self, name, type, node_a, node_b, params, A_, stiffness, reference, damping,
-                   act_field, act, control, composite=None):
+                   act_field, act, control, composite=None, at=None):
         item = f"joint {name!r} ({type})"
         if name in self._joints:
             raise ModelError(f"joint {composite!r}" if composite else item, "name",
@@ -453,10 +479,10 @@ class ModelBuilder:
                     else as_timefunc(control.target_rate, item, "control.target_rate", k))
             pd = PD(kp, kd, tgt, rate)
         self._joints[name] = JointSpec(name, type, node_a, node_b, params, A_, K, a0, C, tau, pd,
-                                       composite)
+                                       composite, None if at is None else at.copy())
 
     def _universal(self, name, node_a, node_b, axes, stiffness, reference, damping, act_field,
-                   act, control):
+                   act, control, at=None):
         item = f"joint {name!r} (universal)"
         try:
             ax = np.asarray(axes, dtype=float)
@@ -471,7 +497,9 @@ class ModelBuilder:
         cross = f"{name}:cross"
         if cross in self._nodes:
             raise ModelError(item, "name", "a name whose ':cross' node is free", cross)
-        self._nodes[cross] = NodeSpec(cross, self._nodes[node_b].position.copy(), np.eye(3), 0.0,
+        # the cross sits at the centre of the universal joint: node B, or the attachment point
+        centre = self._nodes[node_b].position if at is None else at
+        self._nodes[cross] = NodeSpec(cross, centre.copy(), np.eye(3), 0.0,
                                       np.zeros((3, 3)), False, np.zeros(6))
 
         def part(v, i, fld):
@@ -496,7 +524,7 @@ class ModelBuilder:
             self._add_joint(sname, "hinge", na, nb, {"axis": a}, A_, part(stiffness, i,
                             "stiffness"), part(reference, i, "reference"),
                             part(damping, i, "damping"), act_field, sub_act, sub_pd,
-                            composite=name)
+                            composite=name, at=at)
             sub.append(sname)
         self._composites[name] = tuple(sub)
 

@@ -637,6 +637,11 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("torque", TimeFunc(), None, "Alias of `actuator`."),
         Field("force", TimeFunc(), None, "Alias of `actuator`."),
         Field("control", Section("control"), None, "PD control law (abelian joints only)."),
+        Field("at", _V3, None, "Attachment point in the inertial frame of the initial "
+              "configuration (m): the joint connects frames fixed to `a` and `b` at this point "
+              "(inertial orientation at t0), H_B X_B = H_A X_A H_J with X = H0^-1 H(I, at), "
+              "instead of the node frames, so a body needs one node whatever its joints; "
+              "absent: between the node frames (Eq. 7)."),
     ),
     "control": (
         Field("kp", _KVEC_NN, None, "Proportional gain(s) (required).", True),
@@ -708,7 +713,8 @@ _SECTION_DOC = {
     "node": "An entry of `nodes:` (key: the node name). A frame in SE(3) with optional rigid-"
             "body inertia.",
     "joint": "An entry of `joints:` (key: the joint name). A kinematic joint H_B = H_A H_J "
-             "between nodes `a` and `b`, with its force elements. Vector force elements have "
+             "between nodes `a` and `b` (or between frames attached to them at the point "
+             "`at`), with its force elements. Vector force elements have "
              "k components (k = number of relative coordinates of the type); a number applies "
              "to all of them.",
     "control": "The `control:` mapping of a joint: tau = -kp (alpha - target(t)) - kd "
@@ -1015,6 +1021,8 @@ def _act_key(type_: str) -> str:
 def _joint_out(j, model: Model) -> dict:
     item = f"joint {j.name!r}"
     d: dict[str, Any] = {"type": j.type, "a": j.node_a, "b": j.node_b}
+    if j.at is not None:
+        d["at"] = _py(j.at)
     for key, val in j.params.items():
         if val is not None:
             d[key] = _py(val) if key != "pitch" else float(val)
@@ -1037,8 +1045,10 @@ def _joint_out(j, model: Model) -> dict:
 def _universal_out(name: str, parts: tuple[str, ...], model: Model) -> dict:
     item = f"joint {name!r}"
     j1, j2 = (model.joint(p) for p in parts)
-    d: dict[str, Any] = {"type": "universal", "a": j1.node_a, "b": j2.node_b,
-                         "axes": [_py(j1.params["axis"]), _py(j2.params["axis"])]}
+    d: dict[str, Any] = {"type": "universal", "a": j1.node_a, "b": j2.node_b}
+    if j1.at is not None:
+        d["at"] = _py(j1.at)
+    d["axes"] = [_py(j1.params["axis"]), _py(j2.params["axis"])]
     for key in ("stiffness", "reference", "damping"):
         a1, a2 = getattr(j1, key), getattr(j2, key)
         if a1[0] != 0 or a2[0] != 0:

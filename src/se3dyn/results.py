@@ -144,7 +144,10 @@ class Results:
         """Lagrange multipliers of a joint, shape (n, 6) (n, 6 * parts for a composite).
 
         They are the constraint forces and moments on node B in its material frame, with
-        the sign of Eq. (36) (``Phi_q^T lambda`` on the left-hand side).
+        the sign of Eq. (36) (``Phi_q^T lambda`` on the left-hand side); for a joint with an
+        attachment point (``at``), in the attachment frame ``H_B X_B`` of node B (origin at the
+        joint, axes those of the inertial frame at t0 carried along with node B); the wrench on
+        node B in its own material frame is then ``PB^T lambda`` (``PB = Ad(X_B^-1)``).
         """
         s = self.system
         return np.concatenate([self.lam[:, s.joint_multadr[j]:s.joint_multadr[j] + 6]

@@ -76,7 +76,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
              max_iter: int = 25, output_every: int = 1, formulation: str = "index2",
              redundant: str = "drop", tol: float | None = None, h_min: float | None = None,
              h_max: float | None = None, output_step: float | None = None,
-             progress: Callable[[float, int], None] | None = None,
+             engine: str = "auto", newton: str = "modified", progress: Callable[[float, int], None] | None = None,
              on_output: Callable[[State, dict], None] | None = None) -> Results:
     """Simulate a model from ``t_start`` to ``t_end`` (Eqs. (38)-(46)), with a fixed step or,
     when ``tol`` is given, with adaptive steps.
@@ -119,6 +119,13 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         Store the results on the grid ``t_start + k output_step`` (and ``t_end``) by dense
         output (:func:`~se3dyn.integrator.interpolate`), whatever the internal steps; without
         it every (``output_every``-th) step is stored.
+    engine : {"auto", "compiled", "numpy"}
+        Compiled kernels (:mod:`se3dyn.fast`) or the numpy implementation, see
+        :class:`~se3dyn.integrator.GeneralizedAlpha`. With a fixed step and no ``progress``,
+        ``on_output`` or ``output_step``, the whole time loop runs compiled.
+    newton : {"modified", "full"}
+        Reuse of the factorised iteration matrix by the compiled engine, see
+        :class:`~se3dyn.integrator.GeneralizedAlpha`.
     progress : callable(t, step_index), optional
         Called after every step.
     on_output : callable(state, scalars), optional
@@ -170,7 +177,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         rho_inf = float(rho_inf)
     integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,
                              tol_constraint=tol_constraint, max_iter=max_iter,
-                             formulation=formulation, redundant=redundant)
+                             formulation=formulation, redundant=redundant, engine=engine,
+                             newton=newton)
     adaptive = opt["tol"] is not None
     grid = None
     if opt["output_step"] is not None:
@@ -208,6 +216,49 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         exc.result = rec.results(stats)
         raise exc
 
+    if integ.compiled(s):
+        stats["linear_solver"] = "supernodal block LU (se3dyn.blocklu)"
+    if (not adaptive and grid is None and progress is None and on_output is None
+            and integ.compiled(s)):
+        # the whole time loop in the compiled kernels; a step they cannot finish is done by
+        # GeneralizedAlpha.step (numpy), which recovers or reports, then the loop resumes
+        from se3dyn import fast
+
+        times = np.array([t_start + (k + 1) * step if k + 1 < nsteps else t_end
+                          for k in range(nsteps)])
+        tables = fast.input_tables(s, times)
+        stp = fast.stepper(s, integ.index2, st.dropped)
+        st = st.copy()
+        stats["engine"] = "compiled"
+        while i < nsteps:
+            status, i, its = fast.run_fixed(stp, st, times, i, tables[-1], tables, integ.params,
+                                            tol_residual, tol_constraint * s.length_scale,
+                                            max_iter, output_every, rec,
+                                            newton == "modified")
+            stats["newton_iterations"] += its
+            if status == 0 and i >= nsteps:
+                break
+            t1 = times[i]
+            try:
+                new, info = integ.step(s, st, t1 - st.t, solver)
+            except SimulationError as exc:
+                fail(exc)
+            new.t = t1
+            stats["newton_iterations"] += info.iterations
+            i += 1
+            if i % output_every == 0 or i == nsteps:
+                e = info.energies
+                rec.add(new, e["kinetic"], e["potential"], e["spring"], info.iterations,
+                        info.residual, info.constraint)
+            st = new
+            stats["fallback_steps"] = stats.get("fallback_steps", 0) + 1
+        stats["factorizations"] = stp.factorizations
+        if nsteps:
+            hs = np.diff(np.concatenate([[t_start], times]))
+            stats["h_min_used"] = float(hs.min())
+            stats["h_max_used"] = float(hs.max())
+    else:
+        stats["engine"] = "compiled" if integ.compiled(s) else "numpy"
     while st.t < t_end and (adaptive or i < nsteps):
         if adaptive:
             h = min(h, t_end - st.t)

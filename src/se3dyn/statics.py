@@ -64,7 +64,8 @@ class StaticResult(_Accessors):
     alpha : ndarray (nq,)        joint coordinates (Eq. (60), from the model's initial
                                  configuration; 0 on node unknowns)
     lam : ndarray (nm,)          multipliers: the reaction wrench of every joint on its node B,
-                                 material frame, sign of Eq. (36)
+                                 material frame (attachment frame ``H_B X_B`` for a joint
+                                 with ``at``), sign of Eq. (36)
     load_factors : ndarray (s,)  load factor reached after every accepted load step (last: 1)
     iterations : ndarray (s,)    Newton iterations of every accepted load step
     cuts : int                   number of step halvings

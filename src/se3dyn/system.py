@@ -55,7 +55,24 @@ class JointGroup:
     jdof : ndarray (nj, k)     unknown indices of the relative increments
     mult : ndarray (nj, 6)     multiplier indices (into the multiplier vector)
     abelian : ndarray (nj,) bool
-    H0 : ndarray (nj, 4, 4)    initial joint transformations H_J0 = H_A0^-1 H_B0 (Sec. 5.2)
+    H0 : ndarray (nj, 4, 4)    initial joint transformations H_J0 = H_A0^-1 H_B0 (Sec. 5.2);
+                               the identity for joints with an attachment point
+    has_nonabelian_spring : bool
+    XA, XB : ndarray (nj, 4, 4)
+        Constant attachment frames of the joint on nodes A and B (the identity for joints
+        without ``at``): the joint imposes ``H_B X_B = H_A X_A H_J``, constraints
+        ``Phi = vect(G)``, ``G = (H_B X_B)^-1 (H_A X_A) H_J`` (Eq. (55) between the attachment
+        frames).
+    PA, PB : ndarray (nj, 6, 6)
+        ``Ad(X_A^-1)`` and ``Ad(X_B^-1)`` (Eq. (57)): they map node velocities and variations
+        (material frame of the node) to those of the attachment frames, ``v_XA = PA v_A``.
+    offset : bool
+        Some joint of the group has an attachment point (XA, XB not all the identity); when
+        False the products with the identity are skipped, so the computation is that of
+        Eqs. (55)-(59) exactly.
+
+    The constraint gradient at ``Phi = 0`` (Eq. (58) between the attachment frames) is
+    ``[Ad_{H_J^-1} PA, -PB, A]`` (node A, node B, joint coordinates).
     """
 
     k: int
@@ -71,6 +88,11 @@ class JointGroup:
     abelian: np.ndarray
     H0: np.ndarray
     has_nonabelian_spring: bool
+    XA: np.ndarray
+    XB: np.ndarray
+    PA: np.ndarray
+    PB: np.ndarray
+    offset: bool = False
 
 
 class LayoutCounts:
@@ -114,6 +136,8 @@ class System(LayoutCounts):
     joint_a: np.ndarray  # (m,)
     joint_b: np.ndarray  # (m,)
     joint_H0: np.ndarray  # (m, 4, 4)
+    joint_XA: np.ndarray  # (m, 4, 4) attachment frame on node A (identity without ``at``)
+    joint_XB: np.ndarray  # (m, 4, 4) attachment frame on node B
     joint_abelian: np.ndarray  # (m,) bool
     groups: tuple[JointGroup, ...]
     # force elements on joint unknowns, (nq,) arrays, zero on node unknowns
@@ -201,9 +225,23 @@ def compile_model(model: Model) -> System:
     ja = np.array([nidx[j.node_a] for j in joints], dtype=np.int64)
     jb = np.array([nidx[j.node_b] for j in joints], dtype=np.int64)
     joint_H0 = lie.compose(lie.inverse(H0[ja]), H0[jb]) if m else np.zeros((0, 4, 4))
-    # A in the material frame of node B: e -> (R_B0^T e_U, R_B0^T e_Omega)
+    # attachment frames: X_A = H_A0^-1 P, X_B = H_B0^-1 P with P = H(I, at); H_J0 = I
+    joint_XA = np.broadcast_to(np.eye(4), (m, 4, 4)).copy()
+    joint_XB = joint_XA.copy()
+    has_at = np.array([j.at is not None for j in joints], dtype=bool)
+    if has_at.any():
+        sel = np.flatnonzero(has_at)
+        P = lie.make_frame(None, np.array([joints[i].at for i in sel]))
+        joint_XA[sel] = lie.inverse(H0[ja[sel]]) @ P
+        joint_XB[sel] = lie.inverse(H0[jb[sel]]) @ P
+        joint_H0[sel] = np.eye(4)
+    # A in the material frame of node B: e -> (R_B0^T e_U, R_B0^T e_Omega); with ``at`` the
+    # attachment frame of B has the inertial orientation at t0, so A is already material
     A_mat = []
     for jj, j in enumerate(joints):
+        if has_at[jj]:
+            A_mat.append(np.array(j.A, dtype=float))
+            continue
         Rb = R0[jb[jj]]
         A_mat.append(np.concatenate([Rb.T @ j.A[:3], Rb.T @ j.A[3:]], axis=0))
     abelian = np.array([j.abelian for j in joints], dtype=bool)
@@ -246,7 +284,9 @@ def compile_model(model: Model) -> System:
             k=k, ids=ids, A=A, Apinv=np.linalg.pinv(A) if k else np.zeros((len(ids), 0, 6)),
             a=ja[ids], b=jb[ids], dof_a=dof_a, dof_b=dof_b, jdof=jdof.reshape(len(ids), k),
             mult=joint_multadr[ids][:, None] + np.arange(6), abelian=abelian[ids],
-            H0=joint_H0[ids], has_nonabelian_spring=nonab_spring))
+            H0=joint_H0[ids], has_nonabelian_spring=nonab_spring,
+            XA=joint_XA[ids], XB=joint_XB[ids], PA=lie.adjoint_inv(joint_XA[ids]),
+            PB=lie.adjoint_inv(joint_XB[ids]), offset=bool(np.any(has_at[ids]))))
 
     loads = tuple((nidx[ld.node], ld.force, ld.torque, f"load '{ld.name}'") for ld in model.loads)
     pos = H0[:, :3, 3]
@@ -258,6 +298,7 @@ def compile_model(model: Model) -> System:
         node_v0=node_v0, joint_names=tuple(j.name for j in joints),
         joint_type=tuple(j.type for j in joints), joint_k=joint_k, joint_dofadr=joint_dofadr,
         joint_multadr=joint_multadr, joint_a=ja, joint_b=jb, joint_H0=joint_H0,
+        joint_XA=joint_XA, joint_XB=joint_XB,
         joint_abelian=abelian, groups=tuple(groups), dof_stiffness=dof_K, dof_reference=dof_ref,
         dof_damping=dof_C, dof_kp=dof_kp, dof_kd=dof_kd, dof_is_joint=dof_is_joint,
         gravity=model.gravity.copy(), actuators=tuple(actuators), controls=tuple(controls),
@@ -413,7 +454,16 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
         (False inside Newton iterations; see :func:`fill_log_coordinates`).
     velocity : bool
         Also evaluate the velocity constraints ``psi = Phi_q v`` (nm,) (Eq. (58) applied to v:
-        ``Ad_{H_J^-1} v_A - v_B + A v_J`` per joint) for the stabilized index-2 formulation.
+        ``Ad_{H_J^-1} PA v_A - PB v_B + A v_J`` per joint, ``PA = Ad(X_A^-1)``,
+        ``PB = Ad(X_B^-1)``, the identity for joints without offsets) for the stabilized index-2
+        formulation.
+
+    Notes
+    -----
+    Joints (Eqs. (55)-(58)) act between the attachment frames ``H_A X_A`` and ``H_B X_B``
+    (``X = I`` without ``at``): ``G = (H_B X_B)^-1 (H_A X_A) H_J``, ``Phi = vect(G)``; the
+    forces ``Phi_q^T lambda`` are ``PA^T Ad_{H_J^-1}^T lambda`` on node A, ``-PB^T lambda`` on
+    node B and ``A^T lambda`` on the joint coordinates (Eq. (58), at ``Phi = 0``).
 
     Returns
     -------
@@ -467,13 +517,22 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
             TJ = np.zeros((nj, 6, 0))
         HJ[g.ids] = HJg
         Ad = lie.adjoint_inv(HJg)  # Eq. (57)
-        G = lie.inverse(H[g.b]) @ H[g.a] @ HJg
-        phi[g.mult] = lie.vect_se3(G)  # Eq. (55)
         lg = lam[g.mult]  # (nj, 6)
-        AdT = np.swapaxes(Ad, 1, 2)
+        if g.offset:
+            # attachment frames H_A X_A, H_B X_B: G = (H_B X_B)^-1 H_A X_A H_J; a variation
+            # H_A exp(d_a) gives G exp(Ad PA d_a), H_B exp(d_b) gives G exp(-Ad(G^-1) PB d_b)
+            G = lie.inverse(H[g.b] @ g.XB) @ (H[g.a] @ g.XA) @ HJg
+            AdP = Ad @ g.PA
+            rb = np.einsum("jki,jk->ji", g.PB, lg)  # PB^T lambda
+        else:
+            G = lie.inverse(H[g.b]) @ H[g.a] @ HJg
+            AdP = Ad
+            rb = lg
+        phi[g.mult] = lie.vect_se3(G)  # Eq. (55)
+        AdT = np.swapaxes(AdP, 1, 2)  # (Ad PA)^T: node-A block of Phi_q^T
         ra = np.einsum("jik,jk->ji", AdT, lg)  # Phi_q^T lambda, Eq. (58)
         r += np.bincount(np.where(g.dof_a < 0, nq, g.dof_a).ravel(), ra.ravel(), nq + 1)
-        r -= np.bincount(np.where(g.dof_b < 0, nq, g.dof_b).ravel(), lg.ravel(), nq + 1)
+        r -= np.bincount(np.where(g.dof_b < 0, nq, g.dof_b).ravel(), rb.ravel(), nq + 1)
         TA = TAinvT = None
         K = C = kp = kd = None
         if k:
@@ -504,9 +563,13 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
         if velocity:
             vA = np.where(g.dof_a < 0, 0.0, v[np.maximum(g.dof_a, 0)])
             vB = np.where(g.dof_b < 0, 0.0, v[np.maximum(g.dof_b, 0)])
-            w = np.einsum("jik,jk->ji", Ad, vA)
+            w = np.einsum("jik,jk->ji", AdP, vA)
+            if g.offset:
+                vB = np.einsum("jik,jk->ji", g.PB, vB)
             psi[g.mult] = w - vB + (np.einsum("jik,jk->ji", g.A, v[g.jdof]) if k else 0.0)
-        cache["groups"].append((G, Ad, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, w))
+        # per group: G, Ad PA (node-A constraint block), its transpose, T_J A, lambda, force
+        # elements, spring tangents, w = Ad PA v_A
+        cache["groups"].append((G, AdP, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, w))
     f_scale = max(f_scale, lam_max, gint_max,
                   float(np.abs(inputs["tau"]).max(initial=0.0)))
     ev = Evaluation(H=H, HJ=HJ, r=r[:nq], phi=phi, alpha=alpha, f_scale=f_scale, psi=psi)
@@ -547,10 +610,20 @@ def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float],
     stab : dict or None
         For the stabilized index-2 matrix (pattern ``pattern(s, index2=True)``): ``cv`` =
         1/gamma' (float) and ``Adn`` = list over ``s.groups`` of ``Ad_{H_J,n^-1}`` (nj, 6, 6)
-        at the start of the step (the correction direction ``B_n^T``). The extra blocks are
-        ``-(cM M + cC C) B_n^T`` (dynamic rows, xi columns), ``B + cv d(B v)/dn`` (velocity
-        constraint rows, increment columns) and ``-B B_n^T`` (velocity constraint rows, xi
-        columns); see :mod:`se3dyn.integrator`.
+        at the start of the step (the correction direction ``B_n^T``, whose blocks are
+        ``(Ad_n PA)^T`` on node A, ``-PB^T`` on node B and ``A^T`` on the joint coordinates).
+        The extra blocks are ``-(cM M + cC C) B_n^T`` (dynamic rows, xi columns),
+        ``B + cv d(B v)/dn`` with ``B = [Ad PA, -PB, A]`` and ``d(B v)/dn_J = ad(w) T_J A``,
+        ``w = Ad PA v_A`` (velocity constraint rows, increment columns) and ``-B B_n^T``
+        (velocity constraint rows, xi columns); see :mod:`se3dyn.integrator`.
+
+    Notes
+    -----
+    Joint blocks (``Ad = Ad_{H_J^-1}``, Eq. (57); ``PA``, ``PB`` of :class:`JointGroup`):
+    constraint rows ``D [Ad PA T_A, -Ad_{G^-1} PB T_B, T_J A]`` with ``D`` the derivative of
+    ``vect`` at G (the exact linearisation of Eq. (55); Eq. (59) at ``G = I``); multiplier
+    columns ``PA^T Ad^T`` (node A), ``-PB^T`` (node B), ``A^T`` (joint); geometric stiffness
+    ``-cK PA^T Ad^T Lambda(lambda) T_J A`` (joint columns of the node-A rows).
 
     Returns
     -------
@@ -577,7 +650,7 @@ def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float],
         KT[:, :3, 3:] = -lie.hat3(RtF)
         blk += cK * (KT @ Tn[s.node_free])
     vals = [blk.ravel()]
-    for g, (G, Ad, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, _w) in zip(
+    for g, (G, AdP, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, _w) in zip(
             s.groups, ev.cache["groups"], strict=True):
         k, nj = g.k, len(g.ids)
         RG = G[:, :3, :3]
@@ -585,14 +658,20 @@ def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float],
         Dv[:, :3, :3] = RG
         Dv[:, 3:, 3:] = 0.5 * (np.trace(RG, axis1=1, axis2=2)[:, None, None] * np.eye(3)
                                - np.swapaxes(RG, 1, 2))
-        # exact linearisation of vect(H_B^-1 H_A H_J); equals Eq. (59) when Phi = 0
-        CA = Dv @ Ad @ Tn[g.a]
-        CB = -Dv @ lie.adjoint_inv(G) @ Tn[g.b]
+        # exact linearisation of vect(G), G = (H_B X_B)^-1 H_A X_A H_J; equals Eq. (59) (with
+        # the offsets PA, PB) when Phi = 0. AdP = Ad_{H_J^-1} PA
+        CA = Dv @ AdP @ Tn[g.a]
+        if g.offset:
+            CB = -Dv @ lie.adjoint_inv(G) @ g.PB @ Tn[g.b]
+            FB = -np.swapaxes(g.PB, 1, 2)
+        else:
+            CB = -Dv @ lie.adjoint_inv(G) @ Tn[g.b]
+            FB = np.broadcast_to(-np.eye(6), (nj, 6, 6))
         CJ = Dv @ TJ
-        vals += [CA.ravel(), CB.ravel(), CJ.ravel(), AdT.ravel(),
-                 np.broadcast_to(-np.eye(6), (nj, 6, 6)).ravel(),
+        vals += [CA.ravel(), CB.ravel(), CJ.ravel(), AdT.ravel(), FB.ravel(),
                  np.swapaxes(g.A, 1, 2).ravel()]
-        # geometric stiffness of Phi_q^T lambda w.r.t. the joint increment
+        # geometric stiffness of Phi_q^T lambda w.r.t. the joint increment:
+        # d/dn_J (PA^T Ad^T lambda) = -PA^T Ad^T Lambda(lambda) T_J A
         vals.append((-cK * (AdT @ _lam_matrix(lg) @ TJ)).ravel())
         if k:
             KJ = np.zeros((nj, k, k))
@@ -620,27 +699,35 @@ def _stab_values(s: System, ev: Evaluation, blk_m: np.ndarray, coef, stab: dict)
     vals = []
     Ad_all = np.zeros((s.m, 6, 6))
     Adn_all = np.zeros((s.m, 6, 6))
+    PB_all = np.zeros((s.m, 6, 6))
     for g, cg, Adn in zip(s.groups, ev.cache["groups"], stab["Adn"], strict=True):
-        G, Ad, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, w = cg
+        G, AdP, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, w = cg
         k, nj = g.k, len(g.ids)
-        Ad_all[g.ids] = Ad
+        if g.offset:
+            Adn = Adn @ g.PA  # node-A block of B_n: Ad_{H_J,n^-1} PA
+            PB = g.PB
+        else:
+            PB = np.broadcast_to(np.eye(6), (nj, 6, 6))
+        Ad_all[g.ids] = AdP
         Adn_all[g.ids] = Adn
+        PB_all[g.ids] = PB
         AdnT = np.swapaxes(Adn, 1, 2)
-        # dynamic rows x xi columns: -(dr/dm) B_n^T
+        # dynamic rows x xi columns: -(dr/dm) B_n^T (node B: -(dr/dm) (-PB)^T)
         vals.append((-blk_m[free_pos[g.a]] @ AdnT).ravel())
-        vals.append(blk_m[free_pos[g.b]].ravel())
+        vals.append((blk_m[free_pos[g.b]] @ np.swapaxes(PB, 1, 2) if g.offset
+                     else blk_m[free_pos[g.b]]).ravel())
         if k:
             cj = (cC * (C + kd))[:, :, None] * np.swapaxes(g.A, 1, 2)
             vals.append((-cj).ravel())
-        # velocity constraint rows x increment columns: B + cv d(B v)/dn
-        vals += [Ad.ravel(), np.broadcast_to(-np.eye(6), (nj, 6, 6)).ravel()]
+        # velocity constraint rows x increment columns: B + cv d(B v)/dn, with
+        # B = [Ad PA, -PB, A] and d(B v)/dn_J = ad(w) T_J A, w = Ad PA v_A
+        vals += [AdP.ravel(), (-PB).ravel()]
         if k:
             vals.append((g.A + cv * (lie.ad6(w) @ TJ)).ravel())
     # velocity constraint rows x xi columns: -B B_n^T over joints sharing a free node
     pairs = pattern(s, True)["pairs"]
-    eye = np.eye(6)
-    Bi = np.where((pairs[:, 1] == 0)[:, None, None], Ad_all[pairs[:, 0]], -eye)
-    Bj = np.where((pairs[:, 3] == 0)[:, None, None], Adn_all[pairs[:, 2]], -eye)
+    Bi = np.where((pairs[:, 1] == 0)[:, None, None], Ad_all[pairs[:, 0]], -PB_all[pairs[:, 0]])
+    Bj = np.where((pairs[:, 3] == 0)[:, None, None], Adn_all[pairs[:, 2]], -PB_all[pairs[:, 2]])
     vals.append((-Bi @ np.swapaxes(Bj, 1, 2)).ravel())
     AAt = np.zeros((s.m, 6, 6))
     for g in s.groups:
