@@ -967,7 +967,8 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
         for i in range(nm):
             lam[i] += bp * sol[nq + i]
         it += 1
-        if dn_prev > 0 and dnmax > 0.2 * dn_prev:
+        # slow contraction -> new Jacobian (not when the corrections are at round-off level)
+        if dn_prev > 0 and dnmax > 0.2 * dn_prev and dnmax > 1e-12 * nmax:
             refac = True
         dn_prev = dnmax
         if ep <= ltol and dnmax <= 4e-16 * max(nmax, 1e-300):
