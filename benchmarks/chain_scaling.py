@@ -84,16 +84,19 @@ def per_step(system, formulation: str, h: float = 1e-3, long: float = 0.2,
             "matrix_size": res.stats["matrix_size"]}
 
 
-def peak_memory(n_links: int, t_end: float = 1.0, output_every: int = 10) -> dict:
+def peak_memory(n_links: int, t_end: float = 1.0, output_every: int = 10,
+                formulation: str = "index2") -> dict:
     """Run the chain in this process and report the peak resident set size."""
     import resource
 
     t0 = time.perf_counter()
     system = sd.compile_model(chain(n_links))
-    res = sd.simulate(system, t_end=t_end, step=1e-3, rho_inf=0.9, output_every=output_every)
+    res = sd.simulate(system, t_end=t_end, step=1e-3, rho_inf=0.9, output_every=output_every,
+                      formulation=formulation)
     wall = time.perf_counter() - t0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB -> MB on Linux
     return {"N": n_links, "t_end": t_end, "output_every": output_every,
+            "formulation": formulation,
             "stored_rows": len(res.t), "peak_rss_MB": rss, "wall_s": wall,
             "tip_final": tip(res, n_links)[-1].tolist()}
 
@@ -105,16 +108,21 @@ def main(argv: list[str]) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("sizes", nargs="*", type=int, default=[100, 300, 1000, 3000, 10000])
-    ap.add_argument("--memory", type=int, help="only: peak RSS of a 1 s run with N links")
+    ap.add_argument("--memory", type=int, help="only: peak RSS of a run with N links")
+    ap.add_argument("--t-end", type=float, default=1.0, help="model time of --memory")
+    ap.add_argument("--formulation", default="index2", help="formulation of --memory")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" /
                                           "chain_scaling.json"))
     a = ap.parse_args(argv)
     if a.memory:
-        print(json.dumps(peak_memory(a.memory)))
+        print(json.dumps(peak_memory(a.memory, a.t_end, formulation=a.formulation)))
         return 0
     print(f"se3dyn {sd.__version__}, numpy {np.__version__}, scipy {scipy.__version__}, "
           f"Python {platform.python_version()}, {platform.machine()}, {os.cpu_count()} CPUs")
+    import numba
+
     report = {"machine": platform.platform(), "python": platform.python_version(),
+              "numba": numba.__version__,
               "numpy": np.__version__, "scipy": scipy.__version__, "se3dyn": sd.__version__,
               "h": 1e-3, "method": "(wall(0.2 s) - wall(0.02 s)) / 180 steps", "rows": []}
     for n in a.sizes:

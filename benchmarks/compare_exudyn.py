@@ -3,25 +3,33 @@
 Models (built independently in both codes):
 
 1. The spatial slider-crank of Sec. 11 of the paper (Tables 2-4): 5 s at h = 1e-2 s,
-   rho_inf = 0.9. Agreement: position of node 6 (rod COM) at t = 1 s and crank angle at t = 2 s.
+   rho_inf = 0.9. EXUDYN: three rigid bodies and four joints at their points; se3dyn: the same
+   three bodies with joints attached at the points (``examples.slider_crank_bodies``, the
+   headline numbers) and, for reference, the paper's node/rigid-joint form
+   (``examples.slider_crank``), each in the stabilized index-2 (se3dyn's default) and the
+   index-3 form. Agreement: position of node 6 (rod COM) at t = 1 s and crank angle at t = 2 s.
 2. The N-link spatial pendulum chain of ``chain_scaling.py`` (links 0.1 m, 1 kg, slender-rod
-   inertia, spherical joints, released horizontal, gravity -z): 1 s at h = 1e-3, rho_inf = 0.9
-   for N = 10, 100; N = 1000 only with 0.1 s of model time (both codes). Agreement: tip
-   position at the final time.
+   inertia, spherical joints at the link ends, released horizontal, gravity -z): 1 s at
+   h = 1e-3, rho_inf = 0.9 for N = 10, 100, 1000; N = 10000 (``--n10000``) with 0.1 s of model
+   time in both codes. Agreement: tip position at the final time.
+3. ``--memory``: peak resident memory of a 1 s run of the N = 10000 chain in its own process
+   (every 10th step stored).
 
-Timed: the solve (se3dyn ``simulate`` on a compiled system; EXUDYN ``SolveDynamic`` on an
-assembled system), median over repeats; building/compiling is timed separately. For the
-slider-crank also the whole process from a cold start (``python -c`` import + build + simulate,
-median of 3 subprocesses).
+Timed: the solve (se3dyn ``simulate`` on a compiled system whose kernels and block-LU set-up
+are warm; EXUDYN ``SolveDynamic`` on an assembled system), median over repeats;
+building/compiling is timed separately. For the slider-crank also the whole process from a cold
+start (``python -c`` import + build + simulate, median of 3 subprocesses; se3dyn's numba cache
+warm).
 
 EXUDYN settings: implicit generalized-alpha (index 3 constraints, ``useIndex2Constraints =
 False``), rigid bodies with Euler-parameter nodes (7 coordinates + 1 algebraic normalisation
 constraint each), full Newton (``useModifiedNewton = False``), relative tolerance 1e-10,
 absolute 1e-12, fixed step (``adaptiveStep = False``), no solution file, sensors stored in
 memory every step. se3dyn: Lie-group generalized-alpha on SE(3), ``tol_residual = 1e-10``,
-``tol_constraint = 1e-11`` (its defaults).
+``tol_constraint = 1e-11`` (its defaults), compiled engine, modified Newton (its default).
 
-Run:  python benchmarks/compare_exudyn.py [--repeats 3] [--no-1000] [--out PATH]
+Run:  python benchmarks/compare_exudyn.py [--repeats 3] [--no-1000] [--n10000] [--memory]
+      [--out PATH]
 """
 
 from __future__ import annotations
@@ -304,8 +312,11 @@ def repeat(fn, n, *args):
 
 
 COLD = {
-    "se3dyn": ("import se3dyn as sd; from se3dyn.examples import slider_crank; "
-               "sd.simulate(slider_crank(), 5.0, 1e-2, rho_inf=0.9)"),
+    "se3dyn": ("import se3dyn as sd; from se3dyn.examples import slider_crank_bodies; "
+               "sd.simulate(slider_crank_bodies(), 5.0, 1e-2, rho_inf=0.9)"),
+    # the README demo's job: the paper's model file, results streamed to HDF5
+    "se3dyn_demo_run": ("import tempfile, se3dyn.cli as c; d = tempfile.mkdtemp(); "
+                        "c.main(['run', 'examples/slider_crank.yaml', '--out', d])"),
     "exudyn": (f"import sys; sys.path.insert(0, {str(HERE)!r}); import compare_exudyn as c; "
                "c.exu_slider_crank()"),
 }
@@ -315,19 +326,21 @@ def cold_start(code: str, n: int) -> list[float]:
     times = []
     for _ in range(n):
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-c", code], check=True, cwd=str(HERE.parent))
+        subprocess.run([sys.executable, "-c", code], check=True, cwd=str(HERE.parent),
+                       capture_output=True)
         times.append(time.perf_counter() - t0)
     return times
 
 
 def versions():
     import exudyn
+    import numba
     import scipy
 
     import se3dyn
     return {"python": platform.python_version(), "numpy": np.__version__,
             "scipy": scipy.__version__, "se3dyn": se3dyn.__version__,
-            "exudyn": exudyn.__version__}
+            "exudyn": exudyn.__version__, "numba": numba.__version__}
 
 
 def main(argv):
@@ -349,8 +362,8 @@ def main(argv):
     print("EXUDYN: implicit generalized-alpha, index-3 constraints, Euler-parameter rigid-body "
           "nodes, full Newton (useModifiedNewton=False), relTol 1e-10 / absTol 1e-12, fixed step, "
           "dense LU (slider-crank) / EigenSparse LU (chains), 1 thread")
-    print("se3dyn: Lie-group generalized-alpha on SE(3), full Newton, tol_residual 1e-10, "
-          "tol_constraint 1e-11")
+    print("se3dyn: Lie-group generalized-alpha on SE(3), compiled engine, modified Newton "
+          "(Jacobian reuse), tol_residual 1e-10, tol_constraint 1e-11")
     report = {"machine": machine, "versions": ver, "repeats": a.repeats,
               "exudyn_settings": {
                   "integrator": "generalized-alpha (implicit), index-3 constraints",
@@ -361,6 +374,8 @@ def main(argv):
                   "linear_solver": {"slider_crank": "EXUdense", "chain": "EigenSparse"},
                   "threads": 1},
               "se3dyn_settings": {"integrator": "Lie-group generalized-alpha on SE(3)",
+                                  "engine": "compiled (numba), block LU",
+                                  "newton": "modified (Jacobian reuse)",
                                   "tol_residual": 1e-10, "tol_constraint": 1e-11}}
 
     # 1. slider-crank ---------------------------------------------------------------------------
@@ -372,11 +387,14 @@ def main(argv):
     d_rod5 = float(np.linalg.norm(np.subtract(se["rod_com_t5"], ex["rod_com_t5"])))
     cold_se = cold_start(COLD["se3dyn"], 3)
     cold_ex = cold_start(COLD["exudyn"], 3)
+    cold_demo = cold_start(COLD["se3dyn_demo_run"], 3)
     sc = {"se3dyn": se, "exudyn": ex,
           "solve_ratio_se3dyn_over_exudyn": se["solve_s"] / ex["solve_s"],
           "cold_process_s": {"se3dyn": cold_se, "exudyn": cold_ex,
                              "se3dyn_median": statistics.median(cold_se),
-                             "exudyn_median": statistics.median(cold_ex)},
+                             "exudyn_median": statistics.median(cold_ex),
+                             "se3dyn_demo_run": cold_demo,
+                             "se3dyn_demo_run_median": statistics.median(cold_demo)},
           "cold_ratio_se3dyn_over_exudyn": statistics.median(cold_se) / statistics.median(cold_ex),
           "agreement": {"rod_com_t1_diff_m": d_rod, "crank_angle_t2_diff_rad": d_ang,
                         "rod_com_t5_diff_m": d_rod5}}
@@ -388,6 +406,8 @@ def main(argv):
           f"{sc['cold_process_s']['se3dyn_median']:.2f} s   EXUDYN "
           f"{sc['cold_process_s']['exudyn_median']:.2f} s   ratio "
           f"{sc['cold_ratio_se3dyn_over_exudyn']:.2f}")
+    print(f"cold process of the README demo job (se3dyn run examples/slider_crank.yaml, "
+          f"median of 3): {statistics.median(cold_demo):.2f} s")
     print(f"Newton iterations  se3dyn {se['newton_iterations']}   EXUDYN {ex['newton_iterations']}")
     print(f"rod COM at t=1: se3dyn {np.round(se['rod_com_t1'], 6)}  EXUDYN "
           f"{np.round(ex['rod_com_t1'], 6)}  |diff| {d_rod:.2e} m")
@@ -460,13 +480,26 @@ def main(argv):
               f"(factorisations {se['factorizations']}) EXUDYN {ex['newton_iterations']}")
 
     # 3. memory of the N = 10000 chain (own process) --------------------------------------------
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=2) + "\n")
     if a.memory:
-        out = subprocess.run([sys.executable, str(HERE / "chain_scaling.py"), "--memory",
-                              "10000"], check=True, capture_output=True, text=True)
-        mem = json.loads(out.stdout.strip().splitlines()[-1])
-        report["memory_N10000"] = mem
-        print(f"\npeak RSS, N = 10000 chain, 1 s, every 10th step stored: "
-              f"{mem['peak_rss_MB']:.0f} MB ({mem['wall_s']:.1f} s)")
+        report["memory_N10000"] = []
+        for form, t_end in (("index3", 0.2), ("index2", 0.1)):
+            proc = subprocess.run([sys.executable, str(HERE / "chain_scaling.py"), "--memory",
+                                   "10000", "--t-end", str(t_end), "--formulation", form],
+                                  capture_output=True, text=True)
+            if proc.returncode:
+                err = proc.stderr.strip().splitlines()[-1:] or ["?"]
+                report["memory_N10000"].append({"formulation": form, "t_end": t_end,
+                                                "failed": err[0]})
+                print(f"memory run {form} {t_end} s failed: {err[0]}")
+                continue
+            mem = json.loads(proc.stdout.strip().splitlines()[-1])
+            report["memory_N10000"].append(mem)
+            print(f"\npeak RSS, N = 10000 chain, {form}, {t_end:g} s, every 10th step stored "
+                  f"({mem['stored_rows']} rows): {mem['peak_rss_MB']:.0f} MB "
+                  f"({mem['wall_s']:.1f} s)", flush=True)
 
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)

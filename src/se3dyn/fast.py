@@ -1039,8 +1039,9 @@ class Stepper:
                        self.dropm, st.H, st.HJ, st.alpha, st.v, st.vd, a_n, st.lam,
                        inputs["f"], inputs["m"], inputs["tau"], inputs["ref"], inputs["rate"],
                        float(h), am, af, g, b, tol_r, ltol, float(s.length_scale), max_iter,
-                       self.index2, bool(reuse), self.lu_state, H, HJ, alpha, v, vd, a, lam, n, np.empty(nq), np.empty(nm),
-                       np.empty(nm), self.vals, self.rhs, self.sol, self.info)
+                       self.index2, bool(reuse), self.lu_state, H, HJ, alpha, v, vd, a, lam,
+                       n, np.empty(nq), np.empty(nm), np.empty(nm), self.vals, self.rhs,
+                       self.sol, self.info)
         self.factorizations += int(self.info[3])
         return status, a_n, H, HJ, alpha, v, vd, a, lam, n
 

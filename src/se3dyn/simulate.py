@@ -76,7 +76,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
              max_iter: int = 25, output_every: int = 1, formulation: str = "index2",
              redundant: str = "drop", tol: float | None = None, h_min: float | None = None,
              h_max: float | None = None, output_step: float | None = None,
-             engine: str = "auto", newton: str = "modified", progress: Callable[[float, int], None] | None = None,
+             engine: str = "auto", newton: str = "modified",
+             progress: Callable[[float, int], None] | None = None,
              on_output: Callable[[State, dict], None] | None = None) -> Results:
     """Simulate a model from ``t_start`` to ``t_end`` (Eqs. (38)-(46)), with a fixed step or,
     when ``tol`` is given, with adaptive steps.
