@@ -74,37 +74,7 @@ def _coeffs(w0, w1, w2, C2, C3, C4):
     return a, h, c, d, e
 
 
-@njit(cache=True, inline="always")
-def _mm(A, B, C):
-    """C = A @ B (no allocation; C must not alias A or B)."""
-    for i in range(A.shape[0]):
-        for j in range(B.shape[1]):
-            s = 0.0
-            for l in range(A.shape[1]):
-                s += A[i, l] * B[l, j]
-            C[i, j] = s
 
-
-@njit(cache=True, inline="always")
-def _mmT(A, B, C):
-    """C = A @ B.T."""
-    for i in range(A.shape[0]):
-        for j in range(B.shape[0]):
-            s = 0.0
-            for l in range(A.shape[1]):
-                s += A[i, l] * B[j, l]
-            C[i, j] = s
-
-
-@njit(cache=True, inline="always")
-def _mTm(A, B, C):
-    """C = A.T @ B."""
-    for i in range(A.shape[1]):
-        for j in range(B.shape[1]):
-            s = 0.0
-            for l in range(A.shape[0]):
-                s += A[l, i] * B[l, j]
-            C[i, j] = s
 
 
 @njit(cache=True, inline="always")
@@ -699,7 +669,7 @@ class FastSystem:
     """
 
     def __init__(self, s):
-        from se3dyn.system import pattern
+        from se3dyn.system import _joint_pairs
 
         self.s = s
         m = s.m
@@ -723,7 +693,8 @@ class FastSystem:
         gstart[1:] = np.cumsum([len(g.ids) for g in s.groups])
         gids = (np.concatenate([g.ids for g in s.groups]).astype(np.int64) if s.groups
                 else np.zeros(0, np.int64))
-        pairs = pattern(s, True)["pairs"] if m else np.zeros((0, 4), np.int64)
+        # the joint pairs of the index-2 pattern, without building that pattern for index 3
+        pairs = _joint_pairs(s) if m else np.zeros((0, 4), np.int64)
         c = np.ascontiguousarray
         self.S = (
             c(s.node_dofadr[s.node_free].astype(np.int64)), c(s.node_free.astype(np.int64)),
