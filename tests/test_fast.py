@@ -98,7 +98,7 @@ def test_kernel_values_match_numpy(index2):
     assert np.abs(psi - ev.psi).max() < 1e-13
     assert np.abs(H - ev.H).max() < 1e-15
     vals = np.zeros(system.pattern(s, index2)["nvals"])
-    fast._values(F.S, Wk, v, lam, *coef, index2, 0.7, vals)
+    fast._values(F.S, Wk, n, HJ, v, lam, *coef, index2, 0.7, vals)
     keep = system.pattern(s, index2)["keep"]
     assert np.abs(vals[keep] - ref[keep]).max() < 1e-13 * np.abs(ref).max()
 

@@ -100,6 +100,20 @@ def _mm4(A, B, C):
 
 
 @njit(cache=True, inline="always")
+def _mm4a(A, B, C):
+    """C = A @ B for homogeneous transformations (4, 4) (last rows [0, 0, 0, 1]): 36
+    multiplications instead of 64."""
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+        C[i, 3] = A[i, 0] * B[0, 3] + A[i, 1] * B[1, 3] + A[i, 2] * B[2, 3] + A[i, 3]
+    C[3, 0] = 0.0
+    C[3, 1] = 0.0
+    C[3, 2] = 0.0
+    C[3, 3] = 1.0
+
+
+@njit(cache=True, inline="always")
 def _mm3(A, B, C):
     """C = A @ B for 3 x 3 matrices (fixed sizes: unrolled and vectorised by LLVM)."""
     for i in range(3):
@@ -180,6 +194,51 @@ def _exp_tan(n, E, T, C2, C3, C4, scr):
             T[i, 3 + j] = (-h * U[i, j] + c * (UW[i, j] + WU[i, j])
                            + wu * (d * W[i, j] + e * W2[i, j]))
         E[i, 3] = s
+
+
+@njit(cache=True)
+def _exp4(n, E, C2):
+    """E = exp_se3(n) (4, 4) (Eq. (17)) alone: R = I + a W + h W^2, x = (I + h W + c W^2) u
+    with the coefficients of :func:`_coeffs` (no tangent operator, no d and e)."""
+    w0, w1, w2 = n[3], n[4], n[5]
+    t2 = w0 * w0 + w1 * w1 + w2 * w2
+    t = math.sqrt(t2)
+    if t > 0:
+        a = math.sin(t) / t
+        half = 0.5 * t
+        sh = math.sin(half) / half
+        h = 0.5 * sh * sh
+    else:
+        a = 1.0
+        h = 0.5
+    if t < _CUT:
+        c = _series(C2, t2)
+    else:
+        c = (1.0 - a) / t2
+    # W^2 = w w^T - t2 I
+    W2_00 = w0 * w0 - t2
+    W2_11 = w1 * w1 - t2
+    W2_22 = w2 * w2 - t2
+    W2_01 = w0 * w1
+    W2_02 = w0 * w2
+    W2_12 = w1 * w2
+    E[0, 0] = 1.0 + h * W2_00
+    E[1, 1] = 1.0 + h * W2_11
+    E[2, 2] = 1.0 + h * W2_22
+    E[0, 1] = -a * w2 + h * W2_01
+    E[1, 0] = a * w2 + h * W2_01
+    E[0, 2] = a * w1 + h * W2_02
+    E[2, 0] = -a * w1 + h * W2_02
+    E[1, 2] = -a * w0 + h * W2_12
+    E[2, 1] = a * w0 + h * W2_12
+    u0, u1, u2 = n[0], n[1], n[2]
+    E[0, 3] = (1.0 + c * W2_00) * u0 + (-h * w2 + c * W2_01) * u1 + (h * w1 + c * W2_02) * u2
+    E[1, 3] = (h * w2 + c * W2_01) * u0 + (1.0 + c * W2_11) * u1 + (-h * w0 + c * W2_12) * u2
+    E[2, 3] = (-h * w1 + c * W2_02) * u0 + (h * w0 + c * W2_12) * u1 + (1.0 + c * W2_22) * u2
+    E[3, 0] = 0.0
+    E[3, 1] = 0.0
+    E[3, 2] = 0.0
+    E[3, 3] = 1.0
 
 
 @njit(cache=True)
@@ -280,8 +339,15 @@ def _residual(S, Wk, Hn, HJn, alpha_n, n, v, vd, lam, f, mt, tau, ref, rate, vel
               H, HJ, r, phi, psi, alpha):
     """Residual r (nq,) of Eq. (39), constraints phi (nm,) of Eq. (55), velocity constraints psi
     (nm,) (when ``velocity``), frames H (M, 4, 4), HJ (m, 4, 4) and relative coordinates alpha
-    (nq,) (``alpha_n + n`` on joint unknowns) of an iterate; fills the work arrays ``Wk`` used
-    by :func:`_values`. Returns the force scale of :func:`se3dyn.system.evaluate`."""
+    (nq,) (``alpha_n + n`` on joint unknowns) of an iterate; fills the work arrays ``Wk`` that
+    :func:`_values` reads at the same iterate (``RtF``, ``G``, ``w``). Returns the force scale
+    of :func:`se3dyn.system.evaluate`.
+
+    Only what the residual needs is computed: exponentials without tangent operators
+    (:func:`_exp4`), affine 4 x 4 products, and the joint forces ``(Ad(H_J^-1) P_A)^T lambda``
+    of Eq. (58) as ``P_A^T (Ad(H_J^-1)^T lambda)`` from the rotation and translation of H_J,
+    without forming Ad; the tangent operators and Ad blocks of the iteration matrix are left to
+    :func:`_values`, which runs only when the matrix is refactorised."""
     (fdof, fnode, fmass, fJ, gk, gstart, gids, jk, jA, jdof, ja, jb, jfa, jfb, PA, PB, XA, XB,
      dK, dref, dC, dkp, dkd, pairs, Apinv, H0inv, nonab, mass_all, nq, nm, C2, C3, C4, C5) = S
     Tn, RtF, Gs, Ads, TJs, ws, blk_m, Adn = Wk
@@ -291,14 +357,13 @@ def _residual(S, Wk, Hn, HJn, alpha_n, n, v, vd, lam, f, mt, tau, ref, rate, vel
     r[:] = 0.0
     alpha[:] = 0.0
     E = np.empty((4, 4))
-    scr = np.empty((5, 3, 3))
     fin = np.empty(6)
     fs = 0.0
     for q in range(nf):
         d0 = fdof[q]
         i = fnode[q]
-        _exp_tan(n[d0:d0 + 6], E, Tn[q], C2, C3, C4, scr)
-        _mm4(Hn[i], E, H[i])
+        _exp4(n[d0:d0 + 6], E, C2)
+        _mm4a(Hn[i], E, H[i])
         vU0, vU1, vU2 = v[d0], v[d0 + 1], v[d0 + 2]
         w0, w1, w2 = v[d0 + 3], v[d0 + 4], v[d0 + 5]
         ms = fmass[q]
@@ -327,15 +392,16 @@ def _residual(S, Wk, Hn, HJn, alpha_n, n, v, vd, lam, f, mt, tau, ref, rate, vel
     tau_max = 0.0
     for c in range(nq):
         tau_max = max(tau_max, abs(tau[c]))
-    Tj6 = np.empty((6, 6))
     HA = np.empty((4, 4))
     HBi = np.empty((4, 4))
     HB = np.empty((4, 4))
     nJ = np.empty(6)
-    AdPA = np.empty((6, 6))
+    y = np.empty(6)
+    u = np.empty(6)
     for j in range(m):
         k = jk[j]
         A = jA[j]
+        HJj = HJ[j]
         if k > 0:
             jd = jdof[j]
             for c in range(6):
@@ -343,21 +409,18 @@ def _residual(S, Wk, Hn, HJn, alpha_n, n, v, vd, lam, f, mt, tau, ref, rate, vel
                 for l in range(k):
                     s += A[c, l] * n[jd + l]
                 nJ[c] = s
-            _exp_tan(nJ, E, Tj6, C2, C3, C4, scr)
-            _mm4(HJn[j], E, HJ[j])
-            _mm6(Tj6, A, TJs[j])
+            _exp4(nJ, E, C2)
+            _mm4a(HJn[j], E, HJj)
         else:
-            HJ[j] = HJn[j]
-        _adinv(HJ[j], Ads[j])
-        Ad = Ads[j]
+            HJj[:] = HJn[j]
         a_ = ja[j]
         b_ = jb[j]
-        _mm4(H[a_], XA[j], HA)
-        _mm4(H[b_], XB[j], HB)
+        _mm4a(H[a_], XA[j], HA)
+        _mm4a(H[b_], XB[j], HB)
         _inv(HB, HBi)
         G = Gs[j]
-        _mm4(HBi, HA, HB)
-        _mm4(HB, HJ[j], G)
+        _mm4a(HBi, HA, HB)
+        _mm4a(HB, HJj, G)
         mr = 6 * j
         phi[mr] = G[0, 3]
         phi[mr + 1] = G[1, 3]
@@ -365,15 +428,24 @@ def _residual(S, Wk, Hn, HJn, alpha_n, n, v, vd, lam, f, mt, tau, ref, rate, vel
         phi[mr + 3] = 0.5 * (G[2, 1] - G[1, 2])
         phi[mr + 4] = 0.5 * (G[0, 2] - G[2, 0])
         phi[mr + 5] = 0.5 * (G[1, 0] - G[0, 1])
-        _mm6(Ad, PA[j], AdPA)
+        # Ad(H_J^-1)^T = [[R, 0], [hat(x) R, R]] with (R, x) of H_J
+        x0, x1, x2 = HJj[0, 3], HJj[1, 3], HJj[2, 3]
         fa = jfa[j]
         fb = jfb[j]
         if fa >= 0:
             da = fdof[fa]
+            for c in range(3):
+                y[c] = HJj[c, 0] * lam[mr] + HJj[c, 1] * lam[mr + 1] + HJj[c, 2] * lam[mr + 2]
+                y[3 + c] = (HJj[c, 0] * lam[mr + 3] + HJj[c, 1] * lam[mr + 4]
+                            + HJj[c, 2] * lam[mr + 5])
+            y[3] += x1 * y[2] - x2 * y[1]
+            y[4] += x2 * y[0] - x0 * y[2]
+            y[5] += x0 * y[1] - x1 * y[0]
+            P = PA[j]
             for c in range(6):
                 s = 0.0
                 for l in range(6):
-                    s += AdPA[l, c] * lam[mr + l]
+                    s += P[l, c] * y[l]
                 r[da + c] += s
         if fb >= 0:
             db = fdof[fb]
@@ -398,14 +470,24 @@ def _residual(S, Wk, Hn, HJn, alpha_n, n, v, vd, lam, f, mt, tau, ref, rate, vel
                 gint_max = max(gint_max, abs(gi))
                 r[dd] += s + gi - tau[dd]
         if velocity:
+            # w = Ad(H_J^-1) P_A v_A = [R^T (u_top - x cross u_bot), R^T u_bot], u = P_A v_A
             w = ws[j]
-            for c in range(6):
-                s = 0.0
-                if fa >= 0:
-                    da = fdof[fa]
+            if fa >= 0:
+                da = fdof[fa]
+                P = PA[j]
+                for c in range(6):
+                    s = 0.0
                     for l in range(6):
-                        s += AdPA[c, l] * v[da + l]
-                w[c] = s
+                        s += P[c, l] * v[da + l]
+                    u[c] = s
+                u[0] -= x1 * u[5] - x2 * u[4]
+                u[1] -= x2 * u[3] - x0 * u[5]
+                u[2] -= x0 * u[4] - x1 * u[3]
+                for c in range(3):
+                    w[c] = HJj[0, c] * u[0] + HJj[1, c] * u[1] + HJj[2, c] * u[2]
+                    w[3 + c] = HJj[0, c] * u[3] + HJj[1, c] * u[4] + HJj[2, c] * u[5]
+            else:
+                w[:] = 0.0
             for c in range(6):
                 s = w[c]
                 if fb >= 0:
@@ -445,11 +527,14 @@ def _putT(vals, o, X, nr, nc):
 
 
 @njit(cache=True)
-def _values(S, Wk, v, lam, cM, cC, cK, index2, cv, vals):
+def _values(S, Wk, n, HJ, v, lam, cM, cC, cK, index2, cv, vals):
     """Values of the scaled iteration matrix in the order of :func:`se3dyn.system._pattern`
     (= :func:`se3dyn.system.matrix_values`, with the index-2 blocks of ``_stab_values`` when
     ``index2``); needs the work arrays of :func:`_residual` at the same iterate and, for
-    index 2, ``Adn`` (m, 6, 6) = Ad(H_J,n^-1) in ``Wk``."""
+    index 2, ``Adn`` (m, 6, 6) = Ad(H_J,n^-1) in ``Wk``. Computes and stores in ``Wk`` the
+    tangent operators T_SE(3)(n_I) of the nodes (Eqs. (21)-(22)), T_SE(3)(A n_j) A of the
+    joints and Ad(H_J^-1) (Eq. (57)) at the increment ``n`` (nq,) and joint frames ``HJ``
+    (m, 4, 4) of the iterate."""
     (fdof, fnode, fmass, fJ, gk, gstart, gids, jk, jA, jdof, ja, jb, jfa, jfb, PA, PB, XA, XB,
      dK, dref, dC, dkp, dkd, pairs, Apinv, H0inv, nonab, mass_all, nq, nm, C2, C3, C4, C5) = S
     Tn, RtF, Gs, Ads, TJs, ws, blk_m, Adn = Wk
@@ -465,6 +550,25 @@ def _values(S, Wk, v, lam, cM, cC, cK, index2, cv, vals):
     X = np.empty((6, 6))
     Y = np.empty((6, 6))
     AdnPA = np.empty((6, 6))
+    E = np.empty((4, 4))
+    scr = np.empty((5, 3, 3))
+    nJ = np.empty(6)
+    for q in range(nf):
+        d0 = fdof[q]
+        _exp_tan(n[d0:d0 + 6], E, Tn[q], C2, C3, C4, scr)
+    for j in range(m):
+        _adinv(HJ[j], Ads[j])
+        k = jk[j]
+        if k > 0:
+            A = jA[j]
+            jd = jdof[j]
+            for c in range(6):
+                s = 0.0
+                for l in range(k):
+                    s += A[c, l] * n[jd + l]
+                nJ[c] = s
+            _exp_tan(nJ, E, X, C2, C3, C4, scr)
+            _mm6(X, A, TJs[j])
     for q in range(nf):
         d0 = fdof[q]
         ms = fmass[q]
@@ -576,7 +680,6 @@ def _values(S, Wk, v, lam, cM, cC, cK, index2, cv, vals):
     # ---- stabilized index-2 blocks (order of _stab_values)
     X6 = np.empty((6, 6))
     ad = np.empty((6, 6))
-    scr = np.empty((5, 3, 3))
     for g in range(ng):
         k = gk[g]
         j0 = gstart[g]
@@ -831,9 +934,10 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
     if stab:
         for j in range(m):
             _adinv(HJn[j], Adn[j])
+    # predictor vd_{n+1} = vd_n (as in GeneralizedAlpha.step), a_{n+1} of Eq. (43) at it
     for i in range(nq):
-        vd[i] = 0.0
-        a[i] = (af * vd_n[i] - am * a_n[i]) / (1 - am)
+        vd[i] = vd_n[i]
+        a[i] = (vd_n[i] - am * a_n[i]) / (1 - am)
         v[i] = v_n[i] + h * (1 - g) * a_n[i] + h * g * a[i]
         n[i] = h * v_n[i] + h * h * (0.5 - b) * a_n[i] + h * h * b * a[i]
     lam[:] = lam_n
@@ -883,7 +987,7 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
             refac = True
         er_prev = er
         if refac or not reuse:
-            _values(S, Wk, v, lam, cM, cC, cK, stab, cv, vals)
+            _values(S, Wk, n, HJ, v, lam, cM, cC, cK, stab, cv, vals)
             lu_state[0] = 0.0
             code = blocklu.factor(sym, vmask, vone, vals, store, piv)
             nfac += 1
@@ -913,11 +1017,17 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
                 mr = X + 6 * j
                 if jfa[j] >= 0:
                     da = fdof[jfa[j]]
-                    _mm6(Adn[j], PA[j], AP)
+                    Aj = Adn[j]
                     for c in range(6):
                         s = 0.0
                         for l in range(6):
-                            s += AP[l, c] * sol[mr + l]
+                            s += Aj[l, c] * sol[mr + l]
+                        AP[0, c] = s
+                    P = PA[j]
+                    for c in range(6):
+                        s = 0.0
+                        for l in range(6):
+                            s += P[l, c] * AP[0, l]
                         sol[da + c] -= s
                 if jfb[j] >= 0:
                     db = fdof[jfb[j]]
@@ -963,7 +1073,7 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
     if status == 0:
         c1 = (1 - af) / (1 - am)
         for i in range(nq):
-            a[i] += c1 * vd[i]
+            a[i] += c1 * (vd[i] - vd_n[i])
     return status
 
 
