@@ -102,9 +102,17 @@ def redundant_equations(s: System, H: np.ndarray | None = None, HJ: np.ndarray |
     """Constraint equations (indices into the 6 m multipliers) that depend on the others at the
     configuration (H, HJ), by column-pivoted QR of ``Phi_q^T`` restricted to the joints on closed
     loops (:func:`loop_joints`); empty for tree-structured systems (no Jacobian is formed)."""
+    # cached for the initial configuration of the system (keyed by its frames and rtol)
+    initial = (rtol, hash(s.node_H0.tobytes()), hash(s.joint_H0.tobytes())) \
+        if H is None and HJ is None else None
+    if initial and s.pattern.get("redundant0", (None,))[0] == initial:
+        return s.pattern["redundant0"][1].copy()
     loops = loop_joints(s)
     if loops.size == 0:
-        return np.zeros(0, dtype=np.int64)
+        out = np.zeros(0, dtype=np.int64)
+        if initial:
+            s.pattern["redundant0"] = (initial, out)
+        return out.copy()
     rows = (6 * loops[:, None] + np.arange(6)).ravel()
     P = _jacobian(s, H, HJ)[rows]
     cols = np.unique(P.indices)
@@ -112,7 +120,10 @@ def redundant_equations(s: System, H: np.ndarray | None = None, HJ: np.ndarray |
     _, R, piv = sla.qr(P.T, mode="economic", pivoting=True)
     d = np.abs(np.diag(R))
     r = int(np.sum(d > rtol * d[0])) if d.size and d[0] > 0 else 0
-    return np.sort(rows[piv[r:]])
+    out = np.sort(rows[piv[r:]])
+    if initial:
+        s.pattern["redundant0"] = (initial, out)
+    return out.copy()
 
 
 def rank_analysis(s: System, rtol: float = 1e-10) -> RankReport:

@@ -200,10 +200,11 @@ class GeneralizedAlpha:
         reference the kernels are tested against). ``"compiled"``: like auto, but an error
         when the kernels do not apply.
     newton : {"modified", "full"}
-        Compiled engine only: ``"modified"`` (default) keeps the factorised iteration matrix
-        across iterations and steps while Newton contracts by at least a factor 5 per
-        iteration, and refactorises at the current iterate otherwise (or when h changes);
-        ``"full"`` refactorises at every iteration. Both converge to the same tolerances.
+        Compiled engine only: ``"modified"`` (default) factorises the iteration matrix at the
+        predictor of each step and keeps it over the iterations while Newton contracts fast
+        enough to converge within a few more iterations, refactorising at the current iterate
+        otherwise (see :func:`se3dyn.fast._step`); ``"full"`` refactorises at every
+        iteration. Both converge to the same tolerances.
     """
 
     rho_inf: float = 0.9

@@ -33,6 +33,27 @@ class TimeFunction:
     def rate(self, t: float) -> Any:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    def sample(self, times: np.ndarray) -> np.ndarray:
+        """Values at many times: (nt,) for a scalar function, (nt, k) for a k-vector; the
+        same numbers as ``f(t)`` one time at a time (vectorised by the built-ins)."""
+        return np.array([np.asarray(self(t), dtype=float) for t in times], dtype=float)
+
+    def sample_rate(self, times: np.ndarray) -> np.ndarray:
+        """Rates ``f.rate(t)`` at many times, shaped as :meth:`sample`."""
+        return np.array([np.asarray(self.rate(t), dtype=float) for t in times], dtype=float)
+
+
+def _many(times: np.ndarray, v: Any) -> np.ndarray:
+    """A constant value repeated at every time: (nt,) or (nt, k)."""
+    v = np.asarray(v, dtype=float)
+    return np.broadcast_to(v, (len(times),) + v.shape).copy()
+
+
+def _where(on: np.ndarray, v: Any) -> np.ndarray:
+    """``v`` where ``on`` (nt,), else ``0 * v`` (the zeros of the scalar methods)."""
+    v = np.asarray(v, dtype=float)
+    return np.where(on.reshape((-1,) + (1,) * v.ndim), v, 0.0 * v)
+
 
 def _value(v: Any, item: str, fld: str) -> np.ndarray | float:
     a = np.asarray(v, dtype=float) if not isinstance(v, int | float) else float(v)
@@ -64,6 +85,12 @@ class Constant(TimeFunction):
     def rate(self, t):
         return 0.0 * np.asarray(self.value)
 
+    def sample(self, times):
+        return _many(times, self.value)
+
+    def sample_rate(self, times):
+        return _many(times, 0.0 * np.asarray(self.value))
+
 
 @dataclass(frozen=True)
 class Step(TimeFunction):
@@ -87,6 +114,13 @@ class Step(TimeFunction):
     def rate(self, t):
         return 0.0 * np.asarray(self.value)
 
+    def sample(self, times):
+        t = np.asarray(times, dtype=float)
+        return _where((self.start <= t) & (t < self.stop), self.value)
+
+    def sample_rate(self, times):
+        return _many(times, 0.0 * np.asarray(self.value))
+
 
 @dataclass(frozen=True)
 class Ramp(TimeFunction):
@@ -109,6 +143,18 @@ class Ramp(TimeFunction):
     def rate(self, t):
         on = self.start <= t < self.start + self.duration
         return np.asarray(self.value) / self.duration * (1.0 if on else 0.0)
+
+    def sample(self, times):
+        t = np.asarray(times, dtype=float)
+        sc = np.minimum(np.maximum((t - self.start) / self.duration, 0.0), 1.0)
+        v = np.asarray(self.value, dtype=float)
+        return sc.reshape((-1,) + (1,) * v.ndim) * v
+
+    def sample_rate(self, times):
+        t = np.asarray(times, dtype=float)
+        on = ((self.start <= t) & (t < self.start + self.duration)).astype(float)
+        v = np.asarray(self.value, dtype=float) / self.duration
+        return v * on.reshape((-1,) + (1,) * v.ndim)
 
 
 @dataclass(frozen=True)
@@ -142,6 +188,13 @@ class Table(TimeFunction):
 
     def __call__(self, t):
         return self._interp(t, self.values)
+
+    def sample(self, times):
+        t = np.asarray(times, dtype=float)
+        y = self.values
+        if y.ndim == 1:
+            return np.interp(t, self.times, y)
+        return np.stack([np.interp(t, self.times, y[:, i]) for i in range(y.shape[1])], axis=1)
 
     def rate(self, t):
         i = int(np.searchsorted(self.times, t, side="right")) - 1
@@ -212,6 +265,18 @@ class Component(TimeFunction):
 
     def rate(self, t):
         return self._pick(self.base.rate(t))
+
+    def _pick_many(self, v: np.ndarray) -> np.ndarray:
+        v = np.asarray(v, dtype=float)
+        if v.ndim == 1 or v.shape[1] == 1:
+            return v.reshape(len(v))
+        return v[:, self.index].copy()
+
+    def sample(self, times):
+        return self._pick_many(self.base.sample(times))
+
+    def sample_rate(self, times):
+        return self._pick_many(self.base.sample_rate(times))
 
 
 def as_timefunc(v: Any, item: str, fld: str, size: int | None = None) -> TimeFunction:
