@@ -137,7 +137,7 @@ class BlockLU:
     info : int
         Return code of the last :meth:`factor` (0 success, p + 1 failed at step p, -1 never
         factored); :meth:`failed` names the supernodes.
-    rows, cols : ndarray (nvals,) int64
+    rows, cols : ndarray (nvals,) int32
         Row and column of each value (-1: ignored), for :func:`matvec`.
     drop : ndarray (nr,) int64
         Dropped constraint equations (:func:`from_system`; empty otherwise).
@@ -487,6 +487,9 @@ def _order(adj: list[set], kind: np.ndarray, jk: np.ndarray | None
     return groups, later
 
 
+_CHUNK = 1 << 18  # values per chunk in the vectorised parts of symbolic()
+
+
 def symbolic(N: int, rows: np.ndarray, cols: np.ndarray, sn: np.ndarray,
              kind: np.ndarray, jk: np.ndarray | None = None) -> BlockLU:
     """Symbolic phase: elimination order, block fill, storage layout and update lists.
@@ -563,11 +566,17 @@ def symbolic(N: int, rows: np.ndarray, cols: np.ndarray, sn: np.ndarray,
     if np.any(size == 0):
         raise ValueError(f"supernode {int(np.flatnonzero(size == 0)[0])} owns no unknown")
 
-    valid = (rows >= 0) & (cols >= 0)
-    a = sn[rows[valid]]
-    b = sn[cols[valid]]
-    off = a != b
-    e = np.unique(np.concatenate([a[off] * nsn + b[off], b[off] * nsn + a[off]]))
+    # supernode edges, in chunks of the values (bounded temporaries on big models)
+    parts = []
+    for c0 in range(0, len(rows), _CHUNK):
+        rr, cc = rows[c0:c0 + _CHUNK], cols[c0:c0 + _CHUNK]
+        ok = (rr >= 0) & (cc >= 0)
+        a = sn[rr[ok]]
+        b = sn[cc[ok]]
+        off = a != b
+        parts.append(np.unique(np.concatenate([a[off] * nsn + b[off], b[off] * nsn + a[off]])))
+    e = np.unique(np.concatenate(parts)) if parts else np.zeros(0, np.int64)
+    del parts
     ea, eb = e // nsn, e % nsn
     nblocks_struct = nsn + len(e)
     adj: list[set] = [set() for _ in range(nsn)]
@@ -647,11 +656,14 @@ def symbolic(N: int, rows: np.ndarray, cols: np.ndarray, sn: np.ndarray,
     r = nbsn[nbptr[P] + w % cnt[P]]
     updoff = offset(q, r)
 
-    # slot of every pattern value
+    # slot of every pattern value (in chunks: bounded temporaries)
     slot = -np.ones(len(rows), np.int64)
-    r_, c_ = rows[valid], cols[valid]
-    pi, pj = step[sn[r_]], step[sn[c_]]
-    slot[valid] = offset(pi, pj) + local[r_] * bn[pj] + local[c_]
+    for c0 in range(0, len(rows), _CHUNK):
+        rr, cc = rows[c0:c0 + _CHUNK], cols[c0:c0 + _CHUNK]
+        ok = np.flatnonzero((rr >= 0) & (cc >= 0))
+        r_, c_ = rr[ok], cc[ok]
+        pi, pj = step[sn[r_]], step[sn[c_]]
+        slot[c0 + ok] = offset(pi, pj) + local[r_] * bn[pj] + local[c_]
 
     def arr(x):
         return np.ascontiguousarray(np.asarray(x, dtype=np.int64))
@@ -732,20 +744,21 @@ def from_system(s, index2: bool = False, drop=()) -> BlockLU:
     -------
     BlockLU
     """
-    from se3dyn.system import pattern
+    from se3dyn.system import pattern_entries
 
-    p = pattern(s, index2)
-    N = p["N"]
+    # only the (row, col) of every value: the CSC map of system.pattern is not needed here
+    N, rows_all, cols_all, _ = pattern_entries(s, index2)
+    nvals = len(rows_all)
+    keep = np.flatnonzero((rows_all >= 0) & (cols_all >= 0))
+    rows, cols = rows_all[keep], cols_all[keep]
     sn, kind, jk = supernodes(s, index2)
-    bl = symbolic(N, p["rows"], p["cols"], sn, kind, jk)
-    keep = p["keep"]
-    slot = -np.ones(p["nvals"], np.int64)
+    bl = symbolic(N, rows, cols, sn, kind, jk)
+    slot = -np.ones(nvals, np.int64)
     slot[keep] = bl.sym[10]
     bl.sym = bl.sym[:10] + (slot,)
-    bl.rows = -np.ones(p["nvals"], np.int64)
-    bl.cols = -np.ones(p["nvals"], np.int64)
-    bl.rows[keep] = p["rows"]
-    bl.cols[keep] = p["cols"]
+    bl.rows = rows_all.astype(np.int32)
+    bl.cols = cols_all.astype(np.int32)
+    del rows_all, cols_all
     drop = np.unique(np.asarray(drop, dtype=np.int64))
     bl.drop = drop
     bl.index2 = bool(index2)
@@ -755,9 +768,8 @@ def from_system(s, index2: bool = False, drop=()) -> BlockLU:
         dropped[nq + drop] = True
         if index2:
             dropped[nq + nm + drop] = True
-        rows, cols = p["rows"], p["cols"]
-        vmask = np.ones(p["nvals"])
-        vone = np.zeros(p["nvals"])
+        vmask = np.ones(nvals)
+        vone = np.zeros(nvals)
         vmask[keep] = ~(dropped[rows] | dropped[cols])
         vone[keep] = dropped[rows] & (rows == cols)
         bl.vmask, bl.vone = vmask, vone

@@ -335,6 +335,23 @@ def _pattern(s: System, index2: bool = False) -> dict:
 
     The index-3 matrix has ``N = nq + nm`` rows (unknowns, multipliers); the stabilized index-2
     matrix ``nq + 2 nm`` (unknowns, multipliers, velocity-constraint multipliers xi)."""
+    N, rows, cols, pairs = pattern_entries(s, index2)
+    keep = np.flatnonzero((rows >= 0) & (cols >= 0))
+    key = cols[keep] * N + rows[keep]  # column-major: CSC order after sorting
+    uniq, inv = np.unique(key, return_inverse=True)
+    indices = (uniq % N).astype(np.int32)
+    colnum = uniq // N
+    indptr = np.searchsorted(colnum, np.arange(N + 1)).astype(np.int32)
+    dense_key = rows[keep] * N + cols[keep]
+    return dict(keep=keep, inv=inv, nnz=len(uniq), indices=indices, indptr=indptr,
+                dense_key=dense_key, nvals=len(rows), N=N, rows=rows[keep], cols=cols[keep],
+                pairs=pairs)
+
+
+def pattern_entries(s: System, index2: bool = False) -> tuple:
+    """(N, rows, cols, pairs) of :func:`_pattern` without the CSC map: the row and column
+    (nvals,) of every value of :func:`matrix_values` in order, -1 for values on clamped
+    nodes, which are ignored (what the block LU of :mod:`se3dyn.blocklu` needs)."""
     nq, nm = s.nq, s.nm
     N = nq + (2 * nm if index2 else nm)
     rows, cols = [], []
@@ -365,18 +382,7 @@ def _pattern(s: System, index2: bool = False) -> dict:
         add(X + mult6[pairs[:, 0]], X + mult6[pairs[:, 2]])
         add(X + mult6, X + mult6)  # A A^T of each joint
         add(diag + nm, diag + nm)
-    rows = np.concatenate(rows)
-    cols = np.concatenate(cols)
-    keep = np.flatnonzero((rows >= 0) & (cols >= 0))
-    key = cols[keep] * N + rows[keep]  # column-major: CSC order after sorting
-    uniq, inv = np.unique(key, return_inverse=True)
-    indices = (uniq % N).astype(np.int32)
-    colnum = uniq // N
-    indptr = np.searchsorted(colnum, np.arange(N + 1)).astype(np.int32)
-    dense_key = rows[keep] * N + cols[keep]
-    return dict(keep=keep, inv=inv, nnz=len(uniq), indices=indices, indptr=indptr,
-                dense_key=dense_key, nvals=len(rows), N=N, rows=rows[keep], cols=cols[keep],
-                pairs=pairs)
+    return N, np.concatenate(rows), np.concatenate(cols), pairs
 
 
 def pattern(s: System, index2: bool = False) -> dict:
@@ -761,11 +767,22 @@ class LinearSolver:
                  drop=()):
         self.s = s
         self.index2 = index2
-        self.pat = pattern(s, index2)
-        self.N = self.pat["N"]
+        self.N = s.nq + (2 * s.nm if index2 else s.nm)
         self.dense = self.N <= dense_max
         self._lu = None
         self.drop = np.unique(np.asarray(drop, dtype=np.int64))
+        self._pat = None  # built on first use: the compiled engine may never need it
+
+    @property
+    def pat(self) -> dict:
+        """The (cached) :func:`pattern` of this matrix, with the masks of dropped equations."""
+        if self._pat is None:
+            self._pat = pattern(self.s, self.index2)
+            self._setup_drop()
+        return self._pat
+
+    def _setup_drop(self) -> None:
+        s, index2 = self.s, self.index2
         self._mask = None
         if self.drop.size:
             nq, nm = s.nq, s.nm
