@@ -903,7 +903,7 @@ def _log_coordinates(S, HJ, alpha):
 @njit(cache=True)
 def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
           Hn, HJn, alpha_n, v_n, vd_n, a_n, lam_n, f, mt, tau, ref, rate,
-          h, am, af, g, b, tol_r, ltol, lscale, max_iter, index2, reuse, lu_state,
+          h, am, af, g, b, tol_r, ltol, lscale, max_iter, index2, reuse, kmax,
           H, HJ, alpha, v, vd, a, lam, n, r, phi, psi, vals, rhs, sol, info):
     """One step of the Lie-group generalized-alpha scheme (Eqs. (38)-(46)); for index 2 the
     stabilized form of :meth:`se3dyn.integrator.GeneralizedAlpha.step`.
@@ -918,8 +918,8 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
     solution) and kept over the iterations while Newton contracts fast enough: it is
     recomputed at the current iterate when the scaled residual or constraint violation grows,
     when the contraction rate theta = |dn_k| / |dn_k-1| reaches 0.9, or when at that rate more
-    than ``lu_state[2]`` (:data:`KMAX`) further iterations would be needed to reach the
-    tolerances. ``lu_state`` (3,) = (factors valid, their h, KMAX). Measured on the
+    than ``kmax`` (:data:`KMAX`) further iterations would be needed to reach the
+    tolerances. Measured on the
     slider-crank and on chains of 100-10000 links, keeping the factors across steps too cost
     more iterations and more factorisations than it saved. The converged solution satisfies
     the same tolerances as full Newton (``reuse=False``: a new matrix every iteration).
@@ -959,7 +959,7 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
     nfac = 0
     refac = True  # every step starts with the iteration matrix at its predictor
     dn_prev = 0.0
-    er_prev = np.inf
+    ec_prev = np.inf
     while True:
         fs = _residual(S, Wk, Hn, HJn, alpha_n, n, v, vd, lam, f, mt, tau, ref, rate, stab,
                        H, HJ, r, phi, psi, alpha)
@@ -988,19 +988,16 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
         if it == 0:
             er0 = er
         ec = max(er / tol_r, ep / ltol) if nm > 0 else er / tol_r
-        if ec > er_prev:
+        if ec > ec_prev:
             refac = True
-        er_prev = ec
+        ec_prev = ec
         if refac or not reuse:
             _values(S, Wk, n, HJ, v, lam, cM, cC, cK, stab, cv, vals)
-            lu_state[0] = 0.0
             code = blocklu.factor(sym, vmask, vone, vals, store, piv)
             nfac += 1
             if code != 0:
                 status = 4
                 break
-            lu_state[0] = 1.0
-            lu_state[1] = h
             refac = False
         for i in range(nq):
             rhs[i] = -r[i] / bp
@@ -1054,7 +1051,7 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
             lam[i] += bp * sol[nq + i]
         it += 1
         # slow contraction -> new Jacobian when, at the observed rate theta, more than
-        # lu_state[2] further iterations would be needed (not when the corrections are at
+        # kmax further iterations would be needed (not when the corrections are at
         # round-off level)
         if dn_prev > 0 and dnmax > 1e-12 * nmax:
             theta = dnmax / dn_prev
@@ -1065,7 +1062,7 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
                 k_rem = math.log(tol_r / max(er * theta, tol_r)) / lt
                 if nm > 0:
                     k_rem = max(k_rem, math.log(ltol / max(ep * theta, ltol)) / lt)
-                if k_rem > lu_state[2]:
+                if k_rem > kmax:
                     refac = True
         dn_prev = dnmax
         if ep <= ltol and dnmax <= 4e-16 * max(nmax, 1e-300):
@@ -1116,8 +1113,6 @@ class Stepper:
         self.rhs = np.zeros(N)
         self.sol = np.zeros(N)
         self.info = np.zeros(4)
-        self.lu_state = np.zeros(3)
-        self.lu_state[2] = KMAX
         self.factorizations = 0
         self.evals = np.zeros(6)
 
@@ -1142,7 +1137,7 @@ class Stepper:
                        self.dropm, st.H, st.HJ, st.alpha, st.v, st.vd, a_n, st.lam,
                        inputs["f"], inputs["m"], inputs["tau"], inputs["ref"], inputs["rate"],
                        float(h), am, af, g, b, tol_r, ltol, float(s.length_scale), max_iter,
-                       self.index2, bool(reuse), self.lu_state, H, HJ, alpha, v, vd, a, lam,
+                       self.index2, bool(reuse), KMAX, H, HJ, alpha, v, vd, a, lam,
                        n, np.empty(nq), np.empty(nm), np.empty(nm), self.vals, self.rhs,
                        self.sol, self.info)
         self.factorizations += int(self.info[3])
@@ -1174,7 +1169,7 @@ def stepper(s, index2: bool, drop) -> Stepper:
 def _run(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
          H, HJ, alpha, v, vd, a, lam, acc, t_grid, fgrav, gravity,
          ld_node, ld_F, ld_T, act_dof, act_val, ctl_dof, ctl_ref, ctl_rate,
-         am, af, g, b, tol_r, ltol, lscale, max_iter, index2, reuse, lu_state,
+         am, af, g, b, tol_r, ltol, lscale, max_iter, index2, reuse, kmax,
          output_every, rec_t, rec_H, rec_v, rec_vd, rec_lam, rec_alpha, rec_scal, counters,
          i0, i1):
     """Steps ``i0 .. i1-1`` to the times ``t_grid[i]`` (the state is at ``acc[0]`` = t).
@@ -1251,7 +1246,7 @@ def _run(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
             a_n[:] = a
         st = _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
                    H, HJ, alpha, v, vd, a_n, lam, f, mt, tau, ref, rate,
-                   h, am, af, g, b, tol_r, ltol, lscale, max_iter, index2, reuse, lu_state,
+                   h, am, af, g, b, tol_r, ltol, lscale, max_iter, index2, reuse, kmax,
                    H1, HJ1, alpha1, v1, vd1, a1, lam1, n, r, phi, psi, vals, rhs, sol, info)
         counters[3] += int(info[3])
         if st != 0:
@@ -1368,7 +1363,7 @@ def _table(f, times: np.ndarray, shape: tuple, rate: bool = False) -> np.ndarray
 def _vector_tables(s, times, lpos, ld_F, ld_T, act_val, ctl_ref, ctl_rate) -> bool:
     """Fill the load tables of :func:`input_tables` with one vectorised evaluation per time
     function; False when some function needs the time-by-time path."""
-    for i, F, T, item in s.loads:
+    for i, F, T, _item in s.loads:
         c = lpos[i]
         for fn, out in ((F, ld_F), (T, ld_T)):
             if fn is not None:
@@ -1377,14 +1372,14 @@ def _vector_tables(s, times, lpos, ld_F, ld_T, act_val, ctl_ref, ctl_rate) -> bo
                     return False
                 out[:, c] += x
     o = 0
-    for d, tf, item in s.actuators:
+    for d, tf, _item in s.actuators:
         x = _table(tf, times, d.shape)
         if x is None:
             return False
         act_val[:, o:o + len(d)] = x
         o += len(d)
     o = 0
-    for d, tgt, rt, item in s.controls:
+    for d, tgt, rt, _item in s.controls:
         x = _table(tgt, times, d.shape)
         y = _table(tgt, times, d.shape, rate=True) if rt is None else _table(rt, times, d.shape)
         if x is None or y is None:
@@ -1414,7 +1409,7 @@ def run_fixed(stp: Stepper, st, t_grid, i0, i1, tables, params, tol_r, ltol, max
                      stp.dropm, st.H, st.HJ, st.alpha, st.v, st.vd, st.a, st.lam, acc,
                      t_grid, fgrav, np.asarray(s.gravity, dtype=float), ld_node, ld_F, ld_T,
                      act_dof, act_val, ctl_dof, ctl_ref, ctl_rate, am, af, g, b, tol_r, ltol,
-                     float(s.length_scale), max_iter, stp.index2, bool(reuse), stp.lu_state,
+                     float(s.length_scale), max_iter, stp.index2, bool(reuse), KMAX,
                      output_every, rec.t, rec.H,
                      rec.v, rec.vd, rec.lam, rec.alpha, rec.scal, counters, i0, i1)
     st.t = float(acc[0])
