@@ -950,7 +950,7 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
     gp = g / (b * h)
     cM, cC, cK = 1.0, gp / bp, 1.0 / bp
     cv = 1.0 / gp
-    AP = np.empty((6, 6))
+    y6 = np.empty(6)  # Ad_n^T xi of one joint
     it = 0
     er0 = 1.0
     er = 0.0
@@ -1024,12 +1024,12 @@ def _step(S, Wk, sym, vmask, vone, store, piv, lwork, dropm,
                         s = 0.0
                         for l in range(6):
                             s += Aj[l, c] * sol[mr + l]
-                        AP[0, c] = s
+                        y6[c] = s
                     P = PA[j]
                     for c in range(6):
                         s = 0.0
                         for l in range(6):
-                            s += P[l, c] * AP[0, l]
+                            s += P[l, c] * y6[l]
                         sol[da + c] -= s
                 if jfb[j] >= 0:
                     db = fdof[jfb[j]]
