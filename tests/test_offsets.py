@@ -39,9 +39,9 @@ from scipy.optimize import brentq
 
 import se3dyn as sd
 from se3dyn import lie
-from se3dyn.integrator import GeneralizedAlpha, step_inputs
+from se3dyn.integrator import step_inputs
 from se3dyn.modelfile import ModelFileError, load_model, loads_model, save_model
-from se3dyn.system import LinearSolver, compile_model, evaluate, matrix_values
+from se3dyn.system import LinearSolver, compile_model, evaluate, increment_correction, matrix_values
 from test_assembly import A_SE2, _coefficients, _fd_tolerance
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -380,7 +380,8 @@ def test_iteration_matrix_with_offsets_is_the_jacobian(index2):
     inputs = step_inputs(s, 0.7)
     nq, nm = s.nq, s.nm
     Adn = [lie.adjoint_inv(HJ[g.ids]) for g in s.groups]
-    BnT = GeneralizedAlpha._BnT
+    def BnT(s_, Adn_, xi):
+        return increment_correction(s_, H, HJ, xi)
 
     def F(x):
         n, mu = x[:nq], x[nq:nq + nm]

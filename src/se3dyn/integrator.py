@@ -24,9 +24,33 @@ import numpy as np
 
 from se3dyn import lie
 from se3dyn.errors import ModelError, NewtonError, SimulationError
-from se3dyn.system import LinearSolver, System, evaluate, fill_log_coordinates, matrix_values
+from se3dyn.system import LinearSolver, System, evaluate, fill_log_coordinates
 
 __all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "energies", "interpolate"]
+
+#: modified Newton: refactorise when more than KMAX further iterations are predicted (a
+#: factorisation costs about five iterations on the benchmark models; 5-12 perform alike)
+KMAX = 8.0
+
+
+def _stepper(s: System, index2: bool, dropped: np.ndarray):
+    """The compiled Newton stepper of a system for one formulation and one set of dropped
+    (redundant) equations, with its sparse LU analysed once (cached on the system)."""
+    from se3dyn.system import _core, _engine, pattern
+
+    key = ("stepper", bool(index2), dropped.tobytes())
+    stp = s.pattern.get(key)
+    if stp is None:
+        eng, lay = _engine(s)
+        p = pattern(s, index2)
+        drop = np.zeros(s.nm, np.int64)
+        drop[dropped] = 1
+        groups = lay.groups2 if index2 else lay.groups3
+        stp = _core().Stepper(eng, bool(index2), int(p["N"]), p["indptr"].astype(np.int64),
+                              p["indices"].astype(np.int64), p["inv"].astype(np.int64),
+                              np.ascontiguousarray(groups, np.int64), drop)
+        s.pattern[key] = stp
+    return stp
 
 
 @dataclass
@@ -99,66 +123,42 @@ def _sample(f, t: float, shape: tuple[int, ...], item: str, what: str) -> np.nda
 
 
 def step_inputs(s: System, t: float) -> dict:
-    """Time-dependent loads at time t.
+    """Time-dependent inputs at time t.
 
     Returns
     -------
     dict
-        ``f`` (M, 3) inertial forces incl. gravity, ``f_load`` (M, 3) without gravity, ``m``
-        (M, 3) material torques, ``tau`` (nq,) actuator forces, ``ref``/``rate`` (nq,) PD targets.
+        ``u`` (nu,): gravity, load forces and torques, actuator values, PD targets and target
+        rates in the slots of :class:`se3dyn.system._Inputs` (what the element kernels read).
 
     Raises
     ------
     SimulationError
         When a time function fails, changes size or returns a non-finite value (naming it).
     """
-    M, nq = s.M, s.nq
-    f_load = np.zeros((M, 3))
-    mt = np.zeros((M, 3))
-    for i, F, T, item in s.loads:
-        if F is not None:
-            f_load[i] += _sample(F, t, (3,), item, "force")
-        if T is not None:
-            mt[i] += _sample(T, t, (3,), item, "torque")
-    tau = np.zeros(nq)
-    for d, tf, item in s.actuators:
-        tau[d] += _sample(tf, t, d.shape, item, "value")
-    ref = np.zeros(nq)
-    rate = np.zeros(nq)
-    for d, tgt, rt, item in s.controls:
-        ref[d] = _sample(tgt, t, d.shape, item, "target")
-        rate[d] = (_sample(tgt.rate, t, d.shape, item, "target rate") if rt is None
-                   else _sample(rt, t, d.shape, item, "target_rate"))
-    f = f_load + s.node_mass[:, None] * s.gravity
-    return dict(f=f, f_load=f_load, m=mt, tau=tau, ref=ref, rate=rate)
+    ins = s.inputs
+    u = np.zeros(ins.nu)
+    u[:3] = ins.gravity
+    for slot, k, tf, item, what in ins.sources:
+        u[slot:slot + k] = _sample(tf, t, (k,), item, what)
+    return dict(u=u)
 
 
 def energies(s: System, st: State, inputs: dict) -> dict:
-    """Kinetic, gravity-potential and spring energy of a state, and the three powers.
+    """Kinetic, gravity-potential and elastic energy of a state, and the three powers, from
+    the element kernels.
 
     Returns
     -------
-    dict with floats ``kinetic`` (Eq. (47)), ``potential`` (gravity), ``spring`` (Eq. (62)),
-    and ``power`` ndarray (3,) = (actuator incl. PD, external loads, damper dissipation).
+    dict with floats ``kinetic`` (Eq. (47)), ``potential`` (gravity), ``spring`` (Eq. (62) and
+    the elastic elements), and ``power`` ndarray (3,) = (actuators incl. PD, external loads,
+    dissipation).
     """
-    vb = st.v[s.node_dofidx]
-    mass = s.node_mass[s.node_free]
-    J = s.node_J[s.node_free]
-    kin = 0.5 * float(np.sum(mass * np.einsum("ni,ni->n", vb[:, :3], vb[:, :3]))
-                      + np.einsum("ni,nij,nj->", vb[:, 3:], J, vb[:, 3:]))
-    x = st.H[:, :3, 3]
-    pot = -float(np.sum(s.node_mass * (x @ s.gravity)))
-    e = st.alpha - s.dof_reference
-    spring = 0.5 * float(np.sum(s.dof_stiffness * e * e))
-    v = st.v
-    tau_pd = -s.dof_kp * (st.alpha - inputs["ref"]) - s.dof_kd * (v - inputs["rate"])
-    p_act = float(np.sum((inputs["tau"] + tau_pd) * v * s.dof_is_joint))
-    R = st.H[s.node_free, :3, :3]
-    xdot = np.einsum("nij,nj->ni", R, vb[:, :3])
-    p_ext = float(np.sum(inputs["f_load"][s.node_free] * xdot)
-                  + np.sum(inputs["m"][s.node_free] * vb[:, 3:]))
-    p_diss = float(np.sum(s.dof_damping * v * v))
-    return dict(kinetic=kin, potential=pot, spring=spring, power=np.array([p_act, p_ext, p_diss]))
+    z = np.zeros(s.nq)
+    ev = evaluate(s, st.H, st.HJ, st.alpha, z, st.v, z, st.lam, inputs, full_alpha=False)
+    e = ev.energy
+    return dict(kinetic=float(e[0]), potential=float(e[1]), spring=float(e[2]),
+                power=e[3:6].copy())
 
 
 @dataclass(frozen=True)
@@ -192,18 +192,13 @@ class GeneralizedAlpha:
         (:func:`se3dyn.analysis.redundant_equations`): leave them out with zero multipliers
         (default) or raise :class:`ModelError` naming them.
     engine : {"auto", "compiled", "numpy"}
-        ``"auto"`` (default): the compiled kernels of :mod:`se3dyn.fast` (numba; Newton
-        iterations in machine code, O(N) block LU of :mod:`se3dyn.blocklu`) where they apply,
-        the vectorised numpy implementation otherwise (springs on non-abelian joints) and for
-        any step the kernels cannot finish (a singular block pivot; a failing step is repeated
-        by numpy, which names the cause). ``"numpy"``: always the numpy implementation (the
-        reference the kernels are tested against). ``"compiled"``: like auto, but an error
-        when the kernels do not apply.
+        Kept for compatibility: every evaluation and Newton iteration runs in the compiled
+        engine (``se3dyn/_core``, C++ built at install); there is no second implementation.
     newton : {"modified", "full"}
-        Compiled engine only: ``"modified"`` (default) factorises the iteration matrix at the
+        ``"modified"`` (default) factorises the iteration matrix at the
         predictor of each step and keeps it over the iterations while Newton contracts fast
         enough to converge within a few more iterations, refactorising at the current iterate
-        otherwise (see :func:`se3dyn.fast._step`); ``"full"`` refactorises at every
+        otherwise (see ``se3dyn/_core/newton.hpp``); ``"full"`` refactorises at every
         iteration. Both converge to the same tolerances.
     """
 
@@ -238,17 +233,8 @@ class GeneralizedAlpha:
                              self.engine)
 
     def compiled(self, s: System) -> bool:
-        """Whether steps of this system run in the compiled kernels (:mod:`se3dyn.fast`)."""
-        if self.engine == "numpy":
-            return False
-        from se3dyn import fast
-
-        ok = fast.supported(s)
-        if not ok and self.engine == "compiled":
-            raise ModelError("integrator", "engine", "a model the compiled kernels cover "
-                             "(no springs on non-abelian joints)", "compiled",
-                             hint="use engine='auto' or 'numpy'")
-        return ok
+        """Whether steps of this system run in the compiled engine: always."""
+        return True
 
     @property
     def index2(self) -> bool:
@@ -374,22 +360,16 @@ class GeneralizedAlpha:
              ) -> tuple[State, StepInfo]:
         """Advance one step of size h; raises :class:`NewtonError` when Newton fails.
 
-        Newton unknowns: the increment n (nq), the scaled multipliers ``lambda / beta'`` (nm)
-        and, for the index-2 formulation, ``xi`` (nm). Velocities and accelerations follow the
-        part ``m = n - B_n^T xi`` of the increment: ``dv = gamma' dm``, ``dvd = beta' dm``.
-        Rows: dynamics / beta' (Eq. (39)), constraints (Eq. (40)) and, for index 2, velocity
-        constraints / gamma'; all O(1) whatever h.
+        The Newton iterations run in the compiled engine (``se3dyn/_core/newton.hpp``, one
+        Newton loop for every kind of run): unknowns the increment n (nq), the scaled
+        multipliers ``lambda / beta'`` (nm) and, for the index-2 formulation, ``xi`` (nm).
+        Velocities and accelerations follow the part ``m = n - B_n^T xi`` of the increment:
+        ``dv = gamma' dm``, ``dvd = beta' dm``. Rows: dynamics / beta' (Eq. (39)), constraints
+        (Eq. (40)) and, for index 2, velocity constraints / gamma'; all O(1) whatever h.
+        ``solver`` is accepted for compatibility and not used.
         """
-        if self.compiled(s):
-            out = self._fast_step(s, st, h)
-            if out is not None:
-                return out
-        solver = self._solver_for(s, st, solver)
         am, af, g, b = self.params
         t1 = st.t + h
-        nq, nm = s.nq, s.nm
-        idx2 = self.index2
-        drop = st.dropped
         try:
             inputs = step_inputs(s, t1)
         except SimulationError as exc:
@@ -400,85 +380,40 @@ class GeneralizedAlpha:
         a_n = st.a
         if st.h_last > 0 and h != st.h_last:
             a_n = st.vd + (h / st.h_last) * (st.a - st.vd)
-        # predictor: vd_{n+1} = vd_n (constant acceleration; the classical vd_{n+1} = 0 starts
-        # Newton O(1) away from the solution, this one O(h) away: fewer iterations, same
-        # converged step). a_{n+1} of Eq. (43) at the predicted vd_{n+1}.
-        vd = st.vd.copy()
-        a = (st.vd - am * a_n) / (1 - am)
-        v = st.v + h * (1 - g) * a_n + h * g * a
-        n = h * st.v + h * h * (0.5 - b) * a_n + h * h * b * a
-        lam = st.lam.copy()
-        bp = (1 - am) / (b * h * h * (1 - af))
-        gp = g / (b * h)
-        coef = (1.0, gp / bp, 1.0 / bp)
-        stab = None
-        if idx2 and nm:
-            stab = dict(cv=1.0 / gp, Adn=[lie.adjoint_inv(st.HJ[gr.ids]) for gr in s.groups])
-        ltol = self.tol_constraint * s.length_scale
-        it = 0
-        er0 = 1.0
-        while True:
+        stp = _stepper(s, self.index2, st.dropped)
+        F = s.M + s.m
+        Hall = np.ascontiguousarray(np.concatenate([st.H, st.HJ]).reshape(F, 4, 4))
+        Hout = np.empty_like(Hall)
+        nq, nm = s.nq, s.nm
+        alpha, v, vd, a, n = (np.zeros(nq) for _ in range(5))
+        lam = np.zeros(nm)
+        c = np.ascontiguousarray
+        status, it, er, ep, nfac = stp.step(
+            Hall, c(st.alpha, float), c(st.v, float), c(st.vd, float), c(a_n, float),
+            c(st.lam, float), inputs["u"], float(h), am, af, g, b, self.tol_residual,
+            self.tol_constraint * s.length_scale, float(s.length_scale), self.max_iter,
+            self.newton == "modified", KMAX, Hout, alpha, v, vd, a, lam, n)
+        if status != 0:
+            stab = dict(cv=b * h / g) if (self.index2 and nm) else None
             ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, full_alpha=False,
                           velocity=stab is not None)
-            fs = max(ev.f_scale, 1e-300)
-            er = float(np.abs(ev.r).max(initial=0.0)) / fs
-            ep = float(np.abs(ev.phi).max(initial=0.0))
-            if stab is not None:
-                ep = max(ep, float(np.abs(ev.psi).max(initial=0.0)) / gp)
-            if not (np.isfinite(er) and np.isfinite(ep)):
-                self._fail(s, t1, h, it, ev, "the iterate became non-finite")
-            if er <= self.tol_residual and ep <= ltol:
-                break
-            if it >= self.max_iter:
-                self._fail(s, t1, h, it, ev, f"no convergence within max_iter={self.max_iter} "
-                           "iterations")
-            if it >= 3 and (ep > 10.0 * s.length_scale or er > 1e3 * max(er0, 1.0)):
-                self._fail(s, t1, h, it, ev, "Newton is diverging (try a smaller step or "
-                           "rho_inf < 1)")
-            if it == 0:
-                er0 = er
-            try:
-                solver.factor(matrix_values(s, ev, coef, stab), f"t={t1:.9g}")
-            except SimulationError as exc:
-                self._fail(s, t1, h, it, ev, "the iteration matrix is singular (a mechanism "
-                           "in a singular configuration, a massless node no joint determines, "
-                           f"or a diverged iterate) [{exc}]")
-            phi = ev.phi.copy()
-            phi[drop] = 0.0
-            if stab is not None:
-                psi = ev.psi / gp
-                psi[drop] = 0.0
-                d = solver.solve(-np.concatenate([ev.r / bp, phi, psi]))
-                dn = d[:nq]
-                dm = dn - self._BnT(s, stab["Adn"], d[nq + nm:])
-            else:
-                d = solver.solve(-np.concatenate([ev.r / bp, phi]))
-                dn = dm = d[:nq]
-            n += dn
-            v += gp * dm
-            vd += bp * dm
-            lam += bp * d[nq:nq + nm]
-            it += 1
-            # round-off stagnation: correction at the level of the increment's last digits
-            if (ep <= ltol and np.abs(dn).max(initial=0.0)
-                    <= 4e-16 * max(np.abs(n).max(initial=0.0), 1e-300)):
-                ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, None,
-                              full_alpha=False, velocity=stab is not None)
-                er = float(np.abs(ev.r).max(initial=0.0)) / max(ev.f_scale, 1e-300)
-                ep = float(np.abs(ev.phi).max(initial=0.0))
-                if stab is not None:
-                    ep = max(ep, float(np.abs(ev.psi).max(initial=0.0)) / gp)
-                break
-        fill_log_coordinates(s, ev.HJ, ev.alpha)  # coordinates of non-abelian joints
-        a = a + (1 - af) / (1 - am) * (vd - st.vd)  # Eq. (43); the predicted part is in a
+            why = {1: "the iterate became non-finite",
+                   2: f"no convergence within max_iter={self.max_iter} iterations",
+                   3: "Newton is diverging (try a smaller step or rho_inf < 1)",
+                   4: "the iteration matrix is singular (a mechanism in a singular "
+                      "configuration, a massless node no joint determines, or a diverged "
+                      "iterate)"}[status]
+            self._fail(s, t1, h, it, ev, why)
+        H, HJ = Hout[:s.M], Hout[s.M:]
+        fill_log_coordinates(s, HJ, alpha)  # coordinates of non-abelian joints
         # local truncation error of the increment (Zienkiewicz-Xie): the position update
         # n = h v + h^2 ((1/2 - beta) a_n + beta a_{n+1}) reproduces the Taylor term
-        # h^3 q^(3) / 6
-        # as beta h^2 (a_{n+1} - a_n) ~ beta h^3 q^(3), leaving (beta - 1/6) h^2 (a_{n+1} - a_n)
+        # h^3 q^(3) / 6 as beta h^2 (a_{n+1} - a_n) ~ beta h^3 q^(3), leaving
+        # (beta - 1/6) h^2 (a_{n+1} - a_n)
         err = (b - 1.0 / 6.0) * h * h * (a - a_n)
-        new = State(t=t1, H=ev.H, HJ=ev.HJ, v=v, vd=vd, a=a, lam=lam, alpha=ev.alpha,
+        new = State(t=t1, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
                     work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated,
-                    dropped=drop, h_last=h)
+                    dropped=st.dropped, h_last=h)
         e = energies(s, new, inputs)
         p = e["power"]
         new.power = p
@@ -486,56 +421,7 @@ class GeneralizedAlpha:
         new.work_act += 0.5 * h * (st.power[0] + p[0])
         new.work_ext += 0.5 * h * (st.power[1] + p[1])
         new.dissipated += 0.5 * h * (st.power[2] + p[2])
-        return new, StepInfo(it, er, ep, e, n, err)
-
-    def _fast_step(self, s: System, st: State, h: float):
-        """The step in the compiled kernels; None when they could not finish it (the numpy
-        implementation then repeats it, and reports or recovers)."""
-        from se3dyn import fast
-
-        t1 = st.t + h
-        try:
-            inputs = step_inputs(s, t1)
-        except SimulationError as exc:
-            raise SimulationError(f"step h={h:.6g} to {exc}") from None
-        stp = fast.stepper(s, self.index2, st.dropped)
-        status, a_n, H, HJ, alpha, v, vd, a, lam, n = stp.step(
-            st, h, self.params, inputs, self.tol_residual,
-            self.tol_constraint * s.length_scale, self.max_iter, self.newton == "modified")
-        if status != 0:
-            return None
-        stp.log_coordinates(HJ, alpha)
-        e = stp.energies(H, alpha, v, inputs)
-        new = State(t=t1, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
-                    work_act=st.work_act + 0.5 * h * (st.power[0] + e[3]),
-                    work_ext=st.work_ext + 0.5 * h * (st.power[1] + e[4]),
-                    dissipated=st.dissipated + 0.5 * h * (st.power[2] + e[5]),
-                    power=e[3:6].copy(), dropped=st.dropped, h_last=h)
-        b = self.params[3]
-        err = (b - 1.0 / 6.0) * h * h * (a - a_n)
-        it, er, ep = stp.info[:3]
-        en = dict(kinetic=float(e[0]), potential=float(e[1]), spring=float(e[2]),
-                  power=new.power)
-        return new, StepInfo(int(it), float(er), float(ep), en, n, err)
-
-    @staticmethod
-    def _BnT(s: System, Adn: list, xi: np.ndarray) -> np.ndarray:
-        """``B_n^T xi`` (nq,): the increment correction of the index-2 formulation (Eq. (58)):
-        ``(Ad_n PA)^T xi`` on node A, ``-PB^T xi`` on node B, ``A^T xi`` on the joint
-        coordinates (``Ad_n = Ad_{H_J,n^-1}``, ``PA = Ad(X_A^-1)``, ``PB = Ad(X_B^-1)``)."""
-        out = np.zeros(s.nq + 1)
-        for gr, Ad in zip(s.groups, Adn, strict=True):
-            x = xi[gr.mult]
-            if gr.offset:
-                Ad = Ad @ gr.PA
-            out += np.bincount(np.where(gr.dof_a < 0, s.nq, gr.dof_a).ravel(),
-                               np.einsum("jki,jk->ji", Ad, x).ravel(), s.nq + 1)
-            xb = np.einsum("jki,jk->ji", gr.PB, x) if gr.offset else x
-            out -= np.bincount(np.where(gr.dof_b < 0, s.nq, gr.dof_b).ravel(), xb.ravel(),
-                               s.nq + 1)
-            if gr.k:
-                out[gr.jdof.ravel()] += np.einsum("jik,ji->jk", gr.A, x).ravel()
-        return out[:s.nq]
+        return new, StepInfo(int(it), float(er), float(ep), e, n, err)
 
     def _fail(self, s: System, t: float, h: float, it: int, ev, why: str):
         r = np.abs(ev.r)

@@ -130,10 +130,8 @@ def _row_scale(s: System, L: float) -> np.ndarray:
 
 
 def _zero_inputs(s: System) -> dict:
-    """Inputs of :func:`evaluate` with no load at all (assembly)."""
-    z = np.zeros(s.nq)
-    return dict(f=np.zeros((s.M, 3)), f_load=np.zeros((s.M, 3)), m=np.zeros((s.M, 3)),
-                tau=z, ref=z.copy(), rate=z.copy())
+    """Inputs of :func:`evaluate` with no load at all, not even gravity (assembly)."""
+    return dict(u=np.zeros(s.inputs.nu))
 
 
 class _Blocks:

@@ -217,50 +217,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         exc.result = rec.results(stats)
         raise exc
 
-    if integ.compiled(s):
-        stats["linear_solver"] = "supernodal block LU (se3dyn.blocklu)"
-    if (not adaptive and grid is None and progress is None and on_output is None
-            and integ.compiled(s)):
-        # the whole time loop in the compiled kernels; a step they cannot finish is done by
-        # GeneralizedAlpha.step (numpy), which recovers or reports, then the loop resumes
-        from se3dyn import fast
-
-        times = np.array([t_start + (k + 1) * step if k + 1 < nsteps else t_end
-                          for k in range(nsteps)])
-        tables = fast.input_tables(s, times)
-        stp = fast.stepper(s, integ.index2, st.dropped)
-        fac0 = stp.factorizations  # the stepper is cached on the system: count this run only
-        st = st.copy()
-        stats["engine"] = "compiled"
-        while i < nsteps:
-            status, i, its = fast.run_fixed(stp, st, times, i, tables[-1], tables, integ.params,
-                                            tol_residual, tol_constraint * s.length_scale,
-                                            max_iter, output_every, rec,
-                                            newton == "modified")
-            stats["newton_iterations"] += its
-            if status == 0 and i >= nsteps:
-                break
-            t1 = times[i]
-            try:
-                new, info = integ.step(s, st, t1 - st.t, solver)
-            except SimulationError as exc:
-                fail(exc)
-            new.t = t1
-            stats["newton_iterations"] += info.iterations
-            i += 1
-            if i % output_every == 0 or i == nsteps:
-                e = info.energies
-                rec.add(new, e["kinetic"], e["potential"], e["spring"], info.iterations,
-                        info.residual, info.constraint)
-            st = new
-            stats["fallback_steps"] = stats.get("fallback_steps", 0) + 1
-        stats["factorizations"] = stp.factorizations - fac0
-        if nsteps:
-            hs = np.diff(np.concatenate([[t_start], times]))
-            stats["h_min_used"] = float(hs.min())
-            stats["h_max_used"] = float(hs.max())
-    else:
-        stats["engine"] = "compiled" if integ.compiled(s) else "numpy"
+    stats["linear_solver"] = "sparse LU (se3dyn/_core/sparse_lu.hpp)"
+    stats["engine"] = "compiled"
     while st.t < t_end and (adaptive or i < nsteps):
         if adaptive:
             h = min(h, t_end - st.t)

@@ -132,8 +132,11 @@ class _StepFailure(Exception):
 
 
 def _scaled_inputs(full: dict, lf: float) -> dict:
-    return dict(f=lf * full["f"], f_load=lf * full["f_load"], m=lf * full["m"],
-                tau=lf * full["tau"], ref=full["ref"], rate=np.zeros_like(full["rate"]))
+    """Inputs at the load factor lf: gravity, loads and actuators scaled, PD targets kept,
+    target rates zero (slots of :class:`se3dyn.system._Inputs`)."""
+    kind = full["kind"]
+    scale = np.where(kind == 3, 1.0, np.where(kind == 4, 0.0, lf))
+    return dict(u=scale * full["u"])
 
 
 class _Newton:
@@ -285,7 +288,7 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         raise ModelError("static_equilibrium", "tol", "a positive tolerance below 1", tol)
     if not (isinstance(t, int | float) and math.isfinite(t)):
         raise ModelError("static_equilibrium", "t", "a finite time", t)
-    full = step_inputs(s, float(t))
+    full = dict(step_inputs(s, float(t)), kind=s.inputs.kind)
     newton = _Newton(s, tol, max_iter)
     H, HJ = s.node_H0.copy(), s.joint_H0.copy()
     alpha = np.zeros(s.nq)

@@ -155,6 +155,9 @@ class System(LayoutCounts):
     items: tuple[str, ...]  # (N,) item name of each row
     length_scale: float
     pattern: dict = field(repr=False)
+    node_com: np.ndarray = None  # (M, 3) centre of mass in the node's material frame
+    springs: tuple = ()  # point spring-dampers (node a, node b, c_a, c_b, k, d, L0)
+    inputs: object = None  # _Inputs: slots of the time-dependent inputs u
 
     @property
     def N(self) -> int:
@@ -303,86 +306,111 @@ def compile_model(model: Model) -> System:
         dof_damping=dof_C, dof_kp=dof_kp, dof_kd=dof_kd, dof_is_joint=dof_is_joint,
         gravity=model.gravity.copy(), actuators=tuple(actuators), controls=tuple(controls),
         loads=loads, labels=tuple(labels), items=tuple(items), length_scale=max(L, 1.0),
-        pattern={})
+        pattern={}, node_com=np.zeros((M, 3)), springs=())
+    sysd["inputs"] = _Inputs(sysd, model)
     return System(**sysd)
 
 
+class _Inputs:
+    """Slots of the time-dependent inputs ``u`` (nu,) handed to the element kernels.
+
+    ``u[0:3]`` is gravity; then per load its force (3) and torque (3) components, per actuated
+    joint its k actuator values, per controlled joint its k PD targets and k target rates.
+    ``kind`` (nu,) tells each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD
+    target rate), for load stepping in statics.
+    """
+
+    def __init__(self, d: dict, model: Model):
+        nidx = {n: i for i, n in enumerate(d["node_names"])}
+        self.sources = []  # (slot, k, time function, item, what, is_rate_of)
+        kind = [0, 0, 0]
+        self.load_slots = []
+        for ld in model.loads:
+            fs = ts = -1
+            if ld.force is not None:
+                fs = len(kind)
+                self.sources.append((fs, 3, ld.force, f"load '{ld.name}'", "force"))
+                kind += [1] * 3
+            if ld.torque is not None:
+                ts = len(kind)
+                self.sources.append((ts, 3, ld.torque, f"load '{ld.name}'", "torque"))
+                kind += [1] * 3
+            self.load_slots.append((nidx[ld.node], np.zeros(3), fs, ts, 0, 0))
+        self.joint_slots = []  # (slot, k, kind, joint index)
+        for j, js in enumerate(model.joints):
+            k = js.k
+            if js.actuator is not None:
+                item = f"joint '{js.name}' actuator"
+                self.joint_slots.append((len(kind), k, "tau", j))
+                self.sources.append((len(kind), k, js.actuator, item, "value"))
+                kind += [2] * k
+            if js.control is not None:
+                item = f"joint '{js.name}' control target"
+                tgt, rt = js.control.target, js.control.target_rate
+                self.joint_slots.append((len(kind), k, "ref", j))
+                self.sources.append((len(kind), k, tgt, item, "target"))
+                kind += [3] * k
+                self.joint_slots.append((len(kind), k, "rate", j))
+                if rt is None:
+                    self.sources.append((len(kind), k, tgt.rate, item, "target rate"))
+                else:
+                    self.sources.append((len(kind), k, rt, item, "target_rate"))
+                kind += [4] * k
+        self.kind = np.array(kind, np.int64)
+        self.nu = len(kind)
+        self.gravity = np.asarray(model.gravity, float)
+
+
 # ---------------------------------------------------------------------------------------------
-def _block(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Row/col indices of a batch of dense blocks: rows (nb, r), cols (nb, c) -> (nb, r, c)."""
-    nb, r = rows.shape
-    c = cols.shape[1]
-    R = np.broadcast_to(rows[:, :, None], (nb, r, c))
-    C = np.broadcast_to(cols[:, None, :], (nb, r, c))
-    return R.ravel(), C.ravel()
+_CORE = None
 
 
-def _joint_pairs(s: System) -> np.ndarray:
-    """Pairs of joints sharing a free node, for the block ``B_{n+1} B_n^T`` of the stabilized
-    index-2 matrix: rows ``(i, side_i, j, side_j)`` with side 0 = node A, 1 = node B."""
-    att: dict[int, list[tuple[int, int]]] = {}
-    for j in range(s.m):
-        for side, node in ((0, s.joint_a[j]), (1, s.joint_b[j])):
-            if not s.node_fixed[node]:
-                att.setdefault(int(node), []).append((j, side))
-    pairs = [(i, si, j, sj) for lst in att.values() for i, si in lst for j, sj in lst]
-    return np.array(pairs, dtype=np.int64).reshape(-1, 4)
+def _core():
+    """The compiled module, with the Taylor series of :mod:`se3dyn.lie` handed over once."""
+    global _CORE
+    if _CORE is None:
+        from se3dyn import _engine
+
+        _engine.set_series(lie._C2, lie._C3, lie._C4, lie._C5, float(lie.SERIES_CUTOFF))
+        _CORE = _engine
+    return _CORE
+
+
+def _engine(s: System):
+    """The compiled engine of a system and its :class:`se3dyn.assembly.Layout` (built once)."""
+    if "engine" not in s.pattern:
+        from se3dyn.assembly import layout
+
+        _engine = _core()
+
+        lay = layout(s, s.inputs)
+        s.pattern["layout"] = lay
+        s.pattern["engine"] = _engine.Engine(lay.tables)
+    return s.pattern["engine"], s.pattern["layout"]
 
 
 def _pattern(s: System, index2: bool = False) -> dict:
-    """Fixed sparsity pattern: the (row, col) of every value produced by :func:`matrix_values`, in
-    the same order, and the map of each value to its slot in CSC storage (duplicates summed).
-
-    The index-3 matrix has ``N = nq + nm`` rows (unknowns, multipliers); the stabilized index-2
-    matrix ``nq + 2 nm`` (unknowns, multipliers, velocity-constraint multipliers xi)."""
-    N, rows, cols, pairs = pattern_entries(s, index2)
-    keep = np.flatnonzero((rows >= 0) & (cols >= 0))
-    key = cols[keep] * N + rows[keep]  # column-major: CSC order after sorting
+    """Fixed sparsity pattern: the (row, col) of every value of the iteration matrix, in the
+    order the engine writes them (:mod:`se3dyn.assembly`), and the map of each value to its
+    slot in CSC storage."""
+    N, rows, cols = pattern_entries(s, index2)
+    key = cols * N + rows  # column-major: CSC order after sorting
     uniq, inv = np.unique(key, return_inverse=True)
     indices = (uniq % N).astype(np.int32)
     colnum = uniq // N
     indptr = np.searchsorted(colnum, np.arange(N + 1)).astype(np.int32)
-    dense_key = rows[keep] * N + cols[keep]
-    return dict(keep=keep, inv=inv, nnz=len(uniq), indices=indices, indptr=indptr,
-                dense_key=dense_key, nvals=len(rows), N=N, rows=rows[keep], cols=cols[keep],
-                pairs=pairs)
+    dense_key = rows * N + cols
+    return dict(keep=np.arange(len(rows)), inv=inv, nnz=len(uniq), indices=indices,
+                indptr=indptr, dense_key=dense_key, nvals=len(rows), N=N, rows=rows, cols=cols)
 
 
 def pattern_entries(s: System, index2: bool = False) -> tuple:
-    """(N, rows, cols, pairs) of :func:`_pattern` without the CSC map: the row and column
-    (nvals,) of every value of :func:`matrix_values` in order, -1 for values on clamped
-    nodes, which are ignored (what the block LU of :mod:`se3dyn.blocklu` needs)."""
-    nq, nm = s.nq, s.nm
-    N = nq + (2 * nm if index2 else nm)
-    rows, cols = [], []
-
-    def add(rr, cc):
-        r, c = _block(rr, cc)
-        rows.append(r)
-        cols.append(c)
-
-    add(s.node_dofidx, s.node_dofidx)
-    for g in s.groups:
-        mrow = nq + g.mult
-        for rr, cc in ((mrow, g.dof_a), (mrow, g.dof_b), (mrow, g.jdof), (g.dof_a, mrow),
-                       (g.dof_b, mrow), (g.jdof, mrow), (g.dof_a, g.jdof), (g.jdof, g.jdof)):
-            add(rr, cc)
-    diag = np.arange(nq, nq + nm)[:, None]
-    add(diag, diag)  # zero, or 1 for dropped redundant equations
-    pairs = np.zeros((0, 4), np.int64)
+    """(N, rows, cols): the matrix size and the row and column (nvals,) of every value."""
+    _, lay = _engine(s)
+    N = s.nq + (2 * s.nm if index2 else s.nm)
     if index2:
-        X = nq + nm
-        for g in s.groups:
-            xrow = X + g.mult
-            for rr, cc in ((g.dof_a, xrow), (g.dof_b, xrow), (g.jdof, xrow), (xrow, g.dof_a),
-                           (xrow, g.dof_b), (xrow, g.jdof)):
-                add(rr, cc)
-        pairs = _joint_pairs(s)
-        mult6 = 6 * np.arange(s.m)[:, None] + np.arange(6)
-        add(X + mult6[pairs[:, 0]], X + mult6[pairs[:, 2]])
-        add(X + mult6, X + mult6)  # A A^T of each joint
-        add(diag + nm, diag + nm)
-    return N, np.concatenate(rows), np.concatenate(cols), pairs
+        return N, lay.rows2, lay.cols2
+    return N, lay.rows3, lay.cols3
 
 
 def pattern(s: System, index2: bool = False) -> dict:
@@ -406,6 +434,8 @@ class Evaluation:
     f_scale : float, magnitude of the forces entering r (for relative tolerances)
     values : (nvals,) iteration-matrix values in pattern order, or None
     psi : (nm,) velocity constraints ``Phi_q v`` (only when asked for), or None
+    energy : (6,) kinetic, potential, elastic energy and the actuator, load and dissipation
+        powers of the iterate (see :func:`se3dyn.integrator.energies`)
     """
 
     H: np.ndarray
@@ -417,23 +447,16 @@ class Evaluation:
     values: np.ndarray | None = None
     cache: dict | None = field(default=None, repr=False)
     psi: np.ndarray | None = None
-
-
-def _lam_matrix(lam: np.ndarray) -> np.ndarray:
-    """(nj, 6) -> (nj, 6, 6): the matrix Lambda with ad6(d)^T lam = Lambda d."""
-    out = np.zeros(lam.shape[:-1] + (6, 6))
-    LU = lie.hat3(lam[..., :3])
-    out[..., :3, 3:] = LU
-    out[..., 3:, :3] = LU
-    out[..., 3:, 3:] = lie.hat3(lam[..., 3:])
-    return out
+    energy: np.ndarray | None = None
 
 
 def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n: np.ndarray,
              v: np.ndarray, vd: np.ndarray, lam: np.ndarray, inputs: dict,
              coef: tuple[float, float, float] | None = None, *,
-             full_alpha: bool = True, velocity: bool = False) -> Evaluation:
-    """Evaluate the residual, the constraints and (if ``coef``) the scaled iteration matrix.
+             full_alpha: bool = True, velocity: bool = False, stab: dict | None = None
+             ) -> Evaluation:
+    """Evaluate the residual, the constraints and (if ``coef``) the scaled iteration matrix by
+    the element kernels of the compiled engine (one implementation, :mod:`se3dyn.assembly`).
 
     Parameters
     ----------
@@ -447,151 +470,59 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     lam : (nm,)
         Multipliers.
     inputs : dict
-        Time-dependent loads at the end of the step: ``f`` (M, 3) inertial forces incl. gravity,
-        ``m`` (M, 3) material torques, ``tau`` (nq,) actuator forces, ``ref`` and ``rate`` (nq,)
-        PD targets.
+        ``u`` (nu,): the time-dependent inputs at the end of the step (:func:`se3dyn.
+        integrator.step_inputs`).
     coef : (cM, cC, cK) or None
         Coefficients of M, C_T and K_T T in the iteration matrix (``(1, gamma'/beta', 1/beta')``
-        for the scaled Newton matrix; ``(1, 0, 0)`` for the initial accelerations). When None,
-        the matrix is not evaluated; :func:`matrix_values` evaluates it later from the cached
-        intermediates.
+        for the scaled Newton matrix; ``(1, 0, 0)`` for the initial accelerations).
     full_alpha : bool
-        Compute the log coordinates of non-abelian joints even where no spring needs them
-        (False inside Newton iterations; see :func:`fill_log_coordinates`).
+        Compute the log coordinates of non-abelian joints (outputs) too.
     velocity : bool
-        Also evaluate the velocity constraints ``psi = Phi_q v`` (nm,) (Eq. (58) applied to v:
-        ``Ad_{H_J^-1} PA v_A - PB v_B + A v_J`` per joint, ``PA = Ad(X_A^-1)``,
-        ``PB = Ad(X_B^-1)``, the identity for joints without offsets) for the stabilized index-2
-        formulation.
-
-    Notes
-    -----
-    Joints (Eqs. (55)-(58)) act between the attachment frames ``H_A X_A`` and ``H_B X_B``
-    (``X = I`` without ``at``): ``G = (H_B X_B)^-1 (H_A X_A) H_J``, ``Phi = vect(G)``; the
-    forces ``Phi_q^T lambda`` are ``PA^T Ad_{H_J^-1}^T lambda`` on node A, ``-PB^T lambda`` on
-    node B and ``A^T lambda`` on the joint coordinates (Eq. (58), at ``Phi = 0``).
+        Also evaluate the velocity constraints ``psi = Phi_q v`` (nm,) (index 2).
+    stab : dict or None
+        With ``coef``: the stabilized index-2 matrix, ``cv`` = 1/gamma' (its blocks ``B_n``
+        come from the frames at the start of the step, ``Hn``/``HJn``).
 
     Returns
     -------
     Evaluation
     """
-    nq = s.nq
-    M = s.M
-    # --- nodes: H = Hn exp(n_I) (Eq. (38)), T_SE(3)(n_I) (Eq. (21))
-    n_node = np.zeros((M, 6))
-    n_node[s.node_free] = n[s.node_dofidx]
-    H = Hn.copy()
-    E, Tf = lie.exp_tangent_se3(n_node[s.node_free])
-    H[s.node_free] = Hn[s.node_free] @ E
-    Tn = np.broadcast_to(np.eye(6), (M, 6, 6)).copy()
-    Tn[s.node_free] = Tf
-    R = H[:, :3, :3]
-    vb = v[s.node_dofidx]  # (nf, 6)
-    vdb = vd[s.node_dofidx]
-    mass = s.node_mass[s.node_free]
-    J = s.node_J[s.node_free]
-    vU, vO = vb[:, :3], vb[:, 3:]
-    JO = np.einsum("nij,nj->ni", J, vO)
-    # inertia forces, Eq. (51)
-    fin = np.concatenate([mass[:, None] * (vdb[:, :3] + np.cross(vO, vU)),
-                          np.einsum("nij,nj->ni", J, vdb[:, 3:]) + np.cross(vO, JO)], axis=1)
-    # external forces, Eq. (66): g_ext,I = (R^T f, m)
-    RtF = np.einsum("nji,nj->ni", R[s.node_free], inputs["f"][s.node_free])
-    gext = np.concatenate([RtF, inputs["m"][s.node_free]], axis=1)
-    r = np.zeros(nq + 1)  # last slot collects contributions to clamped nodes
-    r[s.node_dofidx] = fin - gext
-    f_scale = max(float(np.abs(fin).max(initial=0.0)), float(np.abs(gext).max(initial=0.0)))
-    cache: dict = {"nodes": (Tn, RtF, mass, J, vU, vO, JO), "groups": []}
-
-    # --- joints, generic kernel over the batches of equal k
-    m = s.m
-    HJ = np.zeros((m, 4, 4))
-    phi = np.zeros(s.nm)
-    psi = np.zeros(s.nm) if velocity else None
-    alpha = np.zeros(nq)
-    lam_max = float(np.abs(lam).max(initial=0.0))
-    gint_max = 0.0
-    for g in s.groups:
-        k, nj = g.k, len(g.ids)
-        if k:
-            nJ = np.einsum("jik,jk->ji", g.A, n[g.jdof])
-            EJ, TJ6 = lie.exp_tangent_se3(nJ)
-            HJg = HJn[g.ids] @ EJ
-            TJ = TJ6 @ g.A  # Eqs. (27), (59)
-        else:
-            HJg = HJn[g.ids].copy()
-            TJ = np.zeros((nj, 6, 0))
-        HJ[g.ids] = HJg
-        Ad = lie.adjoint_inv(HJg)  # Eq. (57)
-        lg = lam[g.mult]  # (nj, 6)
-        if g.offset:
-            # attachment frames H_A X_A, H_B X_B: G = (H_B X_B)^-1 H_A X_A H_J; a variation
-            # H_A exp(d_a) gives G exp(Ad PA d_a), H_B exp(d_b) gives G exp(-Ad(G^-1) PB d_b)
-            G = lie.inverse(H[g.b] @ g.XB) @ (H[g.a] @ g.XA) @ HJg
-            AdP = Ad @ g.PA
-            rb = np.einsum("jki,jk->ji", g.PB, lg)  # PB^T lambda
-        else:
-            G = lie.inverse(H[g.b]) @ H[g.a] @ HJg
-            AdP = Ad
-            rb = lg
-        phi[g.mult] = lie.vect_se3(G)  # Eq. (55)
-        AdT = np.swapaxes(AdP, 1, 2)  # (Ad PA)^T: node-A block of Phi_q^T
-        ra = np.einsum("jik,jk->ji", AdT, lg)  # Phi_q^T lambda, Eq. (58)
-        r += np.bincount(np.where(g.dof_a < 0, nq, g.dof_a).ravel(), ra.ravel(), nq + 1)
-        r -= np.bincount(np.where(g.dof_b < 0, nq, g.dof_b).ravel(), rb.ravel(), nq + 1)
-        TA = TAinvT = None
-        K = C = kp = kd = None
-        if k:
-            jd = g.jdof
-            rj = np.einsum("jik,ji->jk", g.A, lg)
-            # relative coordinates: Eq. (60) for abelian joints; log coordinates otherwise
-            a_ab = alpha_n[jd] + n[jd]
-            if np.all(g.abelian) or not (full_alpha or g.has_nonabelian_spring):
-                a_g = a_ab  # non-abelian entries filled by log_coordinates() when asked
-            else:
-                a_g = np.where(g.abelian[:, None], a_ab, log_coordinates(g, HJg))
-            alpha[jd] = a_g
-            K = s.dof_stiffness[jd]
-            C = s.dof_damping[jd]
-            kp = s.dof_kp[jd]
-            kd = s.dof_kd[jd]
-            vj = v[jd]
-            fs = K * (a_g - s.dof_reference[jd])
-            if g.has_nonabelian_spring:
-                # g = T_A(alpha)^-T K (alpha - alpha0) for non-abelian joints
-                TA = g.Apinv @ lie.tangent_se3(np.einsum("jik,jk->ji", g.A, a_g)) @ g.A
-                TAinvT = np.swapaxes(np.linalg.inv(TA), 1, 2)
-                fs = np.where(g.abelian[:, None], fs, np.einsum("jkl,jl->jk", TAinvT, fs))
-            gint = fs + C * vj + kp * (a_g - inputs["ref"][jd]) + kd * (vj - inputs["rate"][jd])
-            gint_max = max(gint_max, float(np.abs(gint).max(initial=0.0)))
-            r[jd] += rj + gint - inputs["tau"][jd]  # Eqs. (62), (64), (66)
-        w = None
-        if velocity:
-            vA = np.where(g.dof_a < 0, 0.0, v[np.maximum(g.dof_a, 0)])
-            vB = np.where(g.dof_b < 0, 0.0, v[np.maximum(g.dof_b, 0)])
-            w = np.einsum("jik,jk->ji", AdP, vA)
-            if g.offset:
-                vB = np.einsum("jik,jk->ji", g.PB, vB)
-            psi[g.mult] = w - vB + (np.einsum("jik,jk->ji", g.A, v[g.jdof]) if k else 0.0)
-        # per group: G, Ad PA (node-A constraint block), its transpose, T_J A, lambda, force
-        # elements, spring tangents, w = Ad PA v_A
-        cache["groups"].append((G, AdP, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, w))
-    f_scale = max(f_scale, lam_max, gint_max,
-                  float(np.abs(inputs["tau"]).max(initial=0.0)))
-    ev = Evaluation(H=H, HJ=HJ, r=r[:nq], phi=phi, alpha=alpha, f_scale=f_scale, psi=psi)
-    ev.cache = cache
+    eng, lay = _engine(s)
+    F = s.M + s.m
+    Hall = np.ascontiguousarray(np.concatenate([Hn, HJn]).reshape(F, 4, 4), dtype=float)
+    Hout = np.empty_like(Hall)
+    r = np.empty(s.nq)
+    phi = np.empty(s.nm)
+    alpha = np.zeros(s.nq)
+    idx2 = stab is not None
+    psi = np.empty(s.nm) if (velocity or idx2) else None
+    vals = None
     if coef is not None:
-        ev.values = matrix_values(s, ev, coef)
+        vals = np.empty(lay.nvals2 if idx2 else lay.nvals)
+    energy = np.empty(6)
+    c = (0.0, 0.0, 0.0) if coef is None else coef
+    u = np.ascontiguousarray(inputs["u"], dtype=float)
+    f = lambda x: np.ascontiguousarray(x, dtype=float)  # noqa: E731
+    fs = eng.evaluate(Hall, f(alpha_n), f(n), f(v), f(vd), f(lam), u, Hout, r, phi, alpha,
+                      psi, vals, energy, float(c[0]), float(c[1]), float(c[2]), idx2 or velocity,
+                      float(stab["cv"]) if idx2 else 0.0, bool(full_alpha))
+    ev = Evaluation(H=Hout[:s.M], HJ=Hout[s.M:], r=r, phi=phi, alpha=alpha, f_scale=fs,
+                    values=vals, psi=psi if (velocity or idx2) else None, energy=energy)
+    ev.cache = dict(args=(Hn, HJn, alpha_n, n, v, vd, lam, inputs), full_alpha=full_alpha)
     return ev
 
 
-def log_coordinates(g: JointGroup, HJ: np.ndarray) -> np.ndarray:
-    """Log coordinates of joints in the basis A: ``A^+ log(H_J0^-1 H_J)``, shape (nj, k).
-
-    For abelian joints they equal the relative coordinates of Eq. (60) modulo 2 pi; for
-    non-abelian joints (spherical, planar) they are *the* coordinates (|rotation| <= pi).
-    """
-    return np.einsum("jki,ji->jk", g.Apinv, lie.log_se3(lie.inverse(g.H0) @ HJ))
+def increment_correction(s: System, Hn: np.ndarray, HJn: np.ndarray, xi: np.ndarray
+                         ) -> np.ndarray:
+    """``B_n^T xi`` (nq,): the increment correction of the stabilized index-2 formulation, with
+    ``B_n`` the constraint gradient of Eq. (58) at the frames ``Hn`` (M, 4, 4), ``HJn`` (m, 4,
+    4) of the start of the step."""
+    eng, _ = _engine(s)
+    F = s.M + s.m
+    Hall = np.ascontiguousarray(np.concatenate([Hn, HJn]).reshape(F, 4, 4), dtype=float)
+    out = np.empty(s.nq)
+    eng.BnT(Hall, np.ascontiguousarray(xi, dtype=float), out)
+    return out
 
 
 def fill_log_coordinates(s: System, HJ: np.ndarray, alpha: np.ndarray) -> None:
@@ -602,146 +533,18 @@ def fill_log_coordinates(s: System, HJ: np.ndarray, alpha: np.ndarray) -> None:
             alpha[g.jdof[sel]] = log_coordinates(g, HJ[g.ids])[sel]
 
 
+def log_coordinates(g: JointGroup, HJ: np.ndarray) -> np.ndarray:
+    """Log coordinates of joints in the basis A: ``A^+ log(H_J0^-1 H_J)``, shape (nj, k)."""
+    return np.einsum("jki,ji->jk", g.Apinv, lie.log_se3(lie.inverse(g.H0) @ HJ))
+
+
 def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float],
                   stab: dict | None = None) -> np.ndarray:
-    """Values of the scaled iteration matrix (Eq. (46)) at an evaluated iterate, pattern order.
-
-    Parameters
-    ----------
-    s : System
-    ev : Evaluation
-        From :func:`evaluate` at the same iterate (with ``velocity=True`` when ``stab``).
-    coef : (cM, cC, cK)
-        Coefficients of M, C_T and K_T T (see :func:`evaluate`).
-    stab : dict or None
-        For the stabilized index-2 matrix (pattern ``pattern(s, index2=True)``): ``cv`` =
-        1/gamma' (float) and ``Adn`` = list over ``s.groups`` of ``Ad_{H_J,n^-1}`` (nj, 6, 6)
-        at the start of the step (the correction direction ``B_n^T``, whose blocks are
-        ``(Ad_n PA)^T`` on node A, ``-PB^T`` on node B and ``A^T`` on the joint coordinates).
-        The extra blocks are ``-(cM M + cC C) B_n^T`` (dynamic rows, xi columns),
-        ``B + cv d(B v)/dn`` with ``B = [Ad PA, -PB, A]`` and ``d(B v)/dn_J = ad(w) T_J A``,
-        ``w = Ad PA v_A`` (velocity constraint rows, increment columns) and ``-B B_n^T``
-        (velocity constraint rows, xi columns); see :mod:`se3dyn.integrator`.
-
-    Notes
-    -----
-    Joint blocks (``Ad = Ad_{H_J^-1}``, Eq. (57); ``PA``, ``PB`` of :class:`JointGroup`):
-    constraint rows ``D [Ad PA T_A, -Ad_{G^-1} PB T_B, T_J A]`` with ``D`` the derivative of
-    ``vect`` at G (the exact linearisation of Eq. (55); Eq. (59) at ``G = I``); multiplier
-    columns ``PA^T Ad^T`` (node A), ``-PB^T`` (node B), ``A^T`` (joint); geometric stiffness
-    ``-cK PA^T Ad^T Lambda(lambda) T_J A`` (joint columns of the node-A rows).
-
-    Returns
-    -------
-    ndarray (nvals,)
-    """
-    cM, cC, cK = coef
-    Tn, RtF, mass, J, vU, vO, JO = ev.cache["nodes"]
-    nf = len(s.node_free)
-    blk = np.zeros((nf, 6, 6))
-    blk[:, :3, :3] = mass[:, None, None] * np.eye(3)
-    blk[:, 3:, 3:] = J
-    blk *= cM
-    if cC:
-        # tangent damping, Eq. (53)
-        CT = np.zeros((nf, 6, 6))
-        CT[:, :3, :3] = mass[:, None, None] * lie.hat3(vO)
-        CT[:, :3, 3:] = -mass[:, None, None] * lie.hat3(vU)
-        CT[:, 3:, 3:] = lie.hat3(vO) @ J - lie.hat3(JO)
-        blk += cC * CT
-    blk_m = blk.copy() if stab is not None else None  # d r / d m (velocity-level part)
-    if cK:
-        # tangent stiffness of the external forces, Eq. (67), times T_SE(3)(n_I)
-        KT = np.zeros((nf, 6, 6))
-        KT[:, :3, 3:] = -lie.hat3(RtF)
-        blk += cK * (KT @ Tn[s.node_free])
-    vals = [blk.ravel()]
-    for g, (G, AdP, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, _w) in zip(
-            s.groups, ev.cache["groups"], strict=True):
-        k, nj = g.k, len(g.ids)
-        RG = G[:, :3, :3]
-        Dv = np.zeros((nj, 6, 6))
-        Dv[:, :3, :3] = RG
-        Dv[:, 3:, 3:] = 0.5 * (np.trace(RG, axis1=1, axis2=2)[:, None, None] * np.eye(3)
-                               - np.swapaxes(RG, 1, 2))
-        # exact linearisation of vect(G), G = (H_B X_B)^-1 H_A X_A H_J; equals Eq. (59) (with
-        # the offsets PA, PB) when Phi = 0. AdP = Ad_{H_J^-1} PA
-        CA = Dv @ AdP @ Tn[g.a]
-        if g.offset:
-            CB = -Dv @ lie.adjoint_inv(G) @ g.PB @ Tn[g.b]
-            FB = -np.swapaxes(g.PB, 1, 2)
-        else:
-            CB = -Dv @ lie.adjoint_inv(G) @ Tn[g.b]
-            FB = np.broadcast_to(-np.eye(6), (nj, 6, 6))
-        CJ = Dv @ TJ
-        vals += [CA.ravel(), CB.ravel(), CJ.ravel(), AdT.ravel(), FB.ravel(),
-                 np.swapaxes(g.A, 1, 2).ravel()]
-        # geometric stiffness of Phi_q^T lambda w.r.t. the joint increment:
-        # d/dn_J (PA^T Ad^T lambda) = -PA^T Ad^T Lambda(lambda) T_J A
-        vals.append((-cK * (AdT @ _lam_matrix(lg) @ TJ)).ravel())
-        if k:
-            KJ = np.zeros((nj, k, k))
-            idx = np.arange(k)
-            KJ[:, idx, idx] = cK * (K + kp) + cC * (C + kd)
-            if g.has_nonabelian_spring:
-                # d alpha = T_A(alpha)^-1 T_A(n_j) d n_j for log coordinates
-                TAn = g.Apinv @ TJ
-                Knon = cK * (TAinvT @ (K[:, :, None] * np.linalg.inv(TA)) @ TAn)
-                Knon[:, idx, idx] += cC * (C + kd)
-                sel = ~g.abelian
-                KJ[sel] = Knon[sel]
-            vals.append(KJ.ravel())
-    vals.append(np.zeros(s.nm))  # multiplier diagonal (used for dropped equations)
-    if stab is not None:
-        vals += _stab_values(s, ev, blk_m, coef, stab)
-    return np.concatenate(vals)
-
-
-def _stab_values(s: System, ev: Evaluation, blk_m: np.ndarray, coef, stab: dict) -> list:
-    """Extra values of the stabilized index-2 matrix, in the order of :func:`_pattern`."""
-    cC = coef[1]
-    cv = stab["cv"]
-    free_pos = np.maximum(s.node_dofadr, 0) // 6  # node -> index among free nodes
-    vals = []
-    Ad_all = np.zeros((s.m, 6, 6))
-    Adn_all = np.zeros((s.m, 6, 6))
-    PB_all = np.zeros((s.m, 6, 6))
-    for g, cg, Adn in zip(s.groups, ev.cache["groups"], stab["Adn"], strict=True):
-        G, AdP, AdT, TJ, lg, K, C, kp, kd, TA, TAinvT, w = cg
-        k, nj = g.k, len(g.ids)
-        if g.offset:
-            Adn = Adn @ g.PA  # node-A block of B_n: Ad_{H_J,n^-1} PA
-            PB = g.PB
-        else:
-            PB = np.broadcast_to(np.eye(6), (nj, 6, 6))
-        Ad_all[g.ids] = AdP
-        Adn_all[g.ids] = Adn
-        PB_all[g.ids] = PB
-        AdnT = np.swapaxes(Adn, 1, 2)
-        # dynamic rows x xi columns: -(dr/dm) B_n^T (node B: -(dr/dm) (-PB)^T)
-        vals.append((-blk_m[free_pos[g.a]] @ AdnT).ravel())
-        vals.append((blk_m[free_pos[g.b]] @ np.swapaxes(PB, 1, 2) if g.offset
-                     else blk_m[free_pos[g.b]]).ravel())
-        if k:
-            cj = (cC * (C + kd))[:, :, None] * np.swapaxes(g.A, 1, 2)
-            vals.append((-cj).ravel())
-        # velocity constraint rows x increment columns: B + cv d(B v)/dn, with
-        # B = [Ad PA, -PB, A] and d(B v)/dn_J = ad(w) T_J A, w = Ad PA v_A
-        vals += [AdP.ravel(), (-PB).ravel()]
-        if k:
-            vals.append((g.A + cv * (lie.ad6(w) @ TJ)).ravel())
-    # velocity constraint rows x xi columns: -B B_n^T over joints sharing a free node
-    pairs = pattern(s, True)["pairs"]
-    Bi = np.where((pairs[:, 1] == 0)[:, None, None], Ad_all[pairs[:, 0]], -PB_all[pairs[:, 0]])
-    Bj = np.where((pairs[:, 3] == 0)[:, None, None], Adn_all[pairs[:, 2]], -PB_all[pairs[:, 2]])
-    vals.append((-Bi @ np.swapaxes(Bj, 1, 2)).ravel())
-    AAt = np.zeros((s.m, 6, 6))
-    for g in s.groups:
-        if g.k:
-            AAt[g.ids] = g.A @ np.swapaxes(g.A, 1, 2)
-    vals.append((-AAt).ravel())
-    vals.append(np.zeros(s.nm))
-    return vals
+    """Values of the scaled iteration matrix (Eq. (46)) at an evaluated iterate, pattern order
+    (the element kernels evaluated again at the same iterate, see :func:`evaluate`)."""
+    Hn, HJn, alpha_n, n, v, vd, lam, inputs = ev.cache["args"]
+    return evaluate(s, Hn, HJn, alpha_n, n, v, vd, lam, inputs, coef,
+                    full_alpha=ev.cache["full_alpha"], stab=stab).values
 
 
 # ---------------------------------------------------------------------------------------------

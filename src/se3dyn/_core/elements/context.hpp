@@ -1,0 +1,36 @@
+// What an element kernel sees and writes at one Newton iterate.
+#pragma once
+#include <cmath>
+
+#include "../frames.hpp"
+
+namespace se3dyn {
+
+// Energies and powers of a state: kinetic (Eq. (47)), gravity potential, elastic energy
+// (Eq. (62) and the elastic elements), and the powers of actuators (incl. control laws),
+// external loads and dissipation (Eq. (64) and the dampers of the elements).
+enum Energy { KINETIC = 0, POTENTIAL, ELASTIC, P_ACTUATOR, P_LOADS, P_DISSIPATION, N_ENERGY };
+
+struct Context {
+  const FrameTables* T;
+  const FrameState* S;
+  const double* coords;  // (nq,) relative coordinates alpha (Eq. (60)) on joint unknowns
+  const double* vq;      // (nq,) velocities v
+  const double* lam;     // (nm,) multipliers
+  const double* u;       // (nu,) time-dependent inputs at the iterate's time
+  const double* gravity; // (3,) = u[0:3]
+  double* r;             // (nq,) residual of Eq. (39), accumulated
+  double* phi;           // (nm,) constraints Eq. (55)
+  double* psi;           // (nm,) velocity constraints (index 2) or nullptr
+  double* vals;          // iteration-matrix values (block storage) or nullptr
+  double* velv;          // velocity-level part cM M + cC C_T (index 2) or nullptr
+  double cM = 0, cC = 0, cK = 0;  // coefficients of M, C_T and K_T T (Eq. (46))
+  double fscale = 0;     // magnitude of the forces entering r (for relative tolerances)
+  double* energy;        // (N_ENERGY,) or nullptr
+
+  void scale(const double* g, int n) {
+    for (int i = 0; i < n; ++i) fscale = std::fmax(fscale, std::fabs(g[i]));
+  }
+};
+
+}  // namespace se3dyn

@@ -1,0 +1,147 @@
+// Force elements on the relative coordinates of a joint (Secs. 8-10): springs (Eq. (62)),
+// dampers (Eq. (64)), actuators tau(t) (Eq. (66)) and PD control laws
+// tau = -kp (alpha - alpha_ref(t)) - kd (v - rate_ref(t)).
+//
+// On abelian joints alpha are the relative coordinates of Eq. (60) (d alpha = d n_j), so the
+// tangent is diag(cK (K + kp) + cC (C + kd)) (Eqs. (63), (65)). On non-abelian joints springs
+// act on the log coordinates alpha = A^+ log(H_J0^-1 H_J) through T_A(alpha)^-T K (alpha -
+// alpha0), T_A = A^+ T(A alpha) A.
+#pragma once
+#include <vector>
+
+#include "context.hpp"
+
+namespace se3dyn {
+
+struct JointForces {
+  int n = 0;
+  std::vector<int> f;                       // (n,) joint frame
+  std::vector<double> K, ref, C, kp, kd;    // (n, 6), first k used
+  std::vector<int> tau, pref, prate;        // (n,) first input slot (k consecutive) or -1
+  std::vector<char> nonab;                  // (n,) spring on a non-abelian joint
+  std::vector<double> Apinv;                // (n, 6, 6) A^+ (k x 6, ld 6)
+  std::vector<double> A;                    // (n, 6, 6) A (6 x k, ld 6)
+  std::vector<long> off;                    // (n,) block (f, f)
+
+  // T_A(alpha) = A^+ T(A alpha) A (k x k, ld 6)
+  void TA(int e, int k, const double* alpha, double* out) const {
+    double nA[6] = {0}, T6[36], TA6[36];
+    const double* Ae = &A[36 * e];
+    for (int i = 0; i < 6; ++i)
+      for (int c = 0; c < k; ++c) nA[i] += Ae[6 * i + c] * alpha[c];
+    Frame E;
+    exp_tangent_se3(nA, E, T6);
+    cols_times(6, k, T6, Ae, TA6);
+    for (int i = 0; i < k; ++i)
+      for (int c = 0; c < k; ++c) {
+        double s = 0.0;
+        for (int l = 0; l < 6; ++l) s += Apinv[36 * e + 6 * i + l] * TA6[6 * l + c];
+        out[6 * i + c] = s;
+      }
+  }
+
+  void eval(Context& X) const {
+    const FrameTables& T = *X.T;
+    for (int e = 0; e < n; ++e) {
+      int fr = f[e], k = T.k[fr], d = T.dof[fr];
+      const double* al = X.coords + d;
+      const double* v = X.vq + d;
+      double fs[6], g[6], tpd[6];
+      for (int c = 0; c < k; ++c) fs[c] = K[6 * e + c] * (al[c] - ref[6 * e + c]);
+      double TAi[36];
+      if (nonab[e]) {
+        // g = T_A^-T K (alpha - alpha0): solve T_A^T y = fs
+        double TAm[36];
+        TA(e, k, al, TAm);
+        invert(k, TAm, TAi);
+        double y[6];
+        for (int i = 0; i < k; ++i) {
+          y[i] = 0.0;
+          for (int c = 0; c < k; ++c) y[i] += TAi[6 * c + i] * fs[c];
+        }
+        for (int c = 0; c < k; ++c) fs[c] = y[c];
+      }
+      for (int c = 0; c < k; ++c) {
+        double pd = 0.0;
+        if (pref[e] >= 0) pd -= kp[6 * e + c] * (al[c] - X.u[pref[e] + c]);
+        if (prate[e] >= 0) pd -= kd[6 * e + c] * (v[c] - X.u[prate[e] + c]);
+        else pd -= kd[6 * e + c] * v[c];
+        double ta = tau[e] >= 0 ? X.u[tau[e] + c] : 0.0;
+        tpd[c] = ta + pd;
+        g[c] = fs[c] + C[6 * e + c] * v[c] - tpd[c];
+        X.r[d + c] += g[c];
+      }
+      X.scale(g, k);
+      X.scale(tpd, k);
+      if (X.energy) {
+        for (int c = 0; c < k; ++c) {
+          double dl = al[c] - ref[6 * e + c];
+          X.energy[ELASTIC] += 0.5 * K[6 * e + c] * dl * dl;
+          X.energy[P_ACTUATOR] += tpd[c] * v[c];
+          X.energy[P_DISSIPATION] += C[6 * e + c] * v[c] * v[c];
+        }
+      }
+      if (!X.vals || off[e] < 0) continue;
+      double Bk[36] = {0}, Bc[36] = {0};
+      for (int c = 0; c < k; ++c) {
+        Bk[7 * c] = X.cK * (K[6 * e + c] + kp[6 * e + c]);
+        Bc[7 * c] = X.cC * (C[6 * e + c] + kd[6 * e + c]);
+      }
+      if (nonab[e]) {
+        // d alpha = T_A(alpha)^-1 A^+ T(A n_j) A d n_j for log coordinates
+        double TAn[36], t1[36], t2[36];
+        const double* TAJ = &X.S->TA[36 * fr];
+        for (int i = 0; i < k; ++i)
+          for (int c = 0; c < k; ++c) {
+            double s = 0.0;
+            for (int l = 0; l < 6; ++l) s += Apinv[36 * e + 6 * i + l] * TAJ[6 * l + c];
+            TAn[6 * i + c] = s;
+          }
+        // Knon = T_A^-T K T_A^-1 TAn (+ kp on the diagonal as before)
+        for (int i = 0; i < k; ++i)
+          for (int c = 0; c < k; ++c) {
+            double s = 0.0;
+            for (int l = 0; l < k; ++l) s += TAi[6 * l + i] * K[6 * e + l] * TAi[6 * l + c];
+            t1[6 * i + c] = s;
+          }
+        for (int i = 0; i < k; ++i)
+          for (int c = 0; c < k; ++c) {
+            double s = 0.0;
+            for (int l = 0; l < k; ++l) s += t1[6 * i + l] * TAn[6 * l + c];
+            t2[6 * i + c] = X.cK * s + (i == c ? X.cK * kp[6 * e + c] : 0.0);
+          }
+        for (int i = 0; i < 36; ++i) Bk[i] = t2[i];
+      }
+      double Bt[36];
+      for (int i = 0; i < 36; ++i) Bt[i] = Bk[i] + Bc[i];
+      add_block(X.vals, off[e], k, k, Bt, 1.0);
+      if (X.velv) add_block(X.velv, off[e], k, k, Bc, 1.0);
+    }
+  }
+
+  // Gauss-Jordan inverse of a k x k matrix (ld 6) with partial pivoting
+  static void invert(int k, const double* A, double* Ai) {
+    double M[36], I[36] = {0};
+    for (int i = 0; i < 36; ++i) M[i] = A[i];
+    for (int i = 0; i < k; ++i) I[7 * i] = 1.0;
+    for (int c = 0; c < k; ++c) {
+      int p = c;
+      for (int i = c + 1; i < k; ++i)
+        if (std::fabs(M[6 * i + c]) > std::fabs(M[6 * p + c])) p = i;
+      for (int j = 0; j < 6; ++j) {
+        std::swap(M[6 * c + j], M[6 * p + j]);
+        std::swap(I[6 * c + j], I[6 * p + j]);
+      }
+      double piv = M[6 * c + c];
+      for (int j = 0; j < 6; ++j) { M[6 * c + j] /= piv; I[6 * c + j] /= piv; }
+      for (int i = 0; i < k; ++i) {
+        if (i == c) continue;
+        double fct = M[6 * i + c];
+        for (int j = 0; j < 6; ++j) { M[6 * i + j] -= fct * M[6 * c + j]; I[6 * i + j] -= fct * I[6 * c + j]; }
+      }
+    }
+    for (int i = 0; i < 36; ++i) Ai[i] = I[i];
+  }
+};
+
+}  // namespace se3dyn

@@ -1,0 +1,211 @@
+// The assembler and the Newton iteration of one generalized-alpha step (Eqs. (38)-(46)).
+//
+// The assembler knows no element type: it updates the frames of the iterate (Eq. (38)), asks
+// every element batch for its residual, constraint and tangent contributions (which they add
+// through the frame maps of frames.hpp into the residual and into the fixed block pattern), and
+// forms the blocks of the stabilised index-2 matrix that are products of element blocks
+// (`VelProd`, `XiProd`: -(cM M + cC C_T) B_n^T and -B B_n^T).  The Newton loop and its modified
+// Newton strategy are written once here, for every kind of run.
+#pragma once
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "elements/body.hpp"
+#include "elements/joint.hpp"
+#include "elements/joint_force.hpp"
+#include "elements/load.hpp"
+#include "elements/spring_damper.hpp"
+#include "sparse_lu.hpp"
+
+namespace se3dyn {
+
+// target (k_i x 6) -= Vel block (k_i x k_j) * (B_n A)_{joint, slot}^T
+struct VelProd {
+  long target, src;
+  int ki, kj, joint, slot;
+};
+// target (6 x 6) -= (B A)_{c1, s1} (6 x k) * (B_n A)_{c2, s2}^T
+struct XiProd {
+  long target;
+  int k, c1, s1, c2, s2;
+};
+
+struct Engine {
+  FrameTables T;
+  Bodies bodies;
+  Joints joints;
+  JointForces jforces;
+  Loads loads;
+  SpringDampers springs;
+  int nq = 0, nm = 0, nu = 0;
+  long nvals = 0;         // values of the index-3 pattern
+  long nvals2 = 0;        // values of the index-2 pattern (extra blocks after the index-3 ones)
+  // relative coordinates: frames whose coordinates are log coordinates (non-abelian joints)
+  std::vector<int> log_f;              // frames
+  std::vector<Frame> log_H0inv;        // H_J0^-1
+  std::vector<double> log_Apinv;       // (., 6, 6)
+  std::vector<char> log_needed;        // a spring needs them inside the iterations
+  std::vector<VelProd> velprod;
+  std::vector<XiProd> xiprod;
+  std::vector<char> is_joint_frame;    // (F,)
+  // work
+  FrameState S;
+  std::vector<Frame> Hn;
+  std::vector<double> velv;
+
+  void setup() {
+    S.resize(T.F);
+    Hn.resize(T.F);
+    joints.resize_scratch();
+  }
+
+  void load_frames(const double* H4) {
+    for (int f = 0; f < T.F; ++f) frame_from4(H4 + 16 * f, Hn[f]);
+  }
+
+  // Frames of the iterate: H = H_n exp(A n) (Eq. (38)), T(A n) A (Eq. (27)), v* = A v, vd* = A vd
+  void update_frames(const double* n, const double* v, const double* vd, bool tangent) {
+    for (int f = 0; f < T.F; ++f) {
+      int d = T.dof[f];
+      if (d < 0) {
+        S.H[f] = Hn[f];
+        continue;
+      }
+      double ns[6];
+      frame_expand(T, f, n + d, ns);
+      frame_expand(T, f, v + d, &S.v[6 * f]);
+      frame_expand(T, f, vd + d, &S.vd[6 * f]);
+      Frame E;
+      if (tangent) {
+        double T6[36];
+        exp_tangent_se3(ns, E, T6);
+        if (T.node[f]) for (int i = 0; i < 36; ++i) S.TA[36 * f + i] = T6[i];
+        else cols_times(6, T.k[f], T6, &T.A[36 * f], &S.TA[36 * f]);
+      } else {
+        exp_se3(ns, E);
+      }
+      compose(Hn[f], E, S.H[f]);
+    }
+  }
+
+  // alpha = alpha_n + n on abelian joint unknowns (Eq. (60)); log coordinates where asked
+  void coordinates(const double* alpha_n, const double* n, double* alpha, bool all_logs) const {
+    for (int f = 0; f < T.F; ++f) {
+      if (!is_joint_frame[f] || T.dof[f] < 0) continue;
+      int d = T.dof[f];
+      for (int c = 0; c < T.k[f]; ++c) alpha[d + c] = alpha_n[d + c] + n[d + c];
+    }
+    for (size_t i = 0; i < log_f.size(); ++i) {
+      if (!(all_logs || log_needed[i])) continue;
+      int f = log_f[i], d = T.dof[f];
+      Frame G;
+      compose(log_H0inv[i], S.H[f], G);
+      double l[6];
+      log_se3(G, l);
+      for (int c = 0; c < T.k[f]; ++c) {
+        double s = 0.0;
+        for (int j = 0; j < 6; ++j) s += log_Apinv[36 * i + 6 * c + j] * l[j];
+        alpha[d + c] = s;
+      }
+    }
+  }
+
+  struct Out {
+    double* r;       // (nq,)
+    double* phi;     // (nm,)
+    double* psi;     // (nm,) or nullptr
+    double* alpha;   // (nq,)
+    double* vals;    // (nvals or nvals2,) or nullptr
+    double* energy;  // (N_ENERGY,) or nullptr
+  };
+
+  // Residual (Eq. (39)), constraints (Eq. (40)), velocity constraints and, when vals, the
+  // scaled iteration matrix with coefficients (cM, cC, cK) of M, C_T and K_T T; returns the
+  // force scale. Frames of the step start must be loaded (load_frames).
+  double evaluate(const double* alpha_n, const double* n, const double* v, const double* vd,
+                  const double* lam, const double* u, double cM, double cC, double cK,
+                  bool index2, double cv, bool all_logs, Out o) {
+    update_frames(n, v, vd, o.vals != nullptr);
+    coordinates(alpha_n, n, o.alpha, all_logs);
+    std::fill(o.r, o.r + nq, 0.0);
+    std::fill(o.phi, o.phi + nm, 0.0);
+    if (o.psi) std::fill(o.psi, o.psi + nm, 0.0);
+    long nv = index2 ? nvals2 : nvals;
+    if (o.vals) std::fill(o.vals, o.vals + nv, 0.0);
+    bool prod = o.vals && index2;
+    if (prod) velv.assign(nvals, 0.0);
+    if (o.energy) std::fill(o.energy, o.energy + N_ENERGY, 0.0);
+    Context X;
+    X.T = &T;
+    X.S = &S;
+    X.coords = o.alpha;
+    X.vq = v;
+    X.lam = lam;
+    X.u = u;
+    X.gravity = u;  // u[0:3] is gravity (se3dyn.system._Inputs)
+    X.r = o.r;
+    X.phi = o.phi;
+    X.psi = o.psi;
+    X.vals = o.vals;
+    X.velv = prod ? velv.data() : nullptr;
+    X.cM = cM;
+    X.cC = cC;
+    X.cK = cK;
+    X.energy = o.energy;
+    joints.cv_ = cv;
+    bodies.eval(X);
+    joints.eval(X, index2 && o.psi);
+    jforces.eval(X);
+    loads.eval(X);
+    springs.eval(X);
+    if (prod) {
+      joints.store_B(T, Hn, joints.Bnu);
+      double* vals = o.vals;
+      for (const VelProd& p : velprod) {
+        const double* V = velv.data() + p.src;  // ki x kj row-major
+        const double* Bn = &joints.Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
+        double* t = vals + p.target;  // ki x 6
+        for (int i = 0; i < p.ki; ++i)
+          for (int c = 0; c < 6; ++c) {
+            double s = 0.0;
+            for (int l = 0; l < p.kj; ++l) s += V[p.kj * i + l] * Bn[6 * c + l];
+            t[6 * i + c] -= s;
+          }
+      }
+      for (const XiProd& p : xiprod) {
+        const double* B1 = &joints.Bu[108 * p.c1 + 36 * p.s1];
+        const double* B2 = &joints.Bnu[108 * p.c2 + 36 * p.s2];
+        double* t = vals + p.target;
+        for (int i = 0; i < 6; ++i)
+          for (int c = 0; c < 6; ++c) {
+            double s = 0.0;
+            for (int l = 0; l < p.k; ++l) s += B1[6 * i + l] * B2[6 * c + l];
+            t[6 * i + c] -= s;
+          }
+      }
+    }
+    return X.fscale;
+  }
+
+  // B_n^T xi on the unknowns: out[dof_f] -= A_f^T B_{n,f}^T xi (the index-2 correction)
+  void subtract_BnT(const double* xi, double* out) const {
+    for (int e = 0; e < joints.n; ++e) {
+      int fr[3] = {joints.fa[e], joints.fb[e], joints.fj[e]};
+      const double* x = xi + joints.mult[e];
+      for (int s = 0; s < 3; ++s) {
+        int f = fr[s], d = T.dof[f];
+        if (d < 0) continue;
+        const double* Bn = &joints.Bnu[108 * e + 36 * s];  // 6 x k
+        for (int c = 0; c < T.k[f]; ++c) {
+          double acc = 0.0;
+          for (int i = 0; i < 6; ++i) acc += Bn[6 * i + c] * x[i];
+          out[d + c] -= acc;
+        }
+      }
+    }
+  }
+};
+
+}  // namespace se3dyn

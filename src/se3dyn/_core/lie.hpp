@@ -1,0 +1,352 @@
+// SE(3)/SO(3) kernel of the compiled engine, on single elements.
+//
+// Conventions are those of se3dyn/lie.py (written once there): frames H = [[R, x], [0, 1]]
+// (Eq. (1)); tangent vectors (U, Omega), translation first, material (right-trivialised):
+// d(H) = H hat6(h) (Eqs. (2), (4)); exp_se3 is Eq. (17), its tangent operator Eqs. (21)-(22);
+// Ad(H^-1) is Eq. (57); vect is Eq. (56).  The Taylor coefficients of the cancelling
+// functions of the angle (and their cut-off, SERIES_CUTOFF = 1) come from se3dyn.lie at import
+// (set_series), so the series exist once.
+#pragma once
+#include <cmath>
+#include <cstring>
+
+namespace se3dyn {
+
+// ---------------------------------------------------------------------------------------------
+// Fixed-size products, row-major (literal sizes: the compiler unrolls them)
+// ---------------------------------------------------------------------------------------------
+template <int R, int K, int C>
+inline void mm(const double* A, const double* B, double* out) {  // out = A B
+  for (int i = 0; i < R; ++i)
+    for (int j = 0; j < C; ++j) {
+      double s = 0.0;
+      for (int l = 0; l < K; ++l) s += A[i * K + l] * B[l * C + j];
+      out[i * C + j] = s;
+    }
+}
+template <int R, int K, int C>
+inline void mmT(const double* A, const double* B, double* out) {  // out = A B^T, B (C, K)
+  for (int i = 0; i < R; ++i)
+    for (int j = 0; j < C; ++j) {
+      double s = 0.0;
+      for (int l = 0; l < K; ++l) s += A[i * K + l] * B[j * K + l];
+      out[i * C + j] = s;
+    }
+}
+template <int R, int K, int C>
+inline void mTm(const double* A, const double* B, double* out) {  // out = A^T B, A (K, R)
+  for (int i = 0; i < R; ++i)
+    for (int j = 0; j < C; ++j) {
+      double s = 0.0;
+      for (int l = 0; l < K; ++l) s += A[l * R + i] * B[l * C + j];
+      out[i * C + j] = s;
+    }
+}
+template <int R, int C>
+inline void mv(const double* A, const double* x, double* y) {  // y = A x
+  for (int i = 0; i < R; ++i) {
+    double s = 0.0;
+    for (int j = 0; j < C; ++j) s += A[i * C + j] * x[j];
+    y[i] = s;
+  }
+}
+template <int R, int C>
+inline void mTv(const double* A, const double* x, double* y) {  // y = A^T x, A (R, C)
+  for (int j = 0; j < C; ++j) {
+    double s = 0.0;
+    for (int i = 0; i < R; ++i) s += A[i * C + j] * x[i];
+    y[j] = s;
+  }
+}
+
+inline void cross(const double* a, const double* b, double* c) {
+  c[0] = a[1] * b[2] - a[2] * b[1];
+  c[1] = a[2] * b[0] - a[0] * b[2];
+  c[2] = a[0] * b[1] - a[1] * b[0];
+}
+inline double dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+// hat3 (Eq. (3)) into a 3x3 block of a row-major matrix with leading dimension ld
+inline void hat3(const double* w, double* W, int ld = 3, double s = 1.0) {
+  W[0] = 0.0;        W[1] = -s * w[2];  W[2] = s * w[1];
+  W[ld] = s * w[2];  W[ld + 1] = 0.0;   W[ld + 2] = -s * w[0];
+  W[2 * ld] = -s * w[1]; W[2 * ld + 1] = s * w[0]; W[2 * ld + 2] = 0.0;
+}
+inline void add_hat3(const double* w, double* W, int ld, double s) {
+  W[1] -= s * w[2]; W[2] += s * w[1];
+  W[ld] += s * w[2]; W[ld + 2] -= s * w[0];
+  W[2 * ld] -= s * w[1]; W[2 * ld + 1] += s * w[0];
+}
+
+// A frame H = (R, x) of SE(3): R row-major 3x3, x.
+struct Frame {
+  double R[9];
+  double x[3];
+};
+
+inline void set_identity(Frame& H) {
+  std::memset(&H, 0, sizeof(Frame));
+  H.R[0] = H.R[4] = H.R[8] = 1.0;
+}
+inline void frame_from4(const double* H4, Frame& H) {
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) H.R[3 * i + j] = H4[4 * i + j];
+    H.x[i] = H4[4 * i + 3];
+  }
+}
+inline void frame_to4(const Frame& H, double* H4) {
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) H4[4 * i + j] = H.R[3 * i + j];
+    H4[4 * i + 3] = H.x[i];
+  }
+  H4[12] = H4[13] = H4[14] = 0.0;
+  H4[15] = 1.0;
+}
+// C = A B
+inline void compose(const Frame& A, const Frame& B, Frame& C) {
+  mm<3, 3, 3>(A.R, B.R, C.R);
+  for (int i = 0; i < 3; ++i)
+    C.x[i] = A.R[3 * i] * B.x[0] + A.R[3 * i + 1] * B.x[1] + A.R[3 * i + 2] * B.x[2] + A.x[i];
+}
+// C = A^-1 B
+inline void compose_inv(const Frame& A, const Frame& B, Frame& C) {
+  mTm<3, 3, 3>(A.R, B.R, C.R);
+  double d[3] = {B.x[0] - A.x[0], B.x[1] - A.x[1], B.x[2] - A.x[2]};
+  mTv<3, 3>(A.R, d, C.x);
+}
+inline void inverse(const Frame& A, Frame& C) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) C.R[3 * i + j] = A.R[3 * j + i];
+  mv<3, 3>(C.R, A.x, C.x);
+  C.x[0] = -C.x[0]; C.x[1] = -C.x[1]; C.x[2] = -C.x[2];
+}
+// point of the frame's body: R p + x
+inline void apply(const Frame& H, const double* p, double* out) {
+  mv<3, 3>(H.R, p, out);
+  out[0] += H.x[0]; out[1] += H.x[1]; out[2] += H.x[2];
+}
+
+// ---------------------------------------------------------------------------------------------
+// Coefficient functions of the angle (see the docstring of se3dyn/lie.py)
+// ---------------------------------------------------------------------------------------------
+constexpr int SERIES_TERMS = 10;
+struct Series {
+  double cut = 1.0;
+  double c[SERIES_TERMS], d[SERIES_TERMS], e[SERIES_TERMS], f[SERIES_TERMS];
+};
+Series& series();  // defined in module.cpp, filled from se3dyn.lie at import
+
+inline double sum_series(const double* C, double t2) {
+  double s = 0.0, p = 1.0;
+  for (int j = 0; j < SERIES_TERMS; ++j) {
+    s += C[j] * p;
+    p *= t2;
+  }
+  return s;
+}
+
+// a = sin t/t, h = (1-cos t)/t^2, c = (1-a)/t^2, d = (b-a)/t^2, e = (b/2 - 3(1-a)/t^2)/t^2
+struct Coeffs {
+  double a, h, c, d, e;
+};
+inline Coeffs coeffs(const double* w, bool de) {
+  const Series& S = series();
+  Coeffs k;
+  double t2 = dot3(w, w), t = std::sqrt(t2);
+  if (t > 0) {
+    k.a = std::sin(t) / t;
+    double half = 0.5 * t, sh = std::sin(half) / half;
+    k.h = 0.5 * sh * sh;
+  } else {
+    k.a = 1.0;
+    k.h = 0.5;
+  }
+  if (t < S.cut) {
+    k.c = sum_series(S.c, t2);
+    k.d = de ? sum_series(S.d, t2) : 0.0;
+    k.e = de ? sum_series(S.e, t2) : 0.0;
+  } else {
+    k.c = (1.0 - k.a) / t2;
+    k.d = (2.0 * k.h - k.a) / t2;
+    k.e = (k.h - 3.0 * k.c) / t2;
+  }
+  return k;
+}
+
+// exp_so3 (Eq. (18)): R = I + a W + h W^2
+inline void exp_so3(const double* w, const Coeffs& k, double* R) {
+  double t2 = dot3(w, w);
+  double W2[9] = {w[0] * w[0] - t2, w[0] * w[1], w[0] * w[2], w[1] * w[0], w[1] * w[1] - t2,
+                  w[1] * w[2], w[2] * w[0], w[2] * w[1], w[2] * w[2] - t2};
+  for (int i = 0; i < 9; ++i) R[i] = k.h * W2[i];
+  R[0] += 1.0; R[4] += 1.0; R[8] += 1.0;
+  add_hat3(w, R, 3, k.a);
+}
+
+// exp_se3 (Eq. (17)): (exp_so3(w), T_so3(w)^T u) with T_so3^T = I + h W + c W^2
+inline void exp_se3(const double* n, Frame& E) {
+  const double* w = n + 3;
+  Coeffs k = coeffs(w, false);
+  exp_so3(w, k, E.R);
+  double t2 = dot3(w, w);
+  double W2[9] = {w[0] * w[0] - t2, w[0] * w[1], w[0] * w[2], w[1] * w[0], w[1] * w[1] - t2,
+                  w[1] * w[2], w[2] * w[0], w[2] * w[1], w[2] * w[2] - t2};
+  double Tt[9];
+  for (int i = 0; i < 9; ++i) Tt[i] = k.c * W2[i];
+  Tt[0] += 1.0; Tt[4] += 1.0; Tt[8] += 1.0;
+  add_hat3(w, Tt, 3, k.h);
+  mv<3, 3>(Tt, n, E.x);
+}
+
+// exp_se3 and its tangent operator T_SE(3)(n) (Eqs. (21)-(22)), T (6x6) row-major
+inline void exp_tangent_se3(const double* n, Frame& E, double* T) {
+  const double* w = n + 3;
+  const double* u = n;
+  Coeffs k = coeffs(w, true);
+  double W[9], W2[9], U[9], UW[9], WU[9];
+  hat3(w, W);
+  hat3(u, U);
+  mm<3, 3, 3>(W, W, W2);
+  mm<3, 3, 3>(U, W, UW);
+  mm<3, 3, 3>(W, U, WU);
+  double wu = dot3(w, u);
+  std::memset(T, 0, 36 * sizeof(double));
+  for (int i = 0; i < 3; ++i) {
+    double s = 0.0;
+    for (int j = 0; j < 3; ++j) {
+      double dij = i == j ? 1.0 : 0.0;
+      int q = 3 * i + j;
+      E.R[q] = dij + k.a * W[q] + k.h * W2[q];
+      s += (dij + k.h * W[q] + k.c * W2[q]) * u[j];
+      double tso = dij - k.h * W[q] + k.c * W2[q];
+      T[6 * i + j] = tso;
+      T[6 * (3 + i) + 3 + j] = tso;
+      T[6 * i + 3 + j] = -k.h * U[q] + k.c * (UW[q] + WU[q]) + wu * (k.d * W[q] + k.e * W2[q]);
+    }
+    E.x[i] = s;
+  }
+}
+
+// log_so3 of a rotation (|w| <= pi); see the docstring of se3dyn/lie.py for the branches
+inline void log_so3(const double* R, double* w) {
+  double s0 = 0.5 * (R[7] - R[5]), s1 = 0.5 * (R[2] - R[6]), s2 = 0.5 * (R[3] - R[1]);
+  double c = 0.5 * (R[0] + R[4] + R[8] - 1.0);
+  double sn = std::sqrt(s0 * s0 + s1 * s1 + s2 * s2);
+  double t = std::atan2(sn, c);
+  if (c >= 0) {
+    double ratio = sn > 0 ? t / sn : 1.0;
+    w[0] = s0 * ratio; w[1] = s1 * ratio; w[2] = s2 * ratio;
+    return;
+  }
+  double S[9];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) S[3 * i + j] = 0.5 * (R[3 * i + j] + R[3 * j + i]);
+  for (int i = 0; i < 3; ++i) S[4 * i] -= c;
+  int j = 0;
+  for (int i = 1; i < 3; ++i)
+    if (S[4 * i] > S[4 * j]) j = i;
+  double djj = S[4 * j];
+  double sq = djj > 0 ? std::sqrt(djj) : 1.0;
+  double a0 = S[j] / sq, a1 = S[3 + j] / sq, a2 = S[6 + j] / sq;
+  double nrm = std::fmax(std::sqrt(a0 * a0 + a1 * a1 + a2 * a2), 1e-300);
+  a0 /= nrm; a1 /= nrm; a2 /= nrm;
+  double sign = (a0 * s0 + a1 * s1 + a2 * s2) < 0 ? -1.0 : 1.0;
+  w[0] = a0 * sign * t; w[1] = a1 * sign * t; w[2] = a2 * sign * t;
+}
+
+// coefficient f = (1 - (t/2) cot(t/2))/t^2 of the inverse tangent operator
+inline double coeff_f(double t2) {
+  const Series& S = series();
+  double t = std::sqrt(t2);
+  if (t < S.cut) return sum_series(S.f, t2);
+  double x = 0.5 * t;
+  return (1.0 - x * std::cos(x) / std::sin(x)) / t2;
+}
+
+// log_se3 (inverse of Eq. (17) on |w| <= pi): (T_so3(w)^-T x, w)
+inline void log_se3(const Frame& H, double* out) {
+  double w[3];
+  log_so3(H.R, w);
+  double f = coeff_f(dot3(w, w));
+  double c[3], d[3];
+  cross(w, H.x, c);
+  cross(w, c, d);
+  for (int i = 0; i < 3; ++i) out[i] = H.x[i] - 0.5 * c[i] + f * d[i];
+  out[3] = w[0]; out[4] = w[1]; out[5] = w[2];
+}
+
+// T_so3(w)^-1 = I + W/2 + f W^2 (3x3, row-major)
+inline void tangent_so3_inv(const double* w, double* Ti) {
+  double t2 = dot3(w, w);
+  double f = coeff_f(t2);
+  double W2[9] = {w[0] * w[0] - t2, w[0] * w[1], w[0] * w[2], w[1] * w[0], w[1] * w[1] - t2,
+                  w[1] * w[2], w[2] * w[0], w[2] * w[1], w[2] * w[2] - t2};
+  for (int i = 0; i < 9; ++i) Ti[i] = f * W2[i];
+  Ti[0] += 1.0; Ti[4] += 1.0; Ti[8] += 1.0;
+  add_hat3(w, Ti, 3, 0.5);
+}
+
+// Ad(H^-1) (Eq. (57)) = [[R^T, -R^T hat(x)], [0, R^T]]
+inline void adjoint_inv(const Frame& H, double* Ad) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      double r = H.R[3 * j + i];
+      Ad[6 * i + j] = r;
+      Ad[6 * (3 + i) + 3 + j] = r;
+      Ad[6 * (3 + i) + j] = 0.0;
+    }
+  const double* x = H.x;
+  for (int i = 0; i < 3; ++i) {
+    double r0 = H.R[i], r1 = H.R[3 + i], r2 = H.R[6 + i];  // row i of R^T
+    Ad[6 * i + 3] = -(r1 * x[2] - r2 * x[1]);
+    Ad[6 * i + 4] = -(r2 * x[0] - r0 * x[2]);
+    Ad[6 * i + 5] = -(r0 * x[1] - r1 * x[0]);
+  }
+}
+// Ad(H) = [[R, hat(x) R], [0, R]]
+inline void adjoint(const Frame& H, double* Ad) {
+  double X[9];
+  hat3(H.x, X);
+  double XR[9];
+  mm<3, 3, 3>(X, H.R, XR);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      Ad[6 * i + j] = H.R[3 * i + j];
+      Ad[6 * (3 + i) + 3 + j] = H.R[3 * i + j];
+      Ad[6 * (3 + i) + j] = 0.0;
+      Ad[6 * i + 3 + j] = XR[3 * i + j];
+    }
+}
+// ad6(v) (Eq. (6)) = [[hat(v_O), hat(v_U)], [0, hat(v_O)]]
+inline void ad6(const double* v, double* X) {
+  std::memset(X, 0, 36 * sizeof(double));
+  hat3(v + 3, X, 6);
+  hat3(v + 3, X + 21, 6);
+  hat3(v, X + 3, 6);
+}
+// Lambda(p) with ad6(d)^T p = Lambda(p) d: [[0, hat(p_U)], [hat(p_U), hat(p_O)]]
+inline void lam_matrix(const double* p, double* L) {
+  std::memset(L, 0, 36 * sizeof(double));
+  hat3(p, L + 3, 6);
+  hat3(p, L + 18, 6);
+  hat3(p + 3, L + 21, 6);
+}
+// vect_se3 (Eq. (56)): (x, axial((R - R^T)/2))
+inline void vect(const Frame& G, double* out) {
+  out[0] = G.x[0]; out[1] = G.x[1]; out[2] = G.x[2];
+  out[3] = 0.5 * (G.R[7] - G.R[5]);
+  out[4] = 0.5 * (G.R[2] - G.R[6]);
+  out[5] = 0.5 * (G.R[3] - G.R[1]);
+}
+// D with vect(G exp(d)) = vect(G) + D d + O(d^2): [[R, 0], [0, (tr(R) I - R^T)/2]]
+inline void dvect(const Frame& G, double* D) {
+  std::memset(D, 0, 36 * sizeof(double));
+  double tr = G.R[0] + G.R[4] + G.R[8];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      D[6 * i + j] = G.R[3 * i + j];
+      D[6 * (3 + i) + 3 + j] = 0.5 * ((i == j ? tr : 0.0) - G.R[3 * j + i]);
+    }
+}
+
+}  // namespace se3dyn

@@ -1,0 +1,258 @@
+// Python bindings of the compiled engine (nanobind): the element tables arrive once from
+// se3dyn.assembly as a dict of numpy arrays; evaluations and steps work on numpy arrays in place.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/tuple.h>
+
+#include <stdexcept>
+#include <string>
+
+#include "newton.hpp"
+
+namespace nb = nanobind;
+using namespace nb::literals;
+
+namespace se3dyn {
+Series& series() {
+  static Series s;
+  return s;
+}
+}  // namespace se3dyn
+
+using namespace se3dyn;
+
+using DArr = nb::ndarray<double, nb::c_contig, nb::device::cpu>;
+using IArr = nb::ndarray<int64_t, nb::c_contig, nb::device::cpu>;
+
+namespace {
+
+nb::object item(const nb::dict& d, const char* key) {
+  if (!d.contains(key)) throw std::invalid_argument(std::string("engine table missing: ") + key);
+  return d[key];
+}
+std::vector<double> dvec(const nb::dict& d, const char* key) {
+  DArr a = nb::cast<DArr>(item(d, key));
+  return std::vector<double>(a.data(), a.data() + a.size());
+}
+template <class T>
+std::vector<T> ivec(const nb::dict& d, const char* key) {
+  IArr a = nb::cast<IArr>(item(d, key));
+  std::vector<T> out(a.size());
+  for (size_t i = 0; i < a.size(); ++i) out[i] = static_cast<T>(a.data()[i]);
+  return out;
+}
+std::vector<Frame> frames(const nb::dict& d, const char* key) {
+  std::vector<double> h = dvec(d, key);
+  std::vector<Frame> out(h.size() / 16);
+  for (size_t i = 0; i < out.size(); ++i) frame_from4(&h[16 * i], out[i]);
+  return out;
+}
+double* ptr(DArr& a, size_t n, const char* what) {
+  if (a.size() != n)
+    throw std::invalid_argument(std::string(what) + ": expected " + std::to_string(n) +
+                                " values, got " + std::to_string(a.size()));
+  return a.data();
+}
+const double* cptr(const DArr& a, size_t n, const char* what) {
+  if (a.size() != n)
+    throw std::invalid_argument(std::string(what) + ": expected " + std::to_string(n) +
+                                " values, got " + std::to_string(a.size()));
+  return a.data();
+}
+
+void build(Engine& E, const nb::dict& d) {
+  E.nq = nb::cast<int>(item(d, "nq"));
+  E.nm = nb::cast<int>(item(d, "nm"));
+  E.nu = nb::cast<int>(item(d, "nu"));
+  E.nvals = nb::cast<long>(item(d, "nvals"));
+  E.nvals2 = nb::cast<long>(item(d, "nvals2"));
+  FrameTables& T = E.T;
+  T.dof = ivec<int>(d, "frame_dof");
+  T.k = ivec<int>(d, "frame_k");
+  T.node = ivec<char>(d, "frame_node");
+  T.A = dvec(d, "frame_A");
+  T.F = static_cast<int>(T.dof.size());
+  E.is_joint_frame = ivec<char>(d, "frame_joint");
+  Bodies& B = E.bodies;
+  B.f = ivec<int>(d, "body_frame");
+  B.n = static_cast<int>(B.f.size());
+  B.M = dvec(d, "body_M");
+  B.mc = dvec(d, "body_mc");
+  B.m = dvec(d, "body_m");
+  B.off = ivec<long>(d, "body_off");
+  Joints& J = E.joints;
+  J.fa = ivec<int>(d, "joint_fa");
+  J.n = static_cast<int>(J.fa.size());
+  J.fb = ivec<int>(d, "joint_fb");
+  J.fj = ivec<int>(d, "joint_fj");
+  J.mult = ivec<int>(d, "joint_mult");
+  J.XA = frames(d, "joint_XA");
+  J.XB = frames(d, "joint_XB");
+  J.PA = dvec(d, "joint_PA");
+  J.PB = dvec(d, "joint_PB");
+  J.offset = ivec<char>(d, "joint_offset");
+  J.off_ca = ivec<long>(d, "joint_off_ca");
+  J.off_cb = ivec<long>(d, "joint_off_cb");
+  J.off_cj = ivec<long>(d, "joint_off_cj");
+  J.off_ac = ivec<long>(d, "joint_off_ac");
+  J.off_bc = ivec<long>(d, "joint_off_bc");
+  J.off_jc = ivec<long>(d, "joint_off_jc");
+  J.off_aj = ivec<long>(d, "joint_off_aj");
+  J.off_xa = ivec<long>(d, "joint_off_xa");
+  J.off_xb = ivec<long>(d, "joint_off_xb");
+  J.off_xj = ivec<long>(d, "joint_off_xj");
+  JointForces& Q = E.jforces;
+  Q.f = ivec<int>(d, "jforce_frame");
+  Q.n = static_cast<int>(Q.f.size());
+  Q.K = dvec(d, "jforce_K");
+  Q.ref = dvec(d, "jforce_ref");
+  Q.C = dvec(d, "jforce_C");
+  Q.kp = dvec(d, "jforce_kp");
+  Q.kd = dvec(d, "jforce_kd");
+  Q.tau = ivec<int>(d, "jforce_tau");
+  Q.pref = ivec<int>(d, "jforce_pref");
+  Q.prate = ivec<int>(d, "jforce_prate");
+  Q.nonab = ivec<char>(d, "jforce_nonab");
+  Q.Apinv = dvec(d, "jforce_Apinv");
+  Q.A = dvec(d, "jforce_A");
+  Q.off = ivec<long>(d, "jforce_off");
+  Loads& L = E.loads;
+  L.f = ivec<int>(d, "load_frame");
+  L.n = static_cast<int>(L.f.size());
+  L.c = dvec(d, "load_c");
+  L.force = ivec<int>(d, "load_force");
+  L.torque = ivec<int>(d, "load_torque");
+  L.force_body = ivec<char>(d, "load_force_body");
+  L.torque_body = ivec<char>(d, "load_torque_body");
+  L.off = ivec<long>(d, "load_off");
+  SpringDampers& P = E.springs;
+  P.fa = ivec<int>(d, "spring_fa");
+  P.n = static_cast<int>(P.fa.size());
+  P.fb = ivec<int>(d, "spring_fb");
+  P.ca = dvec(d, "spring_ca");
+  P.cb = dvec(d, "spring_cb");
+  P.k = dvec(d, "spring_k");
+  P.d = dvec(d, "spring_d");
+  P.L0 = dvec(d, "spring_L0");
+  P.off_aa = ivec<long>(d, "spring_off_aa");
+  P.off_ab = ivec<long>(d, "spring_off_ab");
+  P.off_ba = ivec<long>(d, "spring_off_ba");
+  P.off_bb = ivec<long>(d, "spring_off_bb");
+  E.log_f = ivec<int>(d, "log_frame");
+  E.log_H0inv = frames(d, "log_H0inv");
+  E.log_Apinv = dvec(d, "log_Apinv");
+  E.log_needed = ivec<char>(d, "log_needed");
+  std::vector<long> vp = ivec<long>(d, "velprod");  // (., 6): target, src, ki, kj, joint, slot
+  for (size_t i = 0; i + 5 < vp.size(); i += 6)
+    E.velprod.push_back({vp[i], vp[i + 1], int(vp[i + 2]), int(vp[i + 3]), int(vp[i + 4]),
+                         int(vp[i + 5])});
+  std::vector<long> xp = ivec<long>(d, "xiprod");  // (., 6): target, k, c1, s1, c2, s2
+  for (size_t i = 0; i + 5 < xp.size(); i += 6)
+    E.xiprod.push_back({xp[i], int(xp[i + 1]), int(xp[i + 2]), int(xp[i + 3]), int(xp[i + 4]),
+                        int(xp[i + 5])});
+  E.setup();
+}
+
+}  // namespace
+
+NB_MODULE(_engine, m) {
+  m.doc() = "se3dyn compiled engine: element kernels, assembler, Newton step (C++).";
+  m.def("set_series", [](DArr c, DArr d, DArr e, DArr f, double cut) {
+    Series& S = series();
+    S.cut = cut;
+    for (int i = 0; i < SERIES_TERMS; ++i) {
+      S.c[i] = c.data()[i];
+      S.d[i] = d.data()[i];
+      S.e[i] = e.data()[i];
+      S.f[i] = f.data()[i];
+    }
+  });
+
+  nb::class_<Engine>(m, "Engine")
+      .def("__init__", [](Engine* E, nb::dict d) {
+        new (E) Engine();
+        build(*E, d);
+      })
+      .def_ro("nq", &Engine::nq)
+      .def_ro("nm", &Engine::nm)
+      .def(
+          "evaluate",
+          [](Engine& E, DArr Hn, DArr alpha_n, DArr n, DArr v, DArr vd, DArr lam, DArr u,
+             DArr H, DArr r, DArr phi, DArr alpha, nb::object psi, nb::object vals,
+             nb::object energy, double cM, double cC, double cK, bool index2, double cv,
+             bool all_logs) {
+            int F = E.T.F, nq = E.nq, nm = E.nm;
+            E.load_frames(cptr(Hn, 16 * F, "Hn"));
+            Engine::Out o{ptr(r, nq, "r"), ptr(phi, nm, "phi"), nullptr, ptr(alpha, nq, "alpha"),
+                          nullptr, nullptr};
+            if (!psi.is_none()) {
+              DArr p = nb::cast<DArr>(psi);
+              o.psi = ptr(p, nm, "psi");
+            }
+            if (!vals.is_none()) {
+              DArr p = nb::cast<DArr>(vals);
+              o.vals = ptr(p, index2 ? E.nvals2 : E.nvals, "vals");
+            }
+            if (!energy.is_none()) {
+              DArr p = nb::cast<DArr>(energy);
+              o.energy = ptr(p, N_ENERGY, "energy");
+            }
+            double fs = E.evaluate(cptr(alpha_n, nq, "alpha_n"), cptr(n, nq, "n"),
+                                   cptr(v, nq, "v"), cptr(vd, nq, "vd"), cptr(lam, nm, "lam"),
+                                   cptr(u, E.nu, "u"), cM, cC, cK, index2, cv,
+                                   all_logs, o);
+            double* Ho = ptr(H, 16 * F, "H");
+            for (int f = 0; f < F; ++f) frame_to4(E.S.H[f], Ho + 16 * f);
+            return fs;
+          },
+          "Hn"_a, "alpha_n"_a, "n"_a, "v"_a, "vd"_a, "lam"_a, "u"_a, "H"_a, "r"_a, "phi"_a,
+          "alpha"_a, "psi"_a.none(), "vals"_a.none(), "energy"_a.none(), "cM"_a, "cC"_a, "cK"_a,
+          "index2"_a, "cv"_a, "all_logs"_a)
+      .def("BnT", [](Engine& E, DArr Hn, DArr xi, DArr out) {
+        // out (nq,) = B_n^T xi with B_n the constraint gradient at the frames Hn (Eq. (58))
+        E.load_frames(cptr(Hn, 16 * E.T.F, "Hn"));
+        E.joints.store_B(E.T, E.Hn, E.joints.Bnu);
+        double* o = ptr(out, E.nq, "out");
+        std::fill(o, o + E.nq, 0.0);
+        E.subtract_BnT(cptr(xi, E.nm, "xi"), o);
+        for (int i = 0; i < E.nq; ++i) o[i] = -o[i];
+      });
+
+  nb::class_<Stepper>(m, "Stepper")
+      .def("__init__",
+           [](Stepper* S, Engine& E, bool index2, int N, IArr colptr, IArr rowind, IArr perm,
+              IArr group, IArr drop) {
+             new (S) Stepper();
+             std::vector<int> cp(colptr.data(), colptr.data() + colptr.size());
+             std::vector<int> ri(rowind.data(), rowind.data() + rowind.size());
+             std::vector<long> pm(perm.data(), perm.data() + perm.size());
+             std::vector<int> gr(group.data(), group.data() + group.size());
+             std::vector<char> dr(drop.data(), drop.data() + drop.size());
+             if (cp.size() != size_t(N + 1)) throw std::invalid_argument("colptr size");
+             if (dr.size() != size_t(E.nm)) throw std::invalid_argument("drop size");
+             S->init(&E, index2, N, cp.data(), ri.data(), pm.data(), long(pm.size()),
+                     gr.empty() ? nullptr : gr.data(), dr.data());
+           },
+           nb::keep_alive<1, 2>())
+      .def(
+          "step",
+          [](Stepper& S, DArr Hn, DArr alpha_n, DArr v_n, DArr vd_n, DArr a_n, DArr lam_n,
+             DArr u, double h, double am, double af, double g, double b, double tol_r,
+             double ltol, double lscale, int max_iter, bool reuse, double kmax, DArr H,
+             DArr alpha, DArr v, DArr vd, DArr a, DArr lam, DArr n) {
+            Engine& E = *S.E;
+            int F = E.T.F, nq = E.nq, nm = E.nm;
+            E.load_frames(cptr(Hn, 16 * F, "Hn"));
+            Stepper::Params P{h, am, af, g, b, tol_r, ltol, lscale, kmax, max_iter, reuse};
+            StepInfo info = S.step(P, cptr(alpha_n, nq, "alpha_n"), cptr(v_n, nq, "v_n"),
+                                   cptr(vd_n, nq, "vd_n"), cptr(a_n, nq, "a_n"),
+                                   cptr(lam_n, nm, "lam_n"), cptr(u, E.nu, "u"),
+                                   ptr(alpha, nq, "alpha"), ptr(v, nq, "v"), ptr(vd, nq, "vd"),
+                                   ptr(a, nq, "a"), ptr(lam, nm, "lam"), ptr(n, nq, "n"));
+            double* Ho = ptr(H, 16 * F, "H");
+            for (int f = 0; f < F; ++f) frame_to4(E.S.H[f], Ho + 16 * f);
+            return nb::make_tuple(info.status, info.iterations, info.residual, info.constraint,
+                                  info.factorisations);
+          });
+}

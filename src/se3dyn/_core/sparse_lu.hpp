@@ -1,0 +1,978 @@
+// Sparse LU of a general (unsymmetric) square matrix: generic, header-only, standard library only.
+//
+//   P A Q = L U      L unit lower triangular, U upper triangular
+//
+// * analyze: a fill-reducing symmetric ordering Q of the pattern of A + A^T by approximate
+//   minimum degree (AMD: Amestoy, Davis & Duff, "An approximate minimum degree ordering
+//   algorithm", SIAM J. Matrix Anal. Appl. 17 (1996) 886-905; the quotient-graph formulation of
+//   Davis, "Direct Methods for Sparse Linear Systems", SIAM 2006, ch. 7), computed on the graph
+//   of the caller's blocks ("groups": e.g. the 6 unknowns of a body) with the block sizes as the
+//   initial supervariable weights, so each block stays contiguous in Q.
+// * factor: left-looking LU with threshold partial pivoting (Gilbert & Peierls, "Sparse partial
+//   pivoting in time proportional to arithmetic operations", SIAM J. Sci. Stat. Comput. 9 (1988)
+//   862-874; CSparse cs_lu, Davis 2006 ch. 6; KLU: Davis & Palamadai Natarajan, ACM TOMS 37
+//   (2010) 36). Column k of L and U is one sparse triangular solve whose nonzero pattern is the
+//   reach of the pattern of A(:, Q[k]) in the graph of the columns of L computed so far (a
+//   depth-first search), then a pivot is chosen among the rows not yet pivotal: the diagonal
+//   (row Q[k]) when |a_kk| >= pivot_tol * max |a_ik| (KLU's rule, pivot_tol = 1e-3), else the
+//   largest.
+// * refactor: new values, same pivot sequence and same L/U patterns (KLU's klu_refactor): no
+//   graph search, a fixed sequence of sparse axpy's per column, and a check of every pivot.
+// * solve / solve_transposed: the two triangular solves (column oriented) and the permutations.
+//
+// Data structure invariants after a successful factor (all indices 0-based):
+//   Q_[k]      original column eliminated at step k; P_[k] original row pivotal at step k;
+//   pinv_[i]   step at which original row i is pivotal (the inverse of P_).
+//   L (CSC, strictly lower part, unit diagonal not stored): column k holds rows Li_[Lp_[k] ..
+//              Lp_[k+1]) in pivot numbering, all > k, sorted ascending, values Lx_.
+//   U (CSC, strictly upper part): column k holds rows Ui_[Up_[k] .. Up_[k+1]) in pivot numbering,
+//              all < k, sorted ascending (an order in which the updates of refactor may be
+//              applied: L(:, j) only touches rows > j), values Ux_; the diagonal is Ud_[k].
+//   Refactor scatter map: the entries of A(:, Q_[k]) that are in the factor pattern are
+//              (value index Rv_[q], pivot row Rr_[q]) for q in [Rp_[k], Rp_[k+1]); the value
+//              indices of A entries left out of the pattern (only with drop_zeros) are Rz_.
+//   work_      n doubles, all zero between calls (every routine that scatters clears again).
+//
+// No exceptions are thrown by factor/refactor/solve (status codes); refactor and solve do not
+// allocate (all memory is sized in analyze and factor). solve() is const but uses the mutable
+// work vector: one SparseLU object must not be used by two threads at once.
+//
+// Test and benchmark: tests/cpp/test_sparse_lu.cpp (matrices from tests/cpp/make_lu_matrices.py).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+namespace se3dyn {
+
+namespace sparse_lu_detail {
+
+inline int flip(int i) { return -i - 2; }  // an involution marking "absorbed into i" (CSparse)
+
+// Reset the marker array w (entries equal to 0 mean "dead", they stay 0) when mark + lemax would
+// overflow; returns the new mark.
+inline int wclear(int mark, int lemax, int* w, int n) {
+  if (mark < 2 || mark >= std::numeric_limits<int>::max() - lemax - 2) {
+    for (int k = 0; k < n; ++k)
+      if (w[k] != 0) w[k] = 1;
+    mark = 2;
+  }
+  return mark;
+}
+
+// Non-recursive depth-first search of the tree given by child lists (head/next) from root j,
+// writing the postorder into post[k...]; returns the new k.
+inline int tdfs(int j, int k, int* head, const int* next, int* post, int* stack) {
+  int top = 0;
+  stack[0] = j;
+  while (top >= 0) {
+    const int p = stack[top];
+    const int i = head[p];
+    if (i == -1) {
+      --top;
+      post[k++] = p;
+    } else {
+      head[p] = next[i];
+      stack[++top] = i;
+    }
+  }
+  return k;
+}
+
+// Approximate minimum degree ordering (Amestoy, Davis & Duff 1996) of a symmetric graph of n
+// nodes given without self loops in CSC form (Cp: n+1 column pointers, Ci: the adjacency lists;
+// both are destroyed). Node i is initially a supervariable of weight[i] >= 1 variables
+// (nvar = sum of the weights): degrees, the dense-row threshold and the elimination count are in
+// variables, so the ordering of a block graph is the one of the full graph with each block kept
+// together. The implementation follows the quotient-graph algorithm as laid out in CSparse's
+// cs_amd (Davis 2006, sec. 7.1): element absorption, mass elimination, supervariable detection
+// by hashing, approximate external degrees |Le \ Lk| from one scan of the element lists,
+// aggressive absorption, dense nodes (degree > 10 sqrt(nvar)) ordered last, and a final
+// postorder of the assembly tree. On return perm[0..n) is the elimination order of the nodes.
+//
+// Quotient graph storage: each live object i (variable or element) has its list at
+// Ci[Cp[i] .. Cp[i] + len[i]): for a variable, first its elen[i] adjacent elements, then its
+// adjacent variables; for an element, its variables. Cp[i] = flip(e) marks i as absorbed into
+// element e (or merged into supervariable e); nv[i] is the weight of supervariable i (0 for a
+// non-principal variable, negated while i is in the pattern of the current pivot element);
+// elen[i] = -2 marks an element, -1 a merged/dense/mass-eliminated variable. degree[] holds
+// approximate external degrees (variables) or element sizes (elements); the lists head/next/last
+// are the degree lists of the variables (head indexed by degree), hhead/next/last the hash
+// buckets during supervariable detection; w[] the marker array of the set differences.
+inline void amd_order(int n, int nvar, std::vector<int>& Cp, std::vector<int>& Ci,
+                      const int* weight, int* perm) {
+  if (n == 0) return;
+  int cnz = Cp[n];
+  // elbow room for the new elements (an element's list is never longer than the weighted
+  // degree of its pivot, which is at most nvar; the live storage never exceeds the initial one)
+  const int nzmax = cnz + cnz / 5 + 2 * n + nvar + 1;
+  Ci.resize(nzmax);
+  int dense = std::max(16, static_cast<int>(10.0 * std::sqrt(static_cast<double>(nvar))));
+  dense = std::min(nvar - 2, dense);
+  const int nd = std::max(n, nvar) + 1;
+  std::vector<int> len(n + 1), nv(n + 1), next(n + 1), head(nd, -1), elen(n + 1), degree(n + 1),
+      w(n + 1), hhead(n + 1, -1), last(n + 1, -1), post(n + 1);
+  Cp.resize(n + 1);
+  for (int k = 0; k < n; ++k) len[k] = Cp[k + 1] - Cp[k];
+  len[n] = 0;
+  for (int i = 0; i <= n; ++i) {
+    next[i] = -1;
+    nv[i] = i < n ? weight[i] : 1;
+    w[i] = 1;
+    elen[i] = 0;
+  }
+  for (int i = 0; i < n; ++i) {
+    int d = 0;
+    for (int p = Cp[i]; p < Cp[i + 1]; ++p) d += weight[Ci[p]];
+    degree[i] = d;
+  }
+  degree[n] = 0;
+  int mark = wclear(0, 0, w.data(), n);
+  elen[n] = -2;
+  Cp[n] = -1;
+  w[n] = 0;
+  int nel = 0;  // variables eliminated so far (weighted)
+  for (int i = 0; i < n; ++i) {
+    const int d = degree[i];
+    if (d == 0) {  // isolated node: an element at once
+      elen[i] = -2;
+      nel += nv[i];
+      Cp[i] = -1;
+      w[i] = 0;
+    } else if (d > dense && nv[i] > 0) {  // dense node: absorbed into the placeholder n, last
+      nel += nv[i];
+      nv[n] += nv[i];
+      nv[i] = 0;
+      elen[i] = -1;
+      Cp[i] = flip(n);
+    } else {
+      if (head[d] != -1) last[head[d]] = i;
+      next[i] = head[d];
+      head[d] = i;
+    }
+  }
+  int mindeg = 0, lemax = 0;
+  while (nel < nvar) {
+    // --- the variable k of minimum approximate degree
+    int k = -1;
+    for (; mindeg < nvar && (k = head[mindeg]) == -1; ++mindeg) {
+    }
+    if (k < 0) break;  // cannot happen with consistent weights; keeps the loop finite
+    if (next[k] != -1) last[next[k]] = -1;
+    head[mindeg] = next[k];
+    const int elenk = elen[k];
+    int nvk = nv[k];
+    nel += nvk;
+    // --- garbage collection of the quotient graph storage
+    if (elenk > 0 && cnz + mindeg >= nzmax) {
+      for (int j = 0; j < n; ++j) {
+        const int p = Cp[j];
+        if (p >= 0) {  // j is a live object: remember its first entry, mark the list start
+          Cp[j] = Ci[p];
+          Ci[p] = flip(j);
+        }
+      }
+      int q = 0;
+      for (int p = 0; p < cnz;) {
+        const int j = flip(Ci[p++]);
+        if (j >= 0) {
+          Ci[q] = Cp[j];
+          Cp[j] = q++;
+          for (int k3 = 0; k3 < len[j] - 1; ++k3) Ci[q++] = Ci[p++];
+        }
+      }
+      cnz = q;
+    }
+    // --- new element Lk = (union of the variables of the elements adjacent to k) + (variables
+    //     adjacent to k), minus k; the absorbed elements point to k
+    int dk = 0;
+    nv[k] = -nvk;
+    int p = Cp[k];
+    const int pk1 = (elenk == 0) ? p : cnz;
+    int pk2 = pk1;
+    for (int k1 = 1; k1 <= elenk + 1; ++k1) {
+      int e, pj, ln;
+      if (k1 > elenk) {
+        e = k;
+        pj = p;
+        ln = len[k] - elenk;
+      } else {
+        e = Ci[p++];
+        pj = Cp[e];
+        ln = len[e];
+      }
+      for (int k2 = 1; k2 <= ln; ++k2) {
+        const int i = Ci[pj++];
+        const int nvi = nv[i];
+        if (nvi <= 0) continue;  // not a principal variable, or already in Lk
+        dk += nvi;
+        nv[i] = -nvi;
+        Ci[pk2++] = i;
+        if (next[i] != -1) last[next[i]] = last[i];  // out of its degree list
+        if (last[i] != -1)
+          next[last[i]] = next[i];
+        else
+          head[degree[i]] = next[i];
+      }
+      if (e != k) {
+        Cp[e] = flip(k);
+        w[e] = 0;
+      }
+    }
+    if (elenk != 0) cnz = pk2;
+    degree[k] = dk;
+    Cp[k] = pk1;
+    len[k] = pk2 - pk1;
+    elen[k] = -2;
+    // --- set differences: for every element e adjacent to a variable of Lk,
+    //     w[e] - mark = |Le \ Lk| (weighted)
+    mark = wclear(mark, lemax, w.data(), n);
+    for (int pk = pk1; pk < pk2; ++pk) {
+      const int i = Ci[pk];
+      const int eln = elen[i];
+      if (eln <= 0) continue;
+      const int nvi = -nv[i];
+      const int wnvi = mark - nvi;
+      for (int q = Cp[i]; q <= Cp[i] + eln - 1; ++q) {
+        const int e = Ci[q];
+        if (w[e] >= mark)
+          w[e] -= nvi;
+        else if (w[e] != 0)
+          w[e] = degree[e] + wnvi;
+      }
+    }
+    // --- approximate degrees of the variables of Lk, element absorption, mass elimination,
+    //     hash keys for the supervariable detection
+    for (int pk = pk1; pk < pk2; ++pk) {
+      const int i = Ci[pk];
+      const int p1 = Cp[i];
+      const int p2 = p1 + elen[i] - 1;
+      int pn = p1;
+      std::size_t h = 0;
+      int d = 0;
+      for (int q = p1; q <= p2; ++q) {
+        const int e = Ci[q];
+        if (w[e] != 0) {
+          const int dext = w[e] - mark;
+          if (dext > 0) {
+            d += dext;
+            Ci[pn++] = e;
+            h += static_cast<std::size_t>(e);
+          } else {  // Le is a subset of Lk: aggressive absorption
+            Cp[e] = flip(k);
+            w[e] = 0;
+          }
+        }
+      }
+      elen[i] = pn - p1 + 1;  // the elements kept, and k
+      const int p3 = pn;
+      const int p4 = p1 + len[i];
+      for (int q = p2 + 1; q < p4; ++q) {
+        const int j = Ci[q];
+        const int nvj = nv[j];
+        if (nvj <= 0) continue;  // j is in Lk or no longer a variable
+        d += nvj;
+        Ci[pn++] = j;
+        h += static_cast<std::size_t>(j);
+      }
+      if (d == 0) {  // i is adjacent to k only: eliminated together with k
+        Cp[i] = flip(k);
+        const int nvi = -nv[i];
+        dk -= nvi;
+        nvk += nvi;
+        nel += nvi;
+        nv[i] = 0;
+        elen[i] = -1;
+      } else {
+        degree[i] = std::min(degree[i], d);
+        Ci[pn] = Ci[p3];  // k becomes the first element of i's list
+        Ci[p3] = Ci[p1];
+        Ci[p1] = k;
+        len[i] = pn - p1 + 1;
+        const int hb = static_cast<int>(h % static_cast<std::size_t>(n));
+        next[i] = hhead[hb];
+        hhead[hb] = i;
+        last[i] = hb;
+      }
+    }
+    degree[k] = dk;
+    lemax = std::max(lemax, dk);
+    mark = wclear(mark + lemax, lemax, w.data(), n);
+    // --- supervariable detection: variables of Lk with identical lists are merged
+    for (int pk = pk1; pk < pk2; ++pk) {
+      int i = Ci[pk];
+      if (nv[i] >= 0) continue;  // already merged, or mass eliminated
+      const int hb = last[i];
+      i = hhead[hb];
+      hhead[hb] = -1;
+      for (; i != -1 && next[i] != -1; i = next[i], ++mark) {
+        const int ln = len[i];
+        const int eln = elen[i];
+        for (int q = Cp[i] + 1; q <= Cp[i] + ln - 1; ++q) w[Ci[q]] = mark;
+        int jlast = i;
+        for (int j = next[i]; j != -1;) {
+          bool ok = (len[j] == ln) && (elen[j] == eln);
+          for (int q = Cp[j] + 1; ok && q <= Cp[j] + ln - 1; ++q)
+            if (w[Ci[q]] != mark) ok = false;
+          if (ok) {  // j is indistinguishable from i: absorb j into i
+            Cp[j] = flip(i);
+            nv[i] += nv[j];
+            nv[j] = 0;
+            elen[j] = -1;
+            j = next[j];
+            next[jlast] = j;
+          } else {
+            jlast = j;
+            j = next[j];
+          }
+        }
+      }
+    }
+    // --- finalise Lk: back into the degree lists with degree = approximate external degree
+    //     + |Lk \ i|
+    int pf = pk1;
+    for (int pk = pk1; pk < pk2; ++pk) {
+      const int i = Ci[pk];
+      const int nvi = -nv[i];
+      if (nvi <= 0) continue;
+      nv[i] = nvi;
+      int d = degree[i] + dk - nvi;
+      d = std::min(d, nvar - nel - nvi);
+      d = std::max(d, 0);
+      if (head[d] != -1) last[head[d]] = i;
+      next[i] = head[d];
+      last[i] = -1;
+      head[d] = i;
+      mindeg = std::min(mindeg, d);
+      degree[i] = d;
+      Ci[pf++] = i;
+    }
+    nv[k] = nvk;
+    if ((len[k] = pf - pk1) == 0) {
+      Cp[k] = -1;
+      w[k] = 0;
+    }
+    if (elenk != 0) cnz = pf;
+  }
+  // --- postorder of the assembly tree (parent of i: flip(Cp[i]), -1 for a root); the
+  //     non-principal variables come right before their principal variable
+  for (int i = 0; i < n; ++i) Cp[i] = flip(Cp[i]);
+  for (int j = 0; j <= n; ++j) head[j] = -1;
+  for (int j = n; j >= 0; --j) {
+    if (nv[j] > 0) continue;
+    next[j] = head[Cp[j]];
+    head[Cp[j]] = j;
+  }
+  for (int e = n; e >= 0; --e) {
+    if (nv[e] <= 0) continue;
+    if (Cp[e] != -1) {
+      next[e] = head[Cp[e]];
+      head[Cp[e]] = e;
+    }
+  }
+  int k = 0;
+  for (int i = 0; i <= n; ++i)
+    if (Cp[i] == -1) k = tdfs(i, k, head.data(), next.data(), post.data(), w.data());
+  int q = 0;
+  for (int t = 0; t < k; ++t)
+    if (post[t] < n) perm[q++] = post[t];
+}
+
+// Sort the row indices of every column of a CSC matrix (with its values) by transposing twice,
+// in O(n + nnz). Workspace is allocated here (called by factor only).
+inline void sort_columns(int n, const std::vector<int>& Ap, std::vector<int>& Ai,
+                         std::vector<double>& Ax) {
+  const int nz = Ap[n];
+  std::vector<int> Tp(n + 1, 0), Ti(nz), cnt(n);
+  std::vector<double> Tx(nz);
+  for (int p = 0; p < nz; ++p) ++Tp[Ai[p] + 1];
+  for (int i = 0; i < n; ++i) Tp[i + 1] += Tp[i];
+  for (int i = 0; i < n; ++i) cnt[i] = Tp[i];
+  for (int j = 0; j < n; ++j)
+    for (int p = Ap[j]; p < Ap[j + 1]; ++p) {
+      const int q = cnt[Ai[p]]++;
+      Ti[q] = j;
+      Tx[q] = Ax[p];
+    }
+  for (int j = 0; j < n; ++j) cnt[j] = Ap[j];
+  for (int i = 0; i < n; ++i)
+    for (int q = Tp[i]; q < Tp[i + 1]; ++q) {
+      const int p = cnt[Ti[q]]++;
+      Ai[p] = i;
+      Ax[p] = Tx[q];
+    }
+}
+
+}  // namespace sparse_lu_detail
+
+class SparseLU {
+ public:
+  struct Options {
+    // factor: the diagonal entry is the pivot when |a_kk| >= pivot_tol * max_i |a_ik| (KLU's
+    // default 1e-3); pivot_tol = 1 is plain partial pivoting.
+    double pivot_tol = 1e-3;
+    // refactor fails (returns nonzero; the caller then calls factor) when a pivot is smaller
+    // than refactor_tol times the largest entry of its column of candidates, |u_kk| <
+    // refactor_tol * max(|u_kk|, max_i |l_ik u_kk|), or not finite.
+    double refactor_tol = 1e-8;
+    // factor: leave the entries of A that are exactly zero in the values given to factor out of
+    // the L/U patterns (an iteration matrix whose pattern holds many entries that are zero in
+    // a given configuration). refactor then checks that these entries are still zero and
+    // fails otherwise.
+    bool drop_zeros = false;
+  };
+
+  // Status of the last factor / refactor.
+  enum Status : int {
+    kOk = 0,
+    kNotAnalyzed = 1,       // analyze not called (or failed), or refactor before any factor
+    kStructurallyZero = 2,  // no candidate pivot row in a column: structurally singular
+    kNumericallyZero = 3,   // all candidate pivots exactly zero
+    kNotFinite = 4,         // a value of the factors is Inf or NaN
+    kSmallPivot = 5,        // refactor: pivot below refactor_tol of its column
+    kPatternChanged = 6,    // refactor (drop_zeros): an entry left out by factor is nonzero now
+  };
+
+  SparseLU() = default;
+  explicit SparseLU(const Options& opt) : opt_(opt) {}
+  void set_options(const Options& opt) { opt_ = opt; }
+  const Options& options() const { return opt_; }
+
+  // Pattern of an n x n matrix in CSC (colptr: n+1, rowind: nnz; rows sorted or not; duplicates
+  // are summed). `group` (n ints, or nullptr): unknowns with equal ids form a block kept
+  // contiguous in the ordering, which is computed on the (smaller) block graph. The pattern is
+  // copied. Returns 0, or -1 for an invalid pattern (then factor fails with kNotAnalyzed).
+  int analyze(int n, const int* colptr, const int* rowind, const int* group = nullptr);
+
+  // Numeric LU with threshold partial pivoting; values in the CSC order of analyze. Returns 0,
+  // or 1 + the original column index of the first column without a usable pivot (structurally
+  // or numerically zero, or non-finite values); status() tells which.
+  int factor(const double* values);
+
+  // New values, the pivot sequence and the patterns of the last successful factor. Returns 0,
+  // or 1 + the original column index of the first failing pivot (zero, non-finite, smaller than
+  // refactor_tol of its column) or of a column whose left-out entry became nonzero
+  // (drop_zeros); after a failure the factors are invalid until the next successful factor or
+  // refactor. No allocation.
+  int refactor(const double* values);
+
+  // Solve A x = b in place (b: n entries). Requires a successful factor/refactor; otherwise b is
+  // filled with NaN. No allocation.
+  void solve(double* b) const;
+  // Solve A^T x = b in place.
+  void solve_transposed(double* b) const;
+
+  int n() const { return n_; }
+  bool ok() const { return valid_; }
+  Status status() const { return status_; }
+  // Ordering (column order Q: step k eliminates column col_perm()[k]) and row pivots.
+  const std::vector<int>& col_perm() const { return Q_; }
+  const std::vector<int>& row_perm() const { return P_; }
+  // Number of entries of L and of U including their diagonals (as SuperLU counts them):
+  // nnz(L + U) = nnz_L() + nnz_U() - n().
+  long long nnz_L() const { return static_cast<long long>(Li_.size()) + n_; }
+  long long nnz_U() const { return static_cast<long long>(Ui_.size()) + n_; }
+  // Multiply-add pairs of one refactor (the sum over the U entries of the lengths of the L
+  // columns they update).
+  long long refactor_flops() const { return flops_; }
+  // Reciprocal pivot growth of the last factor/refactor, min_k max|A(:, Q_k)| / max|U(:, k)|
+  // (KLU's rgrowth; close to 1 is good, tiny means an unstable factorisation).
+  double rgrowth() const { return rgrowth_; }
+  // Crude reciprocal condition estimate min|u_kk| / max|u_kk| (KLU's klu_rcond).
+  double rcond_pivots() const { return rcond_piv_; }
+  // 1-norm condition estimate ||A||_1 ||A^-1||_1 (Hager 1984 / Higham 1988, as LAPACK's dlacon:
+  // a few solves with A and A^T). Allocates; not for the hot path. Inf when not factored.
+  double condest() const;
+
+ private:
+  int dfs(int j, int stamp, int top, int* xi, int* pstack);
+
+  Options opt_;
+  int n_ = 0;
+  bool analyzed_ = false, valid_ = false, have_pattern_ = false;
+  Status status_ = kNotAnalyzed;
+  std::vector<int> colptr_, rowind_;  // the pattern of analyze
+  std::vector<int> blk_;              // block (group) of every unknown; empty without groups
+  std::vector<int> Q_, P_, pinv_;
+  std::vector<int> Lp_, Li_, Up_, Ui_;
+  std::vector<double> Lx_, Ux_, Ud_;
+  std::vector<int> Rp_, Rv_, Rr_, Rz_;  // refactor scatter map (see the invariants above)
+  std::vector<int> mark_, xi_, pstack_;  // factor workspace
+  mutable std::vector<double> work_;     // zero between calls
+  double anorm1_ = 0.0, rgrowth_ = 0.0, rcond_piv_ = 0.0;
+  long long flops_ = 0;
+};
+
+// ---------------------------------------------------------------------------------------------
+// analyze
+// ---------------------------------------------------------------------------------------------
+inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const int* group) {
+  analyzed_ = valid_ = have_pattern_ = false;
+  status_ = kNotAnalyzed;
+  n_ = 0;
+  if (n < 0 || colptr == nullptr || (n > 0 && rowind == nullptr && colptr[n] > 0)) return -1;
+  if (colptr[0] != 0) return -1;
+  for (int j = 0; j < n; ++j)
+    if (colptr[j + 1] < colptr[j]) return -1;
+  const int nz = colptr[n];
+  for (int p = 0; p < nz; ++p)
+    if (rowind[p] < 0 || rowind[p] >= n) return -1;
+  n_ = n;
+  colptr_.assign(colptr, colptr + n + 1);
+  rowind_.assign(rowind, rowind + nz);
+
+  // --- blocks: the distinct ids renumbered 0..nb-1 in increasing order
+  std::vector<int> blk(n);
+  int nb = 0;
+  if (group) {
+    // sort the distinct ids (they may be any ints) to renumber them
+    std::vector<int> ids(group, group + n);
+    std::sort(ids.begin(), ids.end());
+    ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+    nb = static_cast<int>(ids.size());
+    for (int i = 0; i < n; ++i) {
+      const int b = static_cast<int>(std::lower_bound(ids.begin(), ids.end(), group[i]) -
+                                     ids.begin());
+      blk[i] = b;
+    }
+  } else {
+    nb = n;
+    for (int i = 0; i < n; ++i) blk[i] = i;
+  }
+  // members of every block, in increasing index order
+  std::vector<int> bp(nb + 1, 0), bm(n);
+  for (int i = 0; i < n; ++i) ++bp[blk[i] + 1];
+  for (int b = 0; b < nb; ++b) bp[b + 1] += bp[b];
+  {
+    std::vector<int> c(bp.begin(), bp.end() - 1);
+    for (int i = 0; i < n; ++i) bm[c[blk[i]]++] = i;
+  }
+  // --- block graph of A + A^T without self loops: pattern of A^T first (row lists)
+  std::vector<int> Tp(n + 1, 0), Ti(nz);
+  for (int p = 0; p < nz; ++p) ++Tp[rowind[p] + 1];
+  for (int i = 0; i < n; ++i) Tp[i + 1] += Tp[i];
+  {
+    std::vector<int> c(Tp.begin(), Tp.end() - 1);
+    for (int j = 0; j < n; ++j)
+      for (int p = colptr[j]; p < colptr[j + 1]; ++p) Ti[c[rowind[p]]++] = j;
+  }
+  std::vector<int> Cp(nb + 1, 0), Ci, seen(nb, -1);
+  Ci.reserve(static_cast<std::size_t>(2) * nz + 1);
+  for (int b = 0; b < nb; ++b) {
+    seen[b] = b;
+    for (int t = bp[b]; t < bp[b + 1]; ++t) {
+      const int j = bm[t];
+      for (int p = colptr[j]; p < colptr[j + 1]; ++p) {
+        const int c = blk[rowind[p]];
+        if (seen[c] != b) {
+          seen[c] = b;
+          Ci.push_back(c);
+        }
+      }
+      for (int p = Tp[j]; p < Tp[j + 1]; ++p) {
+        const int c = blk[Ti[p]];
+        if (seen[c] != b) {
+          seen[c] = b;
+          Ci.push_back(c);
+        }
+      }
+    }
+    Cp[b + 1] = static_cast<int>(Ci.size());
+  }
+  std::vector<int>().swap(Tp);
+  std::vector<int>().swap(Ti);
+  std::vector<int> weight(nb), bperm(nb);
+  for (int b = 0; b < nb; ++b) weight[b] = bp[b + 1] - bp[b];
+  sparse_lu_detail::amd_order(nb, n, Cp, Ci, weight.data(), bperm.data());
+  // --- expand the block order
+  Q_.resize(n);
+  int k = 0;
+  for (int t = 0; t < nb; ++t) {
+    const int b = bperm[t];
+    for (int q = bp[b]; q < bp[b + 1]; ++q) Q_[k++] = bm[q];
+  }
+  if (group)
+    blk_.swap(blk);
+  else
+    blk_.clear();
+  // --- storage of the numeric phases
+  P_.assign(n, -1);
+  pinv_.assign(n, -1);
+  Lp_.assign(n + 1, 0);
+  Up_.assign(n + 1, 0);
+  Ud_.assign(n, 0.0);
+  Rp_.assign(n + 1, 0);
+  mark_.assign(n, -1);
+  xi_.assign(n, 0);
+  pstack_.assign(n, 0);
+  work_.assign(n, 0.0);
+  analyzed_ = true;
+  return 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// factor (Gilbert-Peierls)
+// ---------------------------------------------------------------------------------------------
+
+// Depth-first search of the graph of L from original row j (during factor: L's row indices are
+// original rows; row i has out-edges to the rows of L(:, pinv[i]) when it is pivotal). Nodes
+// are finished onto xi[--top], so xi[top..n) is a topological order of the reach. Non-recursive
+// (stack xi[0..head], pstack the position in each list).
+inline int SparseLU::dfs(int j, int stamp, int top, int* xi, int* pstack) {
+  int head = 0;
+  int* stack = xi;  // xi[0..head] is free while top > head (the reach has at most n nodes)
+  stack[0] = j;
+  while (head >= 0) {
+    j = stack[head];
+    const int jnew = pinv_[j];
+    if (mark_[j] != stamp) {
+      mark_[j] = stamp;
+      pstack[head] = (jnew < 0) ? 0 : Lp_[jnew];
+    }
+    bool done = true;
+    const int p2 = (jnew < 0) ? 0 : Lp_[jnew + 1];
+    for (int p = pstack[head]; p < p2; ++p) {
+      const int i = Li_[p];
+      if (mark_[i] == stamp) continue;
+      pstack[head] = p + 1;
+      stack[++head] = i;
+      done = false;
+      break;
+    }
+    if (done) {
+      --head;
+      xi[--top] = j;
+    }
+  }
+  return top;
+}
+
+inline int SparseLU::factor(const double* values) {
+  valid_ = false;
+  if (!analyzed_) {
+    status_ = kNotAnalyzed;
+    return 1;
+  }
+  const int n = n_;
+  const bool drop = opt_.drop_zeros;
+  const double tol = opt_.pivot_tol;
+  std::fill(pinv_.begin(), pinv_.end(), -1);
+  std::fill(mark_.begin(), mark_.end(), -1);
+  Li_.clear();
+  Lx_.clear();
+  Ui_.clear();
+  Ux_.clear();
+  Rz_.clear();
+  Lp_[0] = Up_[0] = 0;
+  double* x = work_.data();
+  int* xi = xi_.data();
+  int* pstack = pstack_.data();
+  double rg = std::numeric_limits<double>::infinity();
+  double anorm = 0.0;
+  for (int k = 0; k < n; ++k) {
+    const int c = Q_[k];
+    const int pa = colptr_[c], pb = colptr_[c + 1];
+    // --- reach of the pattern of A(:, c) in the graph of L: xi[top..n), topological order
+    int top = n;
+    for (int p = pa; p < pb; ++p) {
+      if (drop && values[p] == 0.0) continue;
+      const int i = rowind_[p];
+      if (mark_[i] != k) top = dfs(i, k, top, xi, pstack);
+    }
+    // --- sparse triangular solve x = L \ A(:, c) on the reach
+    double amax = 0.0, asum = 0.0;
+    for (int p = pa; p < pb; ++p) {
+      const double v = values[p];
+      asum += std::fabs(v);
+      if (drop && v == 0.0) continue;
+      x[rowind_[p]] += v;
+      amax = std::max(amax, std::fabs(v));
+    }
+    anorm = std::max(anorm, asum);
+    for (int q = top; q < n; ++q) {
+      const int i = xi[q];
+      const int j = pinv_[i];
+      if (j < 0) continue;
+      const double xj = x[i];
+      for (int p = Lp_[j]; p < Lp_[j + 1]; ++p) x[Li_[p]] -= Lx_[p] * xj;
+    }
+    // --- pivot: the diagonal row c if large enough, else the largest candidate
+    int ipiv = -1;
+    double cmax = -1.0, usum = 0.0, umax = 0.0;
+    for (int q = top; q < n; ++q) {
+      const int i = xi[q];
+      const double v = x[i];
+      if (pinv_[i] < 0) {
+        const double av = std::fabs(v);
+        if (av > cmax || ipiv < 0) {
+          cmax = av;
+          ipiv = i;
+        }
+        usum += av;
+      } else {
+        Ui_.push_back(pinv_[i]);
+        Ux_.push_back(v);
+        usum += std::fabs(v);
+        umax = std::max(umax, std::fabs(v));
+      }
+    }
+    Status bad = kOk;
+    if (ipiv < 0)
+      bad = kStructurallyZero;
+    else if (!std::isfinite(usum) || !std::isfinite(anorm))
+      bad = kNotFinite;
+    else if (cmax == 0.0)
+      bad = kNumericallyZero;
+    if (bad != kOk) {
+      for (int q = top; q < n; ++q) x[xi[q]] = 0.0;
+      status_ = bad;
+      return 1 + c;
+    }
+    if (pinv_[c] < 0 && mark_[c] == k && std::fabs(x[c]) >= tol * cmax) {
+      ipiv = c;
+    } else if (!blk_.empty()) {
+      // no usable diagonal: prefer the largest candidate of the column's own block (a pivot
+      // inside the diagonal block keeps the block structure that the ordering assumed)
+      const int bc = blk_[c];
+      int ib = -1;
+      double bmax = -1.0;
+      for (int q = top; q < n; ++q) {
+        const int i = xi[q];
+        if (pinv_[i] < 0 && blk_[i] == bc && std::fabs(x[i]) > bmax) {
+          bmax = std::fabs(x[i]);
+          ib = i;
+        }
+      }
+      if (ib >= 0 && bmax >= tol * cmax) ipiv = ib;
+    }
+    const double piv = x[ipiv];
+    umax = std::max(umax, std::fabs(piv));
+    if (umax > 0.0) rg = std::min(rg, amax / umax);
+    Ud_[k] = piv;
+    pinv_[ipiv] = k;
+    P_[k] = ipiv;
+    const double inv = 1.0 / piv;
+    for (int q = top; q < n; ++q) {
+      const int i = xi[q];
+      if (pinv_[i] < 0) {
+        Li_.push_back(i);
+        Lx_.push_back(x[i] * inv);
+      }
+      x[i] = 0.0;
+    }
+    Lp_[k + 1] = static_cast<int>(Li_.size());
+    Up_[k + 1] = static_cast<int>(Ui_.size());
+  }
+  // --- rows of L in pivot numbering; columns sorted (refactor applies U(:, k) in this order)
+  for (int& i : Li_) i = pinv_[i];
+  sparse_lu_detail::sort_columns(n, Lp_, Li_, Lx_);
+  sparse_lu_detail::sort_columns(n, Up_, Ui_, Ux_);
+  // --- refactor scatter map
+  Rv_.clear();
+  Rr_.clear();
+  Rp_[0] = 0;
+  for (int k = 0; k < n; ++k) {
+    const int c = Q_[k];
+    for (int p = colptr_[c]; p < colptr_[c + 1]; ++p) {
+      if (drop && values[p] == 0.0) {
+        Rz_.push_back(p);
+        continue;
+      }
+      Rv_.push_back(p);
+      Rr_.push_back(pinv_[rowind_[p]]);
+    }
+    Rp_[k + 1] = static_cast<int>(Rv_.size());
+  }
+  flops_ = 0;
+  for (int k = 0; k < n; ++k)
+    for (int q = Up_[k]; q < Up_[k + 1]; ++q) flops_ += Lp_[Ui_[q] + 1] - Lp_[Ui_[q]];
+  double dmin = std::numeric_limits<double>::infinity(), dmax = 0.0;
+  for (int k = 0; k < n; ++k) {
+    dmin = std::min(dmin, std::fabs(Ud_[k]));
+    dmax = std::max(dmax, std::fabs(Ud_[k]));
+  }
+  rcond_piv_ = n ? dmin / dmax : 1.0;
+  rgrowth_ = n ? rg : 1.0;
+  anorm1_ = anorm;
+  have_pattern_ = valid_ = true;
+  status_ = kOk;
+  return 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// refactor (same pivots and patterns)
+// ---------------------------------------------------------------------------------------------
+inline int SparseLU::refactor(const double* values) {
+  valid_ = false;
+  if (!have_pattern_) {
+    status_ = kNotAnalyzed;
+    return 1;
+  }
+  const int n = n_;
+  for (const int p : Rz_)
+    if (values[p] != 0.0) {
+      // the column of entry p: binary search in colptr_
+      const int c = static_cast<int>(std::upper_bound(colptr_.begin(), colptr_.end(), p) -
+                                     colptr_.begin()) - 1;
+      status_ = kPatternChanged;
+      return 1 + c;
+    }
+  double* x = work_.data();
+  const int* Lp = Lp_.data();
+  const int* Li = Li_.data();
+  double* Lx = Lx_.data();
+  const double rtol = opt_.refactor_tol;
+  double rg = std::numeric_limits<double>::infinity();
+  double anorm = 0.0;
+  double dmin = std::numeric_limits<double>::infinity(), dmax = 0.0;
+  for (int k = 0; k < n; ++k) {
+    // scatter A(:, Q[k]) in pivot numbering
+    double amax = 0.0, asum = 0.0;
+    for (int q = Rp_[k]; q < Rp_[k + 1]; ++q) {
+      const double v = values[Rv_[q]];
+      x[Rr_[q]] += v;
+      const double av = std::fabs(v);
+      asum += av;
+      amax = std::max(amax, av);
+    }
+    anorm = std::max(anorm, asum);
+    // U(:, k) in increasing order, each followed by its update with L(:, j)
+    double usum = 0.0, umax = 0.0;
+    for (int q = Up_[k]; q < Up_[k + 1]; ++q) {
+      const int j = Ui_[q];
+      const double xj = x[j];
+      x[j] = 0.0;
+      Ux_[q] = xj;
+      const double axj = std::fabs(xj);
+      usum += axj;
+      umax = std::max(umax, axj);
+      const int p1 = Lp[j], p2 = Lp[j + 1];
+      for (int p = p1; p < p2; ++p) x[Li[p]] -= Lx[p] * xj;
+    }
+    const double piv = x[k];
+    x[k] = 0.0;
+    double cmax = std::fabs(piv);
+    for (int p = Lp[k]; p < Lp[k + 1]; ++p) cmax = std::max(cmax, std::fabs(x[Li[p]]));
+    const bool finite = std::isfinite(usum + cmax + anorm);
+    if (!finite || !(std::fabs(piv) > rtol * cmax) || piv == 0.0) {
+      for (int p = Lp[k]; p < Lp[k + 1]; ++p) x[Li[p]] = 0.0;
+      status_ = finite ? (piv == 0.0 ? kNumericallyZero : kSmallPivot) : kNotFinite;
+      return 1 + Q_[k];
+    }
+    Ud_[k] = piv;
+    const double inv = 1.0 / piv;
+    for (int p = Lp[k]; p < Lp[k + 1]; ++p) {
+      Lx[p] = x[Li[p]] * inv;
+      x[Li[p]] = 0.0;
+    }
+    umax = std::max(umax, std::fabs(piv));
+    rg = std::min(rg, amax / umax);
+    dmin = std::min(dmin, std::fabs(piv));
+    dmax = std::max(dmax, std::fabs(piv));
+  }
+  rcond_piv_ = n ? dmin / dmax : 1.0;
+  rgrowth_ = n ? rg : 1.0;
+  anorm1_ = anorm;
+  valid_ = true;
+  status_ = kOk;
+  return 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// solves
+// ---------------------------------------------------------------------------------------------
+inline void SparseLU::solve(double* b) const {
+  const int n = n_;
+  if (!valid_) {
+    for (int i = 0; i < n; ++i) b[i] = std::numeric_limits<double>::quiet_NaN();
+    return;
+  }
+  double* w = work_.data();
+  for (int k = 0; k < n; ++k) w[k] = b[P_[k]];
+  const int* Lp = Lp_.data();
+  const int* Li = Li_.data();
+  const double* Lx = Lx_.data();
+  for (int j = 0; j < n; ++j) {  // L y = P b
+    const double xj = w[j];
+    if (xj == 0.0) continue;
+    for (int p = Lp[j]; p < Lp[j + 1]; ++p) w[Li[p]] -= Lx[p] * xj;
+  }
+  const int* Up = Up_.data();
+  const int* Ui = Ui_.data();
+  const double* Ux = Ux_.data();
+  for (int j = n - 1; j >= 0; --j) {  // U z = y
+    const double xj = (w[j] /= Ud_[j]);
+    if (xj == 0.0) continue;
+    for (int p = Up[j]; p < Up[j + 1]; ++p) w[Ui[p]] -= Ux[p] * xj;
+  }
+  for (int k = 0; k < n; ++k) {  // x = Q z
+    b[Q_[k]] = w[k];
+    w[k] = 0.0;
+  }
+}
+
+inline void SparseLU::solve_transposed(double* b) const {
+  // A^T = Q U^T L^T P: U^T y = Q^T b, L^T z = y, x = P^T z
+  const int n = n_;
+  if (!valid_) {
+    for (int i = 0; i < n; ++i) b[i] = std::numeric_limits<double>::quiet_NaN();
+    return;
+  }
+  double* w = work_.data();
+  for (int k = 0; k < n; ++k) w[k] = b[Q_[k]];
+  for (int j = 0; j < n; ++j) {
+    double s = w[j];
+    for (int p = Up_[j]; p < Up_[j + 1]; ++p) s -= Ux_[p] * w[Ui_[p]];
+    w[j] = s / Ud_[j];
+  }
+  for (int j = n - 1; j >= 0; --j) {
+    double s = w[j];
+    for (int p = Lp_[j]; p < Lp_[j + 1]; ++p) s -= Lx_[p] * w[Li_[p]];
+    w[j] = s;
+  }
+  for (int k = 0; k < n; ++k) {
+    b[P_[k]] = w[k];
+    w[k] = 0.0;
+  }
+}
+
+inline double SparseLU::condest() const {
+  // Hager's method with Higham's refinements (LAPACK dlacon): estimate ||A^-1||_1 as the max of
+  // ||A^-1 x||_1 over a few vectors x on the vertices of the unit 1-norm ball.
+  const int n = n_;
+  if (!valid_) return std::numeric_limits<double>::infinity();
+  if (n == 0) return 0.0;
+  std::vector<double> x(n, 1.0 / n), y(n);
+  double est = 0.0;
+  int jlast = -1;
+  for (int it = 0; it < 5; ++it) {
+    y = x;
+    solve(y.data());
+    double e = 0.0;
+    for (double v : y) e += std::fabs(v);
+    if (it > 0 && e <= est) break;
+    est = e;
+    for (int i = 0; i < n; ++i) y[i] = y[i] >= 0.0 ? 1.0 : -1.0;
+    solve_transposed(y.data());
+    int j = 0;
+    for (int i = 1; i < n; ++i)
+      if (std::fabs(y[i]) > std::fabs(y[j])) j = i;
+    if (j == jlast) break;
+    jlast = j;
+    std::fill(x.begin(), x.end(), 0.0);
+    x[j] = 1.0;
+  }
+  // Higham's extra test vector with alternating signs
+  for (int i = 0; i < n; ++i) x[i] = (i % 2 ? -1.0 : 1.0) * (1.0 + static_cast<double>(i) / std::max(n - 1, 1));
+  solve(x.data());
+  double e2 = 0.0;
+  for (double v : x) e2 += std::fabs(v);
+  e2 = 2.0 * e2 / (3.0 * n);
+  est = std::max(est, e2);
+  return est * anorm1_;
+}
+
+}  // namespace se3dyn
