@@ -219,6 +219,24 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
 
     stats["linear_solver"] = "sparse LU (se3dyn/_core/sparse_lu.hpp)"
     stats["engine"] = "compiled"
+    if not adaptive and grid is None:
+        # the whole fixed-step loop in the compiled engine, in chunks between which progress
+        # and streamed rows are reported; a failing step is repeated by
+        # GeneralizedAlpha.step, which raises the error naming time, norms and item
+        times = np.array([t_start + (k + 1) * step if k + 1 < nsteps else t_end
+                          for k in range(nsteps)])
+        st, i, fac = _run_compiled(s, integ, st, times, output_every, rec, progress, stats)
+        stats["factorizations"] = fac
+        if i < nsteps:
+            try:
+                integ.step(s, st, times[i] - st.t, solver)
+            except SimulationError as exc:
+                fail(exc)
+            raise AssertionError("the compiled step failed but GeneralizedAlpha.step converged")
+        if nsteps:
+            hs = np.diff(np.concatenate([[t_start], times]))
+            stats["h_min_used"] = float(hs.min())
+            stats["h_max_used"] = float(hs.max())
     while st.t < t_end and (adaptive or i < nsteps):
         if adaptive:
             h = min(h, t_end - st.t)
@@ -286,6 +304,61 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             h = min(opt["h_max"], h * min(2.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.5)))
     stats.update(steps=i, failed=False, wall_time=time.perf_counter() - wall0, final_state=st)
     return rec.results(stats)
+
+
+def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times: np.ndarray,
+                  output_every: int, rec: _Recorder, progress, stats: dict):
+    """Fixed steps to ``times`` in the compiled loop (``Stepper.run``); returns the state
+    reached, the number of steps done (less than ``len(times)`` when a step failed) and the
+    factorisations. Progress is reported and stored rows are streamed between chunks of
+    steps that last about 0.1 s each."""
+    from se3dyn.integrator import KMAX, _stepper, input_table
+
+    nsteps = len(times)
+    U, n_ok = input_table(s, times)
+    stp = _stepper(s, integ.index2, st.dropped)
+    F = s.M + s.m
+    H = np.ascontiguousarray(np.concatenate([st.H, st.HJ]).reshape(F, 4, 4), dtype=float)
+    c = lambda x: np.array(x, dtype=float)  # noqa: E731
+    alpha, v, vd, a, lam = c(st.alpha), c(st.v), c(st.vd), c(st.a), c(st.lam)
+    acc = np.array([*st.power, st.work_act, st.work_ext, st.dissipated, st.h_last, st.t])
+    am, af, g, b = integ.params
+    i = 0
+    fac = 0
+    chunk = 16
+    while i < n_ok:
+        i1 = min(n_ok, i + chunk)
+        rows_needed = (i1 // output_every - i // output_every) + 1
+        while len(rec.t) - rec.n < rows_needed:
+            rec._grow()
+        n0 = rec.n
+        tic = time.perf_counter()
+        status, done, its, nf, count, res, con = stp.run(
+            times, i, i1, nsteps - 1, U, output_every, am, af, g, b, integ.tol_residual,
+            integ.tol_constraint * s.length_scale, float(s.length_scale), integ.max_iter,
+            integ.newton == "modified", KMAX, H, alpha, v, vd, a, lam, acc, rec.t,
+            rec.H.reshape(-1), rec.v.reshape(-1), rec.vd.reshape(-1), rec.lam.reshape(-1),
+            rec.alpha.reshape(-1), rec.scal.reshape(-1), rec.n)
+        dt = time.perf_counter() - tic
+        rec.n = count
+        stats["newton_iterations"] += its
+        fac += nf
+        i = done
+        if rec.sink is not None:
+            for r in range(n0, count):
+                row = State(t=float(rec.t[r]), H=rec.H[r], HJ=np.zeros((0, 4, 4)), v=rec.v[r],
+                            vd=rec.vd[r], a=rec.vd[r], lam=rec.lam[r], alpha=rec.alpha[r])
+                rec.sink(row, dict(zip(SCALARS, rec.scal[r].tolist(), strict=True)))
+        if progress is not None and done > 0:
+            progress(float(times[done - 1]), done)
+        if status != 0:
+            break
+        chunk = max(1, min(4 * chunk, int(chunk * 0.1 / max(dt, 1e-6))))
+    st = State(t=float(acc[7]), H=H[:s.M].copy(), HJ=H[s.M:].copy(), v=v, vd=vd, a=a, lam=lam,
+               alpha=alpha, work_act=float(acc[3]), work_ext=float(acc[4]),
+               dissipated=float(acc[5]), power=acc[:3].copy(), dropped=st.dropped,
+               h_last=float(acc[6]))
+    return st, i, fac
 
 
 def _err_kwargs(exc) -> dict:

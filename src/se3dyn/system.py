@@ -322,18 +322,18 @@ class _Inputs:
 
     def __init__(self, d: dict, model: Model):
         nidx = {n: i for i, n in enumerate(d["node_names"])}
-        self.sources = []  # (slot, k, time function, item, what, is_rate_of)
+        self.sources = []  # (slot, k, time function, item, what, its rate is the input)
         kind = [0, 0, 0]
         self.load_slots = []
         for ld in model.loads:
             fs = ts = -1
             if ld.force is not None:
                 fs = len(kind)
-                self.sources.append((fs, 3, ld.force, f"load '{ld.name}'", "force"))
+                self.sources.append((fs, 3, ld.force, f"load '{ld.name}'", "force", False))
                 kind += [1] * 3
             if ld.torque is not None:
                 ts = len(kind)
-                self.sources.append((ts, 3, ld.torque, f"load '{ld.name}'", "torque"))
+                self.sources.append((ts, 3, ld.torque, f"load '{ld.name}'", "torque", False))
                 kind += [1] * 3
             self.load_slots.append((nidx[ld.node], np.zeros(3), fs, ts, 0, 0))
         self.joint_slots = []  # (slot, k, kind, joint index)
@@ -342,19 +342,19 @@ class _Inputs:
             if js.actuator is not None:
                 item = f"joint '{js.name}' actuator"
                 self.joint_slots.append((len(kind), k, "tau", j))
-                self.sources.append((len(kind), k, js.actuator, item, "value"))
+                self.sources.append((len(kind), k, js.actuator, item, "value", False))
                 kind += [2] * k
             if js.control is not None:
                 item = f"joint '{js.name}' control target"
                 tgt, rt = js.control.target, js.control.target_rate
                 self.joint_slots.append((len(kind), k, "ref", j))
-                self.sources.append((len(kind), k, tgt, item, "target"))
+                self.sources.append((len(kind), k, tgt, item, "target", False))
                 kind += [3] * k
                 self.joint_slots.append((len(kind), k, "rate", j))
                 if rt is None:
-                    self.sources.append((len(kind), k, tgt.rate, item, "target rate"))
+                    self.sources.append((len(kind), k, tgt, item, "target rate", True))
                 else:
-                    self.sources.append((len(kind), k, rt, item, "target_rate"))
+                    self.sources.append((len(kind), k, rt, item, "target_rate", False))
                 kind += [4] * k
         self.kind = np.array(kind, np.int64)
         self.nu = len(kind)

@@ -87,6 +87,10 @@ inline void rows_to_unknowns(const FrameTables& T, int f, const double* X, doubl
 
 // Column map: out (r x k_g, ld 6) = X (r x 6, ld 6) Y_g with Y_g (6 x k_g, ld 6)
 inline void cols_times(int r, int kg, const double* X, const double* Y, double* out) {
+  if (r == 6 && kg == 6) {  // node frames: fixed sizes (unrolled)
+    mm<6, 6, 6>(X, Y, out);
+    return;
+  }
   for (int i = 0; i < r; ++i)
     for (int c = 0; c < kg; ++c) {
       double s = 0.0;
@@ -99,6 +103,10 @@ inline void cols_times(int r, int kg, const double* X, const double* Y, double* 
 inline void add_block(double* vals, long off, int kr, int kc, const double* X, double s) {
   if (off < 0) return;
   double* o = vals + off;
+  if (kr == 6 && kc == 6) {
+    for (int i = 0; i < 36; ++i) o[i] += s * X[i];
+    return;
+  }
   for (int i = 0; i < kr; ++i)
     for (int j = 0; j < kc; ++j) o[i * kc + j] += s * X[6 * i + j];
 }
@@ -116,6 +124,15 @@ inline void add_frame_block(const FrameTables& T, const FrameState& S, double* v
                             int f, int g, const double* K, double s, bool tangent) {
   if (off < 0 || T.k[f] == 0 || T.k[g] == 0) return;
   double X[36], Y[36];
+  if (T.node[f] && T.node[g]) {  // the common case, fixed sizes (unrolled)
+    if (tangent) {
+      mm<6, 6, 6>(K, &S.TA[36 * g], Y);
+      for (int i = 0; i < 36; ++i) vals[off + i] += s * Y[i];
+    } else {
+      for (int i = 0; i < 36; ++i) vals[off + i] += s * K[i];
+    }
+    return;
+  }
   rows_to_unknowns(T, f, K, X);
   const double* Yg = tangent ? &S.TA[36 * g] : &T.A[36 * g];
   cols_times(T.k[f], T.k[g], X, Yg, Y);

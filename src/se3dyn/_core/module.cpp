@@ -254,5 +254,40 @@ NB_MODULE(_engine, m) {
             for (int f = 0; f < F; ++f) frame_to4(E.S.H[f], Ho + 16 * f);
             return nb::make_tuple(info.status, info.iterations, info.residual, info.constraint,
                                   info.factorisations);
+          })
+      .def(
+          "run",
+          [](Stepper& S, DArr times, int i0, int i1, int last, DArr U, int output_every,
+             double am, double af, double g, double b, double tol_r, double ltol, double lscale,
+             int max_iter, bool reuse, double kmax, DArr H, DArr alpha, DArr v, DArr vd, DArr a,
+             DArr lam, DArr acc, DArr rt, DArr rH, DArr rv, DArr rvd, DArr rlam, DArr ralpha,
+             DArr rscal, long count) {
+            Engine& E = *S.E;
+            int F = E.T.F, nq = E.nq, nm = E.nm;
+            long nt = static_cast<long>(times.size());
+            if (i0 < 0 || i1 > nt || i0 > i1) throw std::invalid_argument("run: step range");
+            cptr(U, static_cast<size_t>(nt * E.nu), "U");
+            Stepper::Params P{0.0, am, af, g, b, tol_r, ltol, lscale, kmax, max_iter, reuse};
+            Stepper::Carry c{ptr(H, 16 * F, "H"), ptr(alpha, nq, "alpha"), ptr(v, nq, "v"),
+                             ptr(vd, nq, "vd"), ptr(a, nq, "a"), ptr(lam, nm, "lam"),
+                             ptr(acc, 8, "acc")};
+            Stepper::Rows rows;
+            rows.cap = static_cast<long>(rt.size());
+            rows.count = count;
+            rows.M = static_cast<int>(rH.size() / (16 * std::max<long>(rows.cap, 1)));
+            rows.t = rt.data();
+            rows.H = rH.data();
+            rows.v = ptr(rv, rows.cap * nq, "rows v");
+            rows.vd = ptr(rvd, rows.cap * nq, "rows vd");
+            rows.lam = ptr(rlam, rows.cap * nm, "rows lam");
+            rows.alpha = ptr(ralpha, rows.cap * nq, "rows alpha");
+            rows.scal = ptr(rscal, rows.cap * 9, "rows scal");
+            Stepper::RunResult R;
+            {
+              nb::gil_scoped_release release;
+              R = S.run(P, times.data(), i0, i1, last, U.data(), output_every, c, rows);
+            }
+            return nb::make_tuple(R.status, R.done, R.iterations, R.factorisations, rows.count,
+                                  R.residual, R.constraint);
           });
 }

@@ -194,6 +194,93 @@ struct Stepper {
     }
     return info;
   }
+
+  // Rows of stored results (the recorder of se3dyn.simulate), written by run()
+  struct Rows {
+    long cap = 0, count = 0;
+    int M = 0;
+    double *t, *H, *v, *vd, *lam, *alpha, *scal;  // (cap,), (cap, M, 16), ..., (cap, 9)
+  };
+  // The integration state carried between steps: frames (F, 16), alpha, v, vd, a, lam and
+  // acc = (powers p_act, p_ext, p_diss, works W_act, W_ext, dissipated, h_last, t)
+  struct Carry {
+    double *H, *alpha, *v, *vd, *a, *lam, *acc;
+  };
+  struct RunResult {
+    int status = 0, done = 0, iterations = 0, factorisations = 0;
+    double residual = 0, constraint = 0;
+  };
+
+  // Fixed-step loop over steps i0 <= i < i1 to the times[i], inputs U (nsteps, nu); stores
+  // every output_every-th state (and the last one, i = last) into rows. Energies, powers
+  // (trapezoidal works) and log coordinates of the stored states are computed here too. On a
+  // failing step, returns its status with the carry at the last converged state.
+  RunResult run(Params P, const double* times, int i0, int i1, int last, const double* U,
+                int output_every, Carry c, Rows& rows) {
+    Engine& G = *E;
+    int nq = G.nq, nm = G.nm, F = G.T.F, nu = G.nu;
+    std::vector<double> alpha(nq), v(nq), vd(nq), a(nq), lam(nm), n(nq), a_n(nq), zero(nq, 0.0);
+    std::vector<double> er(nq), ep(nm), ev(nm), en(N_ENERGY);
+    RunResult R;
+    for (int i = i0; i < i1; ++i) {
+      double t1 = times[i], h = t1 - c.acc[7], h_last = c.acc[6];
+      const double* u = U + (long)i * nu;
+      for (int q = 0; q < nq; ++q)
+        a_n[q] = (h_last > 0 && h != h_last) ? c.vd[q] + (h / h_last) * (c.a[q] - c.vd[q]) : c.a[q];
+      G.load_frames(c.H);
+      P.h = h;
+      StepInfo info = step(P, c.alpha, c.v, c.vd, a_n.data(), c.lam, u, alpha.data(), v.data(),
+                           vd.data(), a.data(), lam.data(), n.data());
+      R.iterations += info.iterations;
+      R.factorisations += info.factorisations;
+      if (info.status != CONVERGED) {
+        R.status = info.status;
+        R.done = i;
+        return R;
+      }
+      R.residual = info.residual;
+      R.constraint = info.constraint;
+      G.coordinates(c.alpha, n.data(), alpha.data(), true);  // log coordinates for the output
+      for (int f = 0; f < F; ++f) frame_to4(G.S.H[f], c.H + 16 * f);
+      // energies and powers of the new state (its frames as the step start, n = 0)
+      G.load_frames(c.H);
+      Engine::Out o{er.data(), ep.data(), nullptr, alpha.data(), nullptr, en.data()};
+      G.evaluate(alpha.data(), zero.data(), v.data(), zero.data(), lam.data(), u, 0, 0, 0, false,
+                 0, false, o);
+      for (int k = 0; k < 3; ++k) {
+        c.acc[3 + k] += 0.5 * h * (c.acc[k] + en[P_ACTUATOR + k]);
+        c.acc[k] = en[P_ACTUATOR + k];
+      }
+      c.acc[6] = h;
+      c.acc[7] = t1;
+      std::copy(alpha.begin(), alpha.end(), c.alpha);
+      std::copy(v.begin(), v.end(), c.v);
+      std::copy(vd.begin(), vd.end(), c.vd);
+      std::copy(a.begin(), a.end(), c.a);
+      std::copy(lam.begin(), lam.end(), c.lam);
+      if (((i + 1) % output_every == 0 || i == last) && rows.count < rows.cap) {
+        long r = rows.count++;
+        rows.t[r] = t1;
+        std::copy(c.H, c.H + 16L * rows.M, rows.H + r * 16L * rows.M);
+        std::copy(v.begin(), v.end(), rows.v + r * nq);
+        std::copy(vd.begin(), vd.end(), rows.vd + r * nq);
+        std::copy(lam.begin(), lam.end(), rows.lam + r * nm);
+        std::copy(alpha.begin(), alpha.end(), rows.alpha + r * nq);
+        double* sc = rows.scal + 9 * r;
+        sc[0] = en[KINETIC];
+        sc[1] = en[POTENTIAL];
+        sc[2] = en[ELASTIC];
+        sc[3] = c.acc[3];
+        sc[4] = c.acc[4];
+        sc[5] = c.acc[5];
+        sc[6] = info.iterations;
+        sc[7] = info.residual;
+        sc[8] = info.constraint;
+      }
+      R.done = i + 1;
+    }
+    return R;
+  }
 };
 
 }  // namespace se3dyn

@@ -103,7 +103,7 @@ inline int tdfs(int j, int k, int* head, const int* next, int* post, int* stack)
 // are the degree lists of the variables (head indexed by degree), hhead/next/last the hash
 // buckets during supervariable detection; w[] the marker array of the set differences.
 inline void amd_order(int n, int nvar, std::vector<int>& Cp, std::vector<int>& Ci,
-                      const int* weight, int* perm) {
+                      const int* weight, int* perm, const char* weak = nullptr) {
   if (n == 0) return;
   int cnz = Cp[n];
   // elbow room for the new elements (an element's list is never longer than the weighted
@@ -135,9 +135,15 @@ inline void amd_order(int n, int nvar, std::vector<int>& Cp, std::vector<int>& C
   Cp[n] = -1;
   w[n] = 0;
   int nel = 0;  // variables eliminated so far (weighted)
+  // waiting[i]: a weak node not yet in the degree lists (not eligible as a pivot until it is
+  // adjacent to an element, i.e. until a neighbour has been eliminated)
+  std::vector<char> waiting(n + 1, 0);
+  int wscan = 0;
   for (int i = 0; i < n; ++i) {
     const int d = degree[i];
-    if (d == 0) {  // isolated node: an element at once
+    if (weak && weak[i] && d > 0 && d <= dense) {
+      waiting[i] = 1;
+    } else if (d == 0) {  // isolated node: an element at once
       elen[i] = -2;
       nel += nv[i];
       Cp[i] = -1;
@@ -160,9 +166,16 @@ inline void amd_order(int n, int nvar, std::vector<int>& Cp, std::vector<int>& C
     int k = -1;
     for (; mindeg < nvar && (k = head[mindeg]) == -1; ++mindeg) {
     }
-    if (k < 0) break;  // cannot happen with consistent weights; keeps the loop finite
-    if (next[k] != -1) last[next[k]] = -1;
-    head[mindeg] = next[k];
+    if (k >= 0) {
+      if (next[k] != -1) last[next[k]] = -1;
+      head[mindeg] = next[k];
+    } else {  // only waiting nodes are left: take the next one anyway
+      while (wscan < n && !(waiting[wscan] && nv[wscan] > 0 && elen[wscan] >= 0)) ++wscan;
+      if (wscan == n) break;  // cannot happen with consistent weights; keeps the loop finite
+      k = wscan;
+      waiting[k] = 0;
+      mindeg = std::min(degree[k], nvar);
+    }
     const int elenk = elen[k];
     int nvk = nv[k];
     nel += nvk;
@@ -211,6 +224,10 @@ inline void amd_order(int n, int nvar, std::vector<int>& Cp, std::vector<int>& C
         dk += nvi;
         nv[i] = -nvi;
         Ci[pk2++] = i;
+        if (waiting[i]) {  // adjacent to an element now: eligible from here on
+          waiting[i] = 0;
+          continue;
+        }
         if (next[i] != -1) last[next[i]] = last[i];  // out of its degree list
         if (last[i] != -1)
           next[last[i]] = next[i];
@@ -496,6 +513,10 @@ class SparseLU {
   Status status_ = kNotAnalyzed;
   std::vector<int> colptr_, rowind_;  // the pattern of analyze
   std::vector<int> blk_;              // block (group) of every unknown; empty without groups
+ public:
+  int pivot_rule_ = 0;
+ private:
+  std::vector<int> qinv_, rowcnt_;
   std::vector<int> Q_, P_, pinv_;
   std::vector<int> Lp_, Li_, Up_, Ui_;
   std::vector<double> Lx_, Ux_, Ud_;
@@ -598,6 +619,10 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
     blk_.swap(blk);
   else
     blk_.clear();
+  qinv_.assign(n, 0);
+  for (int t = 0; t < n; ++t) qinv_[Q_[t]] = t;
+  rowcnt_.assign(n, 0);
+  for (int p = 0; p < nz; ++p) ++rowcnt_[rowind[p]];
   // --- storage of the numeric phases
   P_.assign(n, -1);
   pinv_.assign(n, -1);
@@ -733,6 +758,20 @@ inline int SparseLU::factor(const double* values) {
     }
     if (pinv_[c] < 0 && mark_[c] == k && std::fabs(x[c]) >= tol * cmax) {
       ipiv = c;
+    } else if (pivot_rule_ != 0) {
+      // no usable diagonal: among the candidates with |x_i| >= tol * max, prefer those of the
+      // column's own block, then the one whose own column comes first in the ordering
+      const int bc = blk_.empty() ? -1 : blk_[c];
+      const double thr = tol * cmax;
+      long best = -1;
+      for (int q = top; q < n; ++q) {
+        const int i = xi[q];
+        if (pinv_[i] >= 0 || std::fabs(x[i]) < thr) continue;
+        long key;
+        if (pivot_rule_ == 1) key = (bc >= 0 && blk_[i] == bc ? 0 : (long)n) + qinv_[i];
+        else key = (bc >= 0 && blk_[i] == bc ? 0 : (long)n) + rowcnt_[i];
+        if (best < 0 || key < best) { best = key; ipiv = i; }
+      }
     } else if (!blk_.empty()) {
       // no usable diagonal: prefer the largest candidate of the column's own block (a pivot
       // inside the diagonal block keeps the block structure that the ordering assumed)
