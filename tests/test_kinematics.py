@@ -179,7 +179,8 @@ def _fourbar(theta0=math.pi / 2, mass=True):
     z = (0.0, 0.0, 1.0)
 
     def body(name, P, Q, m):
-        kw = dict(mass=m, inertia=(1e-4, m * np.sum((Q - P) ** 2) / 12 + 1e-4, 1e-3)) \
+        kw = dict(mass=m, inertia=(1e-4, m * np.sum((Q - P) ** 2) / 12 + 1e-4,  # a bar
+                                     m * np.sum((Q - P) ** 2) / 12 + 2e-4)) \
             if mass else {}
         mb.node(name, position=(P + Q) / 2, **kw)
 

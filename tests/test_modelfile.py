@@ -106,7 +106,7 @@ def everything_model() -> sd.Model:
     R = _rot((1, 2, 3), 0.7)
     for i in range(1, 10):
         mb.node(f"b{i}", position=(0.1 * i, 0.2, -0.3 * i), mass=0.5 + i,
-                inertia=(1e-2 * i, 2e-2, 3e-3))
+                inertia=(1e-2 * i, 2e-2, 1e-2 * i + 1e-2))  # J3 <= J1 + J2
     mb.node("oriented", position=(1, 1, 1), orientation=R, mass=2.0, inertia=(1.0, 2.0, 3.0),
             principal_axes=_rot((0, 1, 1), 0.3), velocity=(1, 2, 3), angular_velocity=(0.1, 0, 0),
             velocity_frame="material")

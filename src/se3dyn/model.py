@@ -32,7 +32,8 @@ from se3dyn.errors import ModelError
 from se3dyn.joints import JOINT_TYPES, is_abelian, unit_vector
 from se3dyn.timefunc import Component, TimeFunction, as_timefunc
 
-__all__ = ["NodeSpec", "JointSpec", "LoadSpec", "PD", "Model", "ModelBuilder"]
+__all__ = ["NodeSpec", "JointSpec", "LoadSpec", "SpringDamperSpec", "PD", "Model",
+           "ModelBuilder"]
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,9 @@ class NodeSpec:
         Clamped node (no unknowns).
     velocity : ndarray, shape (6,)
         Initial velocity ``(U, Omega)`` in the *inertial* frame (converted on compile).
+    com : ndarray, shape (3,), or None
+        Centre of mass as a point in the inertial frame of the initial configuration (the
+        convention of ``at``); None: at the node. ``inertia`` is about the centre of mass.
     """
 
     name: str
@@ -87,6 +91,7 @@ class NodeSpec:
     inertia: np.ndarray
     fixed: bool
     velocity: np.ndarray
+    com: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -140,13 +145,43 @@ class JointSpec:
 
 @dataclass(frozen=True)
 class LoadSpec:
-    """External load on a node (Eq. (66)): force in the inertial frame, torque in the material
-    frame of the node, each a TimeFunction of 3 components or None."""
+    """External load on a body (Eq. (66)): a force and a torque, each a TimeFunction of 3
+    components or None, given in the inertial or the body frame, the force applied at the point
+    ``at`` (inertial frame, initial configuration; None: the node)."""
 
     name: str
     node: str
     force: TimeFunction | None
     torque: TimeFunction | None
+    at: np.ndarray | None = None
+    force_frame: str = "inertial"
+    torque_frame: str = "body"
+
+
+@dataclass(frozen=True)
+class SpringDamperSpec:
+    """A spring-damper between two points attached to two nodes: force
+    ``stiffness (L - length) + damping dL/dt`` along the line of the points.
+
+    Attributes
+    ----------
+    name, node_a, node_b : str
+    at_a, at_b : ndarray (3,)
+        The points in the inertial frame of the initial configuration.
+    stiffness, damping : float
+        N/m and N s/m (>= 0).
+    length : float
+        Free length L0 (m, >= 0).
+    """
+
+    name: str
+    node_a: str
+    node_b: str
+    at_a: np.ndarray
+    at_b: np.ndarray
+    stiffness: float
+    damping: float
+    length: float
 
 
 @dataclass(frozen=True)
@@ -159,6 +194,7 @@ class Model:
     gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
     composites: dict = field(default_factory=dict)
     name: str = "model"
+    springs: tuple[SpringDamperSpec, ...] = ()
 
     def node(self, name: str) -> NodeSpec:
         """The node called ``name`` (KeyError listing valid names otherwise)."""
@@ -257,13 +293,14 @@ class ModelBuilder:
         self._nodes: dict[str, NodeSpec] = {}
         self._joints: dict[str, JointSpec] = {}
         self._loads: dict[str, LoadSpec] = {}
+        self._springs: dict[str, SpringDamperSpec] = {}
         self._composites: dict[str, tuple[str, ...]] = {}
 
     # -----------------------------------------------------------------------------------------
     def node(self, name: str, position: Any = (0.0, 0.0, 0.0), *, orientation: Any = None,
              mass: float = 0.0, inertia: Any = None, principal_axes: Any = None,
              fixed: bool = False, velocity: Any = None, angular_velocity: Any = None,
-             velocity_frame: str = "inertial") -> None:
+             velocity_frame: str = "inertial", com: Any = None) -> None:
         """Add a node.
 
         Parameters
@@ -287,6 +324,12 @@ class ModelBuilder:
             Initial linear and angular velocity.
         velocity_frame : {"inertial", "material"}
             Frame in which the initial velocities are given.
+        com : array_like, shape (3,), optional
+            Centre of mass as a point in the inertial frame of the initial configuration (the
+            convention of ``at``), when the node is not at it (e.g. at a joint or at the fixed
+            point of a top); ``inertia`` is then about the centre of mass. The constant
+            material mass matrix about the node and its gyroscopic terms generalise Eqs.
+            (47)-(53).
         """
         item = f"node {name!r}"
         if not isinstance(name, str) or not name:
@@ -314,7 +357,14 @@ class ModelBuilder:
             raise ModelError(item, "velocity", "zero velocity for a fixed node", (vU, vO))
         if velocity_frame == "material":
             vU, vO = R0 @ vU, R0 @ vO
-        self._nodes[name] = NodeSpec(name, x, R0, m, J, bool(fixed), np.concatenate([vU, vO]))
+        c = None
+        if com is not None:
+            c = _vec(com, 3, item, "com")
+            if m == 0:
+                raise ModelError(item, "com", "a centre of mass only on a node with mass", com,
+                                 "give the node a mass and an inertia")
+        self._nodes[name] = NodeSpec(name, x, R0, m, J, bool(fixed), np.concatenate([vU, vO]),
+                                     c)
 
     @staticmethod
     def _inertia(item: str, m: float, inertia: Any, axes: Any) -> np.ndarray:
@@ -351,6 +401,11 @@ class ModelBuilder:
             if ev.min() <= 0:
                 raise ModelError(item, "inertia", "a positive-definite inertia", inertia,
                                  f"eigenvalues {ev}")
+            # a real mass distribution: each principal moment at most the sum of the other two
+            if ev[2] > (ev[0] + ev[1]) * (1 + 1e-9):
+                raise ModelError(item, "inertia", "principal moments satisfying the triangle "
+                                 "inequality J3 <= J1 + J2 of a real body", inertia,
+                                 f"principal moments {ev}: no mass distribution has them")
         return J
 
     # -----------------------------------------------------------------------------------------
@@ -529,8 +584,10 @@ class ModelBuilder:
         self._composites[name] = tuple(sub)
 
     # -----------------------------------------------------------------------------------------
-    def load(self, name: str, node: str, *, force: Any = None, torque: Any = None) -> None:
-        """Add an external load on a node (Eq. (66)).
+    def load(self, name: str, node: str, *, force: Any = None, torque: Any = None,
+             at: Any = None, force_frame: str = "inertial", torque_frame: str = "body"
+             ) -> None:
+        """Add an external load on a body (Eq. (66)), at a point of it.
 
         Parameters
         ----------
@@ -539,9 +596,15 @@ class ModelBuilder:
         node : str
             Loaded node.
         force : array (3,), TimeFunction or callable of t, optional
-            Force in the **inertial** frame (its tangent term, Eq. (67), is included).
+            Force, in the inertial frame by default (its tangent term, Eq. (67), is included).
         torque : array (3,), TimeFunction or callable of t, optional
-            Torque in the **material** frame of the node.
+            Torque, in the body (material) frame of the node by default.
+        at : array_like (3,), optional
+            Point of application of the force, in the inertial frame of the initial
+            configuration (it moves with the body); the node by default.
+        force_frame, torque_frame : {"inertial", "body"}
+            Frames of the force and of the torque: ``"inertial"`` keeps its direction in
+            space, ``"body"`` turns with the body (a follower load).
         """
         item = f"load {name!r}"
         if name in self._loads:
@@ -556,7 +619,77 @@ class ModelBuilder:
             raise ModelError(item, "force", "a force and/or a torque", None)
         f = None if force is None else as_timefunc(force, item, "force", 3)
         m = None if torque is None else as_timefunc(torque, item, "torque", 3)
-        self._loads[name] = LoadSpec(name, node, f, m)
+        for fld, val in (("force_frame", force_frame), ("torque_frame", torque_frame)):
+            if val not in ("inertial", "body"):
+                raise ModelError(item, fld, "'inertial' or 'body'", val)
+        p = None if at is None else _vec(at, 3, item, "at")
+        self._loads[name] = LoadSpec(name, node, f, m, p, force_frame, torque_frame)
+
+    # -----------------------------------------------------------------------------------------
+    def spring_damper(self, name: str, node_a: str, node_b: str, *, at_a: Any = None,
+                      at_b: Any = None, stiffness: Any, damping: Any = 0.0,
+                      length: Any = None) -> None:
+        """Add a spring-damper between two points attached to two nodes.
+
+        The force ``stiffness (L - length) + damping dL/dt`` acts along the line of the points
+        (``L`` their distance), pulling them together when positive.
+
+        Parameters
+        ----------
+        name : str
+            Unique name.
+        node_a, node_b : str
+            The nodes the points are attached to (either may be fixed, not both).
+        at_a, at_b : array_like (3,), optional
+            The points in the inertial frame of the initial configuration (they move with
+            their nodes); the node positions by default.
+        stiffness : float
+            N/m, >= 0.
+        damping : float
+            N s/m, >= 0.
+        length : float, optional
+            Absolute free length (m); the initial distance of the points by default.
+        """
+        item = f"spring_damper {name!r}"
+        if not isinstance(name, str) or not name:
+            raise ModelError("spring_damper", "name", "a non-empty string", name)
+        if name in self._springs:
+            raise ModelError(item, "name", "a unique spring-damper name", name, "defined twice")
+        for fld, nd in (("node_a", node_a), ("node_b", node_b)):
+            if not isinstance(nd, str) or nd not in self._nodes:
+                raise ModelError(item, fld, "the name of a defined node", nd,
+                                 _unknown("node", nd, list(self._nodes))
+                                 if isinstance(nd, str) else None)
+        if node_a == node_b:
+            raise ModelError(item, "node_b", "a node other than node_a", node_b)
+        if self._nodes[node_a].fixed and self._nodes[node_b].fixed:
+            raise ModelError(item, "node_b", "at least one free node", node_b,
+                             "both nodes are fixed: the element does nothing")
+        pa = self._nodes[node_a].position if at_a is None else _vec(at_a, 3, item, "at_a")
+        pb = self._nodes[node_b].position if at_b is None else _vec(at_b, 3, item, "at_b")
+        vals = {}
+        for fld, val in (("stiffness", stiffness), ("damping", damping)):
+            try:
+                x = float(val)
+            except (TypeError, ValueError):
+                raise ModelError(item, fld, "a non-negative number", val) from None
+            if isinstance(val, bool) or not math.isfinite(x) or x < 0:
+                raise ModelError(item, fld, "a non-negative finite number", val)
+            vals[fld] = x
+        L0 = float(np.linalg.norm(pb - pa))
+        if L0 == 0:
+            raise ModelError(item, "at_b", "a point apart from at_a (the line of the force is "
+                             "undefined for coinciding points)", pb)
+        if length is not None:
+            try:
+                L = float(length)
+            except (TypeError, ValueError):
+                raise ModelError(item, "length", "a non-negative length (m)", length) from None
+            if isinstance(length, bool) or not math.isfinite(L) or L < 0:
+                raise ModelError(item, "length", "a non-negative finite length (m)", length)
+            L0 = L
+        self._springs[name] = SpringDamperSpec(name, node_a, node_b, pa, pb,
+                                               vals["stiffness"], vals["damping"], L0)
 
     # -----------------------------------------------------------------------------------------
     def build(self) -> Model:
@@ -576,4 +709,4 @@ class ModelBuilder:
                                              else ""))
         return Model(tuple(self._nodes.values()), tuple(self._joints.values()),
                      tuple(self._loads.values()), self._gravity.copy(), dict(self._composites),
-                     self._name)
+                     self._name, tuple(self._springs.values()))

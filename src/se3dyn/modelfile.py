@@ -597,7 +597,8 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("gravity", _V3, [0, 0, 0], "Gravity acceleration in the inertial frame (m/s^2)."),
         Field("nodes", Named("node"), None, "Nodes by name, in order (required).", True),
         Field("joints", Named("joint"), {}, "Kinematic joints by name, in order."),
-        Field("loads", Named("load"), {}, "External nodal loads by name."),
+        Field("loads", Named("load"), {}, "External loads by name."),
+        Field("springs", Named("spring_damper"), {}, "Point-to-point spring-dampers by name."),
         Field("simulation", Section("simulation"), {}, "Simulation settings, returned by "
               "`load_model` as a dict for `se3dyn.simulate(model, **settings)`."),
     ),
@@ -616,6 +617,9 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("angular_velocity", _V3, [0, 0, 0], "Initial angular velocity (rad/s)."),
         Field("velocity_frame", Str(("inertial", "material")), "inertial",
               "Frame of `velocity` and `angular_velocity`."),
+        Field("com", _V3, None, "Centre of mass as a point in the inertial frame of the initial "
+              "configuration (m), when the node is not at it (at a joint, at the fixed point of "
+              "a top); `inertia` is then about the centre of mass. Absent: at the node."),
     ),
     "joint": (
         Field("type", Str(_JOINT_KEYS), None, "Joint type, see [joint types](#joint-types).",
@@ -652,9 +656,25 @@ FIELDS: dict[str, tuple[Field, ...]] = {
     ),
     "load": (
         Field("node", Str(ref="node"), None, "Loaded node (a free node; required).", True),
-        Field("force", TimeFunc(), None, "Force in the inertial frame (3 components)."),
-        Field("torque", TimeFunc(), None, "Torque in the material frame of the node (3 "
-              "components)."),
+        Field("force", TimeFunc(), None, "Force (3 components), in the frame `force_frame`."),
+        Field("torque", TimeFunc(), None, "Torque (3 components), in the frame "
+              "`torque_frame`."),
+        Field("at", _V3, None, "Point of application of the force in the inertial frame of the "
+              "initial configuration (m); it moves with the body. Absent: the node."),
+        Field("force_frame", Str(("inertial", "body")), "inertial", "`inertial`: the force "
+              "keeps its direction in space; `body`: it turns with the body (follower load)."),
+        Field("torque_frame", Str(("inertial", "body")), "body", "Frame of the torque "
+              "(`body`: the material frame of the node, as in Eq. 66)."),
+    ),
+    "spring_damper": (
+        Field("a", Str(ref="node"), None, "Node A (required).", True),
+        Field("b", Str(ref="node"), None, "Node B (required).", True),
+        Field("at_a", _V3, "position of a", "Point attached to A, in the inertial frame of the "
+              "initial configuration (m)."),
+        Field("at_b", _V3, "position of b", "Point attached to B (m)."),
+        Field("stiffness", Num(minimum=0), None, "Stiffness (N/m) (required).", True),
+        Field("damping", Num(minimum=0), 0, "Damping (N s/m) on the rate of the distance."),
+        Field("length", Num(minimum=0), "initial distance", "Free length (m)."),
     ),
     "simulation": (
         Field("t_end", Num(), None, "Final time (s)."),
@@ -720,6 +740,9 @@ _SECTION_DOC = {
     "control": "The `control:` mapping of a joint: tau = -kp (alpha - target(t)) - kd "
                "(alpha_dot - target_rate(t)).",
     "load": "An entry of `loads:` (key: the load name).",
+    "spring_damper": "An entry of `springs:` (key: the name). Force stiffness (L - length) + "
+                     "damping dL/dt along the line of two points attached to nodes `a` and "
+                     "`b`.",
     "simulation": "The `simulation:` mapping: keyword arguments of `se3dyn.simulate`.",
     "constant": "Time function `{constant: {...}}`.",
     "step": "Time function `{step: {...}}`.",
@@ -942,6 +965,13 @@ def _build(ctx: _Ctx, top: _Obj) -> tuple[Model, dict]:
             mb.load(obj.name, kw.pop("node"), **kw)
         except ModelError as e:
             _rethrow(ctx, e, obj, items)
+    for obj in v.get("springs", []):
+        items[f"spring_damper {obj.name!r}"] = obj.line
+        kw = dict(obj.values)
+        try:
+            mb.spring_damper(obj.name, kw.pop("a"), kw.pop("b"), **kw)
+        except ModelError as e:
+            _rethrow(ctx, e, obj, items)
     try:
         model = mb.build()
     except ModelError as e:
@@ -1010,6 +1040,8 @@ def _node_out(n) -> dict:
         d["velocity"] = _py(n.velocity[:3])
     if np.any(n.velocity[3:] != 0):
         d["angular_velocity"] = _py(n.velocity[3:])
+    if n.com is not None:
+        d["com"] = _py(n.com)
     return d
 
 
@@ -1110,9 +1142,20 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
             d["force"] = _tf_out(ld.force, f"load {ld.name!r}", "force")
         if ld.torque is not None:
             d["torque"] = _tf_out(ld.torque, f"load {ld.name!r}", "torque")
+        if ld.at is not None:
+            d["at"] = _py(ld.at)
+        if ld.force_frame != "inertial":
+            d["force_frame"] = ld.force_frame
+        if ld.torque_frame != "body":
+            d["torque_frame"] = ld.torque_frame
         loads[ld.name] = d
     if loads:
         doc["loads"] = loads
+    if model.springs:
+        doc["springs"] = {sp.name: {"a": sp.node_a, "b": sp.node_b, "at_a": _py(sp.at_a),
+                                    "at_b": _py(sp.at_b), "stiffness": float(sp.stiffness),
+                                    "damping": float(sp.damping), "length": float(sp.length)}
+                          for sp in model.springs}
     if settings:
         known = {f.name: f for f in FIELDS["simulation"]}
         sim = {}

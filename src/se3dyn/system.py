@@ -306,9 +306,30 @@ def compile_model(model: Model) -> System:
         dof_damping=dof_C, dof_kp=dof_kp, dof_kd=dof_kd, dof_is_joint=dof_is_joint,
         gravity=model.gravity.copy(), actuators=tuple(actuators), controls=tuple(controls),
         loads=loads, labels=tuple(labels), items=tuple(items), length_scale=max(L, 1.0),
-        pattern={}, node_com=np.zeros((M, 3)), springs=())
+        pattern={}, node_com=_node_com(nodes, H0), springs=_springs(model, nidx, H0))
     sysd["inputs"] = _Inputs(sysd, model)
     return System(**sysd)
+
+
+def _node_com(nodes, H0: np.ndarray) -> np.ndarray:
+    """(M, 3) centres of mass in the material frames of the nodes, ``R0^T (com - x0)``."""
+    out = np.zeros((len(nodes), 3))
+    for i, n in enumerate(nodes):
+        if n.com is not None:
+            out[i] = H0[i, :3, :3].T @ (n.com - H0[i, :3, 3])
+    return out
+
+
+def _springs(model: Model, nidx: dict, H0: np.ndarray) -> tuple:
+    """Point spring-dampers as (node a, node b, c_a, c_b, k, d, L0), the points as material
+    offsets ``R0^T (p - x0)`` of their nodes."""
+    out = []
+    for sp in model.springs:
+        a, b = nidx[sp.node_a], nidx[sp.node_b]
+        ca = H0[a, :3, :3].T @ (sp.at_a - H0[a, :3, 3])
+        cb = H0[b, :3, :3].T @ (sp.at_b - H0[b, :3, 3])
+        out.append((a, b, ca, cb, sp.stiffness, sp.damping, sp.length))
+    return tuple(out)
 
 
 class _Inputs:
@@ -335,7 +356,11 @@ class _Inputs:
                 ts = len(kind)
                 self.sources.append((ts, 3, ld.torque, f"load '{ld.name}'", "torque", False))
                 kind += [1] * 3
-            self.load_slots.append((nidx[ld.node], np.zeros(3), fs, ts, 0, 0))
+            i = nidx[ld.node]
+            R0, x0 = d["node_H0"][i, :3, :3], d["node_H0"][i, :3, 3]
+            c = np.zeros(3) if ld.at is None else R0.T @ (ld.at - x0)
+            self.load_slots.append((i, c, fs, ts, int(ld.force_frame == "body"),
+                                    int(ld.torque_frame == "body")))
         self.joint_slots = []  # (slot, k, kind, joint index)
         for j, js in enumerate(model.joints):
             k = js.k
@@ -383,7 +408,7 @@ def _engine(s: System):
 
         _engine = _core()
 
-        lay = layout(s, s.inputs)
+        lay = layout(s)
         s.pattern["layout"] = lay
         s.pattern["engine"] = _engine.Engine(lay.tables)
     return s.pattern["engine"], s.pattern["layout"]

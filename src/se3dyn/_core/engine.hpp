@@ -12,11 +12,9 @@
 #include <limits>
 #include <vector>
 
-#include "elements/body.hpp"
-#include "elements/joint.hpp"
-#include "elements/joint_force.hpp"
-#include "elements/load.hpp"
-#include "elements/spring_damper.hpp"
+#include <memory>
+
+#include "elements/registry.hpp"
 #include "sparse_lu.hpp"
 
 namespace se3dyn {
@@ -33,12 +31,12 @@ struct XiProd {
 };
 
 struct Engine {
+  Engine() = default;
+  Engine(const Engine&) = delete;  // owns its element batches
+  Engine& operator=(const Engine&) = delete;
   FrameTables T;
-  Bodies bodies;
-  Joints joints;
-  JointForces jforces;
-  Loads loads;
-  SpringDampers springs;
+  std::vector<std::unique_ptr<ElementBatch>> batches;  // one per element type, in order
+  Joints* joints = nullptr;  // the constraint elements (their B blocks serve index 2)
   int nq = 0, nm = 0, nu = 0;
   long nvals = 0;         // values of the index-3 pattern
   long nvals2 = 0;        // values of the index-2 pattern (extra blocks after the index-3 ones)
@@ -55,10 +53,20 @@ struct Engine {
   std::vector<Frame> Hn;
   std::vector<double> velv;
 
+  void add_batch(const std::string& key, const Tables& t) {
+    std::unique_ptr<ElementBatch> b = make_batch(key);
+    b->load(t);
+    if (key == "joint") joints = static_cast<Joints*>(b.get());
+    batches.push_back(std::move(b));
+  }
+
   void setup() {
     S.resize(T.F);
     Hn.resize(T.F);
-    joints.resize_scratch();
+    if (!joints) {  // no constraint elements: an empty batch keeps the index-2 code uniform
+      batches.push_back(std::make_unique<Joints>());
+      joints = static_cast<Joints*>(batches.back().get());
+    }
   }
 
   void load_frames(const double* H4) {
@@ -154,18 +162,14 @@ struct Engine {
     X.cC = cC;
     X.cK = cK;
     X.energy = o.energy;
-    joints.cv_ = cv;
-    bodies.eval(X);
-    joints.eval(X, index2 && o.psi);
-    jforces.eval(X);
-    loads.eval(X);
-    springs.eval(X);
+    joints->cv_ = cv;
+    for (const auto& b : batches) b->eval(X, index2 && o.psi);
     if (prod) {
-      joints.store_B(T, Hn, joints.Bnu);
+      joints->store_B(T, Hn, joints->Bnu);
       double* vals = o.vals;
       for (const VelProd& p : velprod) {
         const double* V = velv.data() + p.src;  // ki x kj row-major
-        const double* Bn = &joints.Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
+        const double* Bn = &joints->Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
         double* t = vals + p.target;  // ki x 6
         for (int i = 0; i < p.ki; ++i)
           for (int c = 0; c < 6; ++c) {
@@ -175,8 +179,8 @@ struct Engine {
           }
       }
       for (const XiProd& p : xiprod) {
-        const double* B1 = &joints.Bu[108 * p.c1 + 36 * p.s1];
-        const double* B2 = &joints.Bnu[108 * p.c2 + 36 * p.s2];
+        const double* B1 = &joints->Bu[108 * p.c1 + 36 * p.s1];
+        const double* B2 = &joints->Bnu[108 * p.c2 + 36 * p.s2];
         double* t = vals + p.target;
         for (int i = 0; i < 6; ++i)
           for (int c = 0; c < 6; ++c) {
@@ -191,13 +195,13 @@ struct Engine {
 
   // B_n^T xi on the unknowns: out[dof_f] -= A_f^T B_{n,f}^T xi (the index-2 correction)
   void subtract_BnT(const double* xi, double* out) const {
-    for (int e = 0; e < joints.n; ++e) {
-      int fr[3] = {joints.fa[e], joints.fb[e], joints.fj[e]};
-      const double* x = xi + joints.mult[e];
+    for (int e = 0; e < joints->n; ++e) {
+      int fr[3] = {joints->fa[e], joints->fb[e], joints->fj[e]};
+      const double* x = xi + joints->mult[e];
       for (int s = 0; s < 3; ++s) {
         int f = fr[s], d = T.dof[f];
         if (d < 0) continue;
-        const double* Bn = &joints.Bnu[108 * e + 36 * s];  // 6 x k
+        const double* Bn = &joints->Bnu[108 * e + 36 * s];  // 6 x k
         for (int c = 0; c < T.k[f]; ++c) {
           double acc = 0.0;
           for (int i = 0; i < 6; ++i) acc += Bn[6 * i + c] * x[i];

@@ -61,6 +61,13 @@ const double* cptr(const DArr& a, size_t n, const char* what) {
   return a.data();
 }
 
+struct DictTables : Tables {
+  nb::dict d;
+  explicit DictTables(nb::dict x) : d(std::move(x)) {}
+  std::vector<double> real(const char* key) const override { return dvec(d, key); }
+  std::vector<long> integer(const char* key) const override { return ivec<long>(d, key); }
+};
+
 void build(Engine& E, const nb::dict& d) {
   E.nq = nb::cast<int>(item(d, "nq"));
   E.nm = nb::cast<int>(item(d, "nm"));
@@ -74,71 +81,10 @@ void build(Engine& E, const nb::dict& d) {
   T.A = dvec(d, "frame_A");
   T.F = static_cast<int>(T.dof.size());
   E.is_joint_frame = ivec<char>(d, "frame_joint");
-  Bodies& B = E.bodies;
-  B.f = ivec<int>(d, "body_frame");
-  B.n = static_cast<int>(B.f.size());
-  B.M = dvec(d, "body_M");
-  B.mc = dvec(d, "body_mc");
-  B.m = dvec(d, "body_m");
-  B.off = ivec<long>(d, "body_off");
-  Joints& J = E.joints;
-  J.fa = ivec<int>(d, "joint_fa");
-  J.n = static_cast<int>(J.fa.size());
-  J.fb = ivec<int>(d, "joint_fb");
-  J.fj = ivec<int>(d, "joint_fj");
-  J.mult = ivec<int>(d, "joint_mult");
-  J.XA = frames(d, "joint_XA");
-  J.XB = frames(d, "joint_XB");
-  J.PA = dvec(d, "joint_PA");
-  J.PB = dvec(d, "joint_PB");
-  J.offset = ivec<char>(d, "joint_offset");
-  J.off_ca = ivec<long>(d, "joint_off_ca");
-  J.off_cb = ivec<long>(d, "joint_off_cb");
-  J.off_cj = ivec<long>(d, "joint_off_cj");
-  J.off_ac = ivec<long>(d, "joint_off_ac");
-  J.off_bc = ivec<long>(d, "joint_off_bc");
-  J.off_jc = ivec<long>(d, "joint_off_jc");
-  J.off_aj = ivec<long>(d, "joint_off_aj");
-  J.off_xa = ivec<long>(d, "joint_off_xa");
-  J.off_xb = ivec<long>(d, "joint_off_xb");
-  J.off_xj = ivec<long>(d, "joint_off_xj");
-  JointForces& Q = E.jforces;
-  Q.f = ivec<int>(d, "jforce_frame");
-  Q.n = static_cast<int>(Q.f.size());
-  Q.K = dvec(d, "jforce_K");
-  Q.ref = dvec(d, "jforce_ref");
-  Q.C = dvec(d, "jforce_C");
-  Q.kp = dvec(d, "jforce_kp");
-  Q.kd = dvec(d, "jforce_kd");
-  Q.tau = ivec<int>(d, "jforce_tau");
-  Q.pref = ivec<int>(d, "jforce_pref");
-  Q.prate = ivec<int>(d, "jforce_prate");
-  Q.nonab = ivec<char>(d, "jforce_nonab");
-  Q.Apinv = dvec(d, "jforce_Apinv");
-  Q.A = dvec(d, "jforce_A");
-  Q.off = ivec<long>(d, "jforce_off");
-  Loads& L = E.loads;
-  L.f = ivec<int>(d, "load_frame");
-  L.n = static_cast<int>(L.f.size());
-  L.c = dvec(d, "load_c");
-  L.force = ivec<int>(d, "load_force");
-  L.torque = ivec<int>(d, "load_torque");
-  L.force_body = ivec<char>(d, "load_force_body");
-  L.torque_body = ivec<char>(d, "load_torque_body");
-  L.off = ivec<long>(d, "load_off");
-  SpringDampers& P = E.springs;
-  P.fa = ivec<int>(d, "spring_fa");
-  P.n = static_cast<int>(P.fa.size());
-  P.fb = ivec<int>(d, "spring_fb");
-  P.ca = dvec(d, "spring_ca");
-  P.cb = dvec(d, "spring_cb");
-  P.k = dvec(d, "spring_k");
-  P.d = dvec(d, "spring_d");
-  P.L0 = dvec(d, "spring_L0");
-  P.off_aa = ivec<long>(d, "spring_off_aa");
-  P.off_ab = ivec<long>(d, "spring_off_ab");
-  P.off_ba = ivec<long>(d, "spring_off_ba");
-  P.off_bb = ivec<long>(d, "spring_off_bb");
+  for (nb::handle h : nb::cast<nb::list>(item(d, "elements"))) {
+    nb::tuple kt = nb::cast<nb::tuple>(h);
+    E.add_batch(nb::cast<std::string>(kt[0]), DictTables(nb::cast<nb::dict>(kt[1])));
+  }
   E.log_f = ivec<int>(d, "log_frame");
   E.log_H0inv = frames(d, "log_H0inv");
   E.log_Apinv = dvec(d, "log_Apinv");
@@ -212,7 +158,7 @@ NB_MODULE(_engine, m) {
       .def("BnT", [](Engine& E, DArr Hn, DArr xi, DArr out) {
         // out (nq,) = B_n^T xi with B_n the constraint gradient at the frames Hn (Eq. (58))
         E.load_frames(cptr(Hn, 16 * E.T.F, "Hn"));
-        E.joints.store_B(E.T, E.Hn, E.joints.Bnu);
+        E.joints->store_B(E.T, E.Hn, E.joints->Bnu);
         double* o = ptr(out, E.nq, "out");
         std::fill(o, o + E.nq, 0.0);
         E.subtract_BnT(cptr(xi, E.nm, "xi"), o);

@@ -462,7 +462,8 @@ class SparseLU {
   // are summed). `group` (n ints, or nullptr): unknowns with equal ids form a block kept
   // contiguous in the ordering, which is computed on the (smaller) block graph. The pattern is
   // copied. Returns 0, or -1 for an invalid pattern (then factor fails with kNotAnalyzed).
-  int analyze(int n, const int* colptr, const int* rowind, const int* group = nullptr);
+  int analyze(int n, const int* colptr, const int* rowind, const int* group = nullptr,
+              const double* values = nullptr);
 
   // Numeric LU with threshold partial pivoting; values in the CSC order of analyze. Returns 0,
   // or 1 + the original column index of the first column without a usable pivot (structurally
@@ -495,6 +496,25 @@ class SparseLU {
   // Multiply-add pairs of one refactor (the sum over the U entries of the lengths of the L
   // columns they update).
   long long refactor_flops() const { return flops_; }
+  // Number of supernodes of L (n() / num_supernodes() is their mean width).
+  int num_supernodes() const {
+    int c = 0;
+    for (int j = 0; j < n_; j = snend_[j]) ++c;
+    return c;
+  }
+  // Mean number of columns per supernode update in refactor, weighted by flops
+  double mean_update_width() const {
+    double num = 0, den = 0;
+    for (int k = 0; k < n_; ++k)
+      for (int q = Up_[k]; q < Up_[k + 1];) {
+        const int j = Ui_[q], l = snend_[j], e = std::min(l, k);
+        const double f = static_cast<double>(e - j) * (Lp_[l] - Lp_[l - 1]);
+        num += f * (e - j);
+        den += f;
+        q += e - j;
+      }
+    return den > 0 ? num / den : 0.0;
+  }
   // Reciprocal pivot growth of the last factor/refactor, min_k max|A(:, Q_k)| / max|U(:, k)|
   // (KLU's rgrowth; close to 1 is good, tiny means an unstable factorisation).
   double rgrowth() const { return rgrowth_; }
@@ -506,6 +526,16 @@ class SparseLU {
 
  private:
   int dfs(int j, int stamp, int top, int* xi, int* pstack);
+  void find_supernodes();
+  void count_flops() {
+    flops_ = 0;
+    for (int k = 0; k < n_; ++k)
+      for (int q = Up_[k]; q < Up_[k + 1]; ++q) flops_ += Lp_[Ui_[q] + 1] - Lp_[Ui_[q]];
+  }
+  // x(R) -= L(R, j..e-1) u for columns j..e-1 of the supernode ending at l = snend_[j]
+  // (e <= l), R its rows below l, given the final values u[0..e-j) of those columns (the rows
+  // inside the supernode are updated by the caller, a small unit triangular solve)
+  inline void supernode_update(int j, int e, int l, const double* u, double* x) const;
 
   Options opt_;
   int n_ = 0;
@@ -513,14 +543,11 @@ class SparseLU {
   Status status_ = kNotAnalyzed;
   std::vector<int> colptr_, rowind_;  // the pattern of analyze
   std::vector<int> blk_;              // block (group) of every unknown; empty without groups
- public:
-  int pivot_rule_ = 0;
- private:
-  std::vector<int> qinv_, rowcnt_;
   std::vector<int> Q_, P_, pinv_;
   std::vector<int> Lp_, Li_, Up_, Ui_;
   std::vector<double> Lx_, Ux_, Ud_;
   std::vector<int> Rp_, Rv_, Rr_, Rz_;  // refactor scatter map (see the invariants above)
+  std::vector<int> snend_;               // supernode of L containing column j: [.., snend_[j])
   std::vector<int> mark_, xi_, pstack_;  // factor workspace
   mutable std::vector<double> work_;     // zero between calls
   double anorm1_ = 0.0, rgrowth_ = 0.0, rcond_piv_ = 0.0;
@@ -530,7 +557,8 @@ class SparseLU {
 // ---------------------------------------------------------------------------------------------
 // analyze
 // ---------------------------------------------------------------------------------------------
-inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const int* group) {
+inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const int* group,
+                             const double* values) {
   analyzed_ = valid_ = have_pattern_ = false;
   status_ = kNotAnalyzed;
   n_ = 0;
@@ -572,13 +600,17 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
     for (int i = 0; i < n; ++i) bm[c[blk[i]]++] = i;
   }
   // --- block graph of A + A^T without self loops: pattern of A^T first (row lists)
-  std::vector<int> Tp(n + 1, 0), Ti(nz);
+  std::vector<int> Tp(n + 1, 0), Ti(nz), Tv(values ? nz : 0);  // Tv: position in A's arrays
   for (int p = 0; p < nz; ++p) ++Tp[rowind[p] + 1];
   for (int i = 0; i < n; ++i) Tp[i + 1] += Tp[i];
   {
     std::vector<int> c(Tp.begin(), Tp.end() - 1);
     for (int j = 0; j < n; ++j)
-      for (int p = colptr[j]; p < colptr[j + 1]; ++p) Ti[c[rowind[p]]++] = j;
+      for (int p = colptr[j]; p < colptr[j + 1]; ++p) {
+        const int q = c[rowind[p]]++;
+        Ti[q] = j;
+        if (values) Tv[q] = p;
+      }
   }
   std::vector<int> Cp(nb + 1, 0), Ci, seen(nb, -1);
   Ci.reserve(static_cast<std::size_t>(2) * nz + 1);
@@ -587,6 +619,7 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
     for (int t = bp[b]; t < bp[b + 1]; ++t) {
       const int j = bm[t];
       for (int p = colptr[j]; p < colptr[j + 1]; ++p) {
+        if (values && opt_.drop_zeros && values[p] == 0.0) continue;
         const int c = blk[rowind[p]];
         if (seen[c] != b) {
           seen[c] = b;
@@ -594,6 +627,7 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
         }
       }
       for (int p = Tp[j]; p < Tp[j + 1]; ++p) {
+        if (values && opt_.drop_zeros && values[Tv[p]] == 0.0) continue;
         const int c = blk[Ti[p]];
         if (seen[c] != b) {
           seen[c] = b;
@@ -605,9 +639,61 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
   }
   std::vector<int>().swap(Tp);
   std::vector<int>().swap(Ti);
+  std::vector<int>().swap(Tv);
   std::vector<int> weight(nb), bperm(nb);
   for (int b = 0; b < nb; ++b) weight[b] = bp[b + 1] - bp[b];
-  sparse_lu_detail::amd_order(nb, n, Cp, Ci, weight.data(), bperm.data());
+  std::vector<char> weak;
+  if (values) {
+    // weak blocks: numerically singular diagonal block (dense LU with partial pivoting of the
+    // block, a pivot <= 1e-10 of the block's largest entry); they wait in the ordering until
+    // a neighbour has been eliminated (saddle-point constraint rows, massless bodies)
+    weak.assign(nb, 0);
+    std::vector<int> loc(n);
+    for (int b = 0; b < nb; ++b)
+      for (int q = bp[b]; q < bp[b + 1]; ++q) loc[bm[q]] = q - bp[b];
+    std::vector<double> D;
+    for (int b = 0; b < nb; ++b) {
+      const int sb = bp[b + 1] - bp[b];
+      if (sb > 64) {
+        for (int q = bp[b]; q < bp[b + 1] && !weak[b]; ++q) {
+          const int j = bm[q];
+          double d = 0.0;
+          for (int p = colptr[j]; p < colptr[j + 1]; ++p)
+            if (rowind[p] == j) d += values[p];
+          if (d == 0.0) weak[b] = 1;
+        }
+        continue;
+      }
+      D.assign(static_cast<std::size_t>(sb) * sb, 0.0);
+      double dmax = 0.0;
+      for (int q = bp[b]; q < bp[b + 1]; ++q) {
+        const int j = bm[q];
+        for (int p = colptr[j]; p < colptr[j + 1]; ++p)
+          if (blk[rowind[p]] == b) D[loc[rowind[p]] * sb + loc[j]] += values[p];
+      }
+      for (const double v : D) dmax = std::max(dmax, std::fabs(v));
+      bool singular = !(dmax > 0.0);
+      for (int c = 0; c < sb && !singular; ++c) {
+        int ip = c;
+        for (int r = c + 1; r < sb; ++r)
+          if (std::fabs(D[r * sb + c]) > std::fabs(D[ip * sb + c])) ip = r;
+        if (!(std::fabs(D[ip * sb + c]) > 1e-10 * dmax)) {
+          singular = true;
+          break;
+        }
+        if (ip != c)
+          for (int t = 0; t < sb; ++t) std::swap(D[c * sb + t], D[ip * sb + t]);
+        for (int r = c + 1; r < sb; ++r) {
+          const double l = D[r * sb + c] / D[c * sb + c];
+          if (l != 0.0)
+            for (int t = c + 1; t < sb; ++t) D[r * sb + t] -= l * D[c * sb + t];
+        }
+      }
+      weak[b] = singular;
+    }
+  }
+  sparse_lu_detail::amd_order(nb, n, Cp, Ci, weight.data(), bperm.data(),
+                              weak.empty() ? nullptr : weak.data());
   // --- expand the block order
   Q_.resize(n);
   int k = 0;
@@ -619,10 +705,6 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
     blk_.swap(blk);
   else
     blk_.clear();
-  qinv_.assign(n, 0);
-  for (int t = 0; t < n; ++t) qinv_[Q_[t]] = t;
-  rowcnt_.assign(n, 0);
-  for (int p = 0; p < nz; ++p) ++rowcnt_[rowind[p]];
   // --- storage of the numeric phases
   P_.assign(n, -1);
   pinv_.assign(n, -1);
@@ -758,20 +840,6 @@ inline int SparseLU::factor(const double* values) {
     }
     if (pinv_[c] < 0 && mark_[c] == k && std::fabs(x[c]) >= tol * cmax) {
       ipiv = c;
-    } else if (pivot_rule_ != 0) {
-      // no usable diagonal: among the candidates with |x_i| >= tol * max, prefer those of the
-      // column's own block, then the one whose own column comes first in the ordering
-      const int bc = blk_.empty() ? -1 : blk_[c];
-      const double thr = tol * cmax;
-      long best = -1;
-      for (int q = top; q < n; ++q) {
-        const int i = xi[q];
-        if (pinv_[i] >= 0 || std::fabs(x[i]) < thr) continue;
-        long key;
-        if (pivot_rule_ == 1) key = (bc >= 0 && blk_[i] == bc ? 0 : (long)n) + qinv_[i];
-        else key = (bc >= 0 && blk_[i] == bc ? 0 : (long)n) + rowcnt_[i];
-        if (best < 0 || key < best) { best = key; ipiv = i; }
-      }
     } else if (!blk_.empty()) {
       // no usable diagonal: prefer the largest candidate of the column's own block (a pivot
       // inside the diagonal block keeps the block structure that the ordering assumed)
@@ -825,9 +893,7 @@ inline int SparseLU::factor(const double* values) {
     }
     Rp_[k + 1] = static_cast<int>(Rv_.size());
   }
-  flops_ = 0;
-  for (int k = 0; k < n; ++k)
-    for (int q = Up_[k]; q < Up_[k + 1]; ++q) flops_ += Lp_[Ui_[q] + 1] - Lp_[Ui_[q]];
+  find_supernodes();
   double dmin = std::numeric_limits<double>::infinity(), dmax = 0.0;
   for (int k = 0; k < n; ++k) {
     dmin = std::min(dmin, std::fabs(Ud_[k]));
@@ -837,8 +903,82 @@ inline int SparseLU::factor(const double* values) {
   rgrowth_ = n ? rg : 1.0;
   anorm1_ = anorm;
   have_pattern_ = valid_ = true;
+  count_flops();
+  have_pattern_ = valid_ = true;
   status_ = kOk;
   return 0;
+}
+
+// Supernodes of L (Davis 2006 sec. 4.13 for Cholesky; SuperLU's for LU): maximal ranges of
+// consecutive columns [f, l) with struct(L(:, j)) = {j+1, ..., l-1} + R for every j in the range,
+// R = struct(L(:, l-1)) (rows >= l) the rows common to all. Since the columns are sorted, L(:, j)
+// holds the l-1-j rows inside the supernode first, then R in the same order for every column.
+// If U(j, k) is (structurally) nonzero for some j of a supernode then so is U(j', k) for every
+// later j' < k of it (L(j', j) != 0 fills it), so the U(:, k) entries in a supernode form a
+// range j..min(l, k)-1: refactor and solve then apply the updates of those columns to R together (one pass
+// over R for up to four columns instead of one per column). The suffix property is checked here
+// (a violated one would mean a bug; then no supernodes are used).
+inline void SparseLU::find_supernodes() {
+  const int n = n_;
+  snend_.assign(n, 0);
+  int j = n - 1;
+  int l = n;
+  for (; j >= 0; --j) {
+    // does column j start a supernode ending at l (i.e. continue the one of column j+1)?
+    bool joins = false;
+    if (j + 1 < n && l > j + 1) {
+      const int c0 = Lp_[j], c1 = Lp_[j + 1], c2 = Lp_[j + 2];
+      if (c1 - c0 == c2 - c1 + 1 && Li_[c0] == j + 1) {
+        joins = true;
+        for (int t = 1; t < c1 - c0; ++t)
+          if (Li_[c0 + t] != Li_[c1 + t - 1]) {
+            joins = false;
+            break;
+          }
+      }
+    }
+    if (!joins) l = j + 1;
+    snend_[j] = l;
+  }
+  // verify the suffix property of U(:, k) in every supernode
+  for (int k = 0; k < n; ++k) {
+    for (int q = Up_[k]; q < Up_[k + 1];) {
+      const int jj = Ui_[q];
+      const int w = std::min(snend_[jj], k) - jj;
+      if (q + w > Up_[k + 1] || Ui_[q + w - 1] != jj + w - 1) {
+        for (int t = 0; t < n; ++t) snend_[t] = t + 1;
+        return;
+      }
+      q += w;
+    }
+  }
+}
+
+inline void SparseLU::supernode_update(int j, int e, int l, const double* u, double* x) const {
+  const int* R = Li_.data() + Lp_[l - 1];
+  const int nr = Lp_[l] - Lp_[l - 1];
+  const double* Lx = Lx_.data();
+  int t = j;
+  for (; t + 4 <= e; t += 4) {
+    const double* a0 = Lx + Lp_[t] + (l - 1 - t);
+    const double* a1 = Lx + Lp_[t + 1] + (l - 2 - t);
+    const double* a2 = Lx + Lp_[t + 2] + (l - 3 - t);
+    const double* a3 = Lx + Lp_[t + 3] + (l - 4 - t);
+    const double u0 = u[t - j], u1 = u[t + 1 - j], u2 = u[t + 2 - j], u3 = u[t + 3 - j];
+    for (int r = 0; r < nr; ++r) x[R[r]] -= (a0[r] * u0 + a1[r] * u1) + (a2[r] * u2 + a3[r] * u3);
+  }
+  if (t + 2 <= e) {
+    const double* a0 = Lx + Lp_[t] + (l - 1 - t);
+    const double* a1 = Lx + Lp_[t + 1] + (l - 2 - t);
+    const double u0 = u[t - j], u1 = u[t + 1 - j];
+    for (int r = 0; r < nr; ++r) x[R[r]] -= a0[r] * u0 + a1[r] * u1;
+    t += 2;
+  }
+  if (t < e) {
+    const double* a0 = Lx + Lp_[t] + (l - 1 - t);
+    const double u0 = u[t - j];
+    for (int r = 0; r < nr; ++r) x[R[r]] -= a0[r] * u0;
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -878,18 +1018,26 @@ inline int SparseLU::refactor(const double* values) {
       amax = std::max(amax, av);
     }
     anorm = std::max(anorm, asum);
-    // U(:, k) in increasing order, each followed by its update with L(:, j)
+    // U(:, k) in increasing order, a supernode suffix j..l-1 at a time: the values inside the
+    // supernode by a unit lower triangular solve, then the update of the rows below
     double usum = 0.0, umax = 0.0;
-    for (int q = Up_[k]; q < Up_[k + 1]; ++q) {
+    for (int q = Up_[k]; q < Up_[k + 1];) {
       const int j = Ui_[q];
-      const double xj = x[j];
-      x[j] = 0.0;
-      Ux_[q] = xj;
-      const double axj = std::fabs(xj);
-      usum += axj;
-      umax = std::max(umax, axj);
-      const int p1 = Lp[j], p2 = Lp[j + 1];
-      for (int p = p1; p < p2; ++p) x[Li[p]] -= Lx[p] * xj;
+      const int l = snend_[j];
+      const int e = std::min(l, k);
+      double* u = Ux_.data() + q;
+      for (int t = j; t < e; ++t) {
+        const double xt = x[t];
+        x[t] = 0.0;
+        u[t - j] = xt;
+        const double axt = std::fabs(xt);
+        usum += axt;
+        umax = std::max(umax, axt);
+        const double* a = Lx + Lp[t];
+        for (int r = t + 1; r < l; ++r) x[r] -= a[r - t - 1] * xt;
+      }
+      supernode_update(j, e, l, u, x);
+      q += e - j;
     }
     const double piv = x[k];
     x[k] = 0.0;
@@ -934,10 +1082,15 @@ inline void SparseLU::solve(double* b) const {
   const int* Lp = Lp_.data();
   const int* Li = Li_.data();
   const double* Lx = Lx_.data();
-  for (int j = 0; j < n; ++j) {  // L y = P b
-    const double xj = w[j];
-    if (xj == 0.0) continue;
-    for (int p = Lp[j]; p < Lp[j + 1]; ++p) w[Li[p]] -= Lx[p] * xj;
+  for (int j = 0; j < n;) {  // L y = P b, a supernode at a time
+    const int l = snend_[j];
+    for (int t = j; t < l; ++t) {
+      const double xt = w[t];
+      const double* a = Lx + Lp[t];
+      for (int r = t + 1; r < l; ++r) w[r] -= a[r - t - 1] * xt;
+    }
+    supernode_update(j, l, l, w + j, w);
+    j = l;
   }
   const int* Up = Up_.data();
   const int* Ui = Ui_.data();

@@ -16,15 +16,23 @@
 
 namespace se3dyn {
 
-struct Bodies {
-  int n = 0;
+struct Bodies : ElementBatch {
   std::vector<int> f;         // (n,) frame
   std::vector<double> M;      // (n, 6, 6) material mass matrix about the node
   std::vector<double> mc;     // (n, 3) m c
   std::vector<double> m;      // (n,)
   std::vector<long> off;      // (n,) block (f, f)
 
-  void eval(Context& X) const {
+  void load(const Tables& t) override {
+    f = t.ints<int>("frame");
+    n = static_cast<int>(f.size());
+    M = t.real("M");
+    mc = t.real("mc");
+    m = t.real("m");
+    off = t.integer("off");
+  }
+
+  void eval(Context& X, bool) const override {
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
     for (int e = 0; e < n; ++e) {

@@ -1,6 +1,8 @@
 // What an element kernel sees and writes at one Newton iterate.
 #pragma once
 #include <cmath>
+#include <string>
+#include <vector>
 
 #include "../frames.hpp"
 
@@ -31,6 +33,33 @@ struct Context {
   void scale(const double* g, int n) {
     for (int i = 0; i < n; ++i) fscale = std::fmax(fscale, std::fabs(g[i]));
   }
+};
+
+// The arrays of one element type by field name (filled from se3dyn.elements.<type>.tables)
+struct Tables {
+  virtual ~Tables() = default;
+  virtual std::vector<double> real(const char* key) const = 0;
+  virtual std::vector<long> integer(const char* key) const = 0;
+  template <class T>
+  std::vector<T> ints(const char* key) const {
+    std::vector<long> v = integer(key);
+    return std::vector<T>(v.begin(), v.end());
+  }
+  std::vector<Frame> frames(const char* key) const {
+    std::vector<double> h = real(key);
+    std::vector<Frame> out(h.size() / 16);
+    for (size_t i = 0; i < out.size(); ++i) frame_from4(&h[16 * i], out[i]);
+    return out;
+  }
+};
+
+// A batch of elements of one type (struct of arrays): its kernel adds the residual, constraint
+// and tangent contributions of all its elements at one iterate (se3dyn/_core/elements/*.hpp).
+struct ElementBatch {
+  int n = 0;
+  virtual ~ElementBatch() = default;
+  virtual void load(const Tables& t) = 0;
+  virtual void eval(Context& X, bool index2) const = 0;
 };
 
 }  // namespace se3dyn

@@ -23,8 +23,7 @@
 
 namespace se3dyn {
 
-struct Joints {
-  int n = 0;
+struct Joints : ElementBatch {
   std::vector<int> fa, fb, fj;      // (n,) frames of node A, node B and the joint
   std::vector<int> mult;            // (n,) first multiplier row
   std::vector<Frame> XA, XB;        // (n,) attachment frames
@@ -69,7 +68,31 @@ struct Joints {
     }
   }
 
-  void eval(Context& X, bool index2) const {
+  void load(const Tables& t) override {
+    fa = t.ints<int>("fa");
+    n = static_cast<int>(fa.size());
+    fb = t.ints<int>("fb");
+    fj = t.ints<int>("fj");
+    mult = t.ints<int>("mult");
+    XA = t.frames("XA");
+    XB = t.frames("XB");
+    PA = t.real("PA");
+    PB = t.real("PB");
+    offset = t.ints<char>("offset");
+    off_ca = t.integer("off_ca");
+    off_cb = t.integer("off_cb");
+    off_cj = t.integer("off_cj");
+    off_ac = t.integer("off_ac");
+    off_bc = t.integer("off_bc");
+    off_jc = t.integer("off_jc");
+    off_aj = t.integer("off_aj");
+    off_xa = t.integer("off_xa");
+    off_xb = t.integer("off_xb");
+    off_xj = t.integer("off_xj");
+    resize_scratch();
+  }
+
+  void eval(Context& X, bool index2) const override {
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
     for (int e = 0; e < n; ++e) {

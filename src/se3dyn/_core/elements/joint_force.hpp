@@ -13,8 +13,7 @@
 
 namespace se3dyn {
 
-struct JointForces {
-  int n = 0;
+struct JointForces : ElementBatch {
   std::vector<int> f;                       // (n,) joint frame
   std::vector<double> K, ref, C, kp, kd;    // (n, 6), first k used
   std::vector<int> tau, pref, prate;        // (n,) first input slot (k consecutive) or -1
@@ -40,7 +39,24 @@ struct JointForces {
       }
   }
 
-  void eval(Context& X) const {
+  void load(const Tables& t) override {
+    f = t.ints<int>("frame");
+    n = static_cast<int>(f.size());
+    K = t.real("K");
+    ref = t.real("ref");
+    C = t.real("C");
+    kp = t.real("kp");
+    kd = t.real("kd");
+    tau = t.ints<int>("tau");
+    pref = t.ints<int>("pref");
+    prate = t.ints<int>("prate");
+    nonab = t.ints<char>("nonab");
+    Apinv = t.real("Apinv");
+    A = t.real("A");
+    off = t.integer("off");
+  }
+
+  void eval(Context& X, bool) const override {
     const FrameTables& T = *X.T;
     for (int e = 0; e < n; ++e) {
       int fr = f[e], k = T.k[fr], d = T.dof[fr];

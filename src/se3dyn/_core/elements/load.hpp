@@ -14,15 +14,25 @@
 
 namespace se3dyn {
 
-struct Loads {
-  int n = 0;
+struct Loads : ElementBatch {
   std::vector<int> f;           // (n,) node frame
   std::vector<double> c;        // (n, 3) material offset of the point
   std::vector<int> force, torque;           // (n,) input slot of the 3 components or -1
   std::vector<char> force_body, torque_body;  // (n,) given in the body frame
   std::vector<long> off;        // (n,) block (f, f)
 
-  void eval(Context& X) const {
+  void load(const Tables& t) override {
+    f = t.ints<int>("frame");
+    n = static_cast<int>(f.size());
+    c = t.real("c");
+    force = t.ints<int>("force");
+    torque = t.ints<int>("torque");
+    force_body = t.ints<char>("force_body");
+    torque_body = t.ints<char>("torque_body");
+    off = t.integer("off");
+  }
+
+  void eval(Context& X, bool) const override {
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
     for (int e = 0; e < n; ++e) {

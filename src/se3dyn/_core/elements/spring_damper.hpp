@@ -17,14 +17,28 @@
 
 namespace se3dyn {
 
-struct SpringDampers {
-  int n = 0;
+struct SpringDampers : ElementBatch {
   std::vector<int> fa, fb;          // (n,) node frames
   std::vector<double> ca, cb;       // (n, 3) material offsets of the points
   std::vector<double> k, d, L0;     // (n,)
   std::vector<long> off_aa, off_ab, off_ba, off_bb;
 
-  void eval(Context& X) const {
+  void load(const Tables& t) override {
+    fa = t.ints<int>("fa");
+    n = static_cast<int>(fa.size());
+    fb = t.ints<int>("fb");
+    ca = t.real("ca");
+    cb = t.real("cb");
+    k = t.real("k");
+    d = t.real("d");
+    L0 = t.real("L0");
+    off_aa = t.integer("off_aa");
+    off_ab = t.integer("off_ab");
+    off_ba = t.integer("off_ba");
+    off_bb = t.integer("off_bb");
+  }
+
+  void eval(Context& X, bool) const override {
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
     for (int e = 0; e < n; ++e) {

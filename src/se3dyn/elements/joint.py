@@ -1,0 +1,75 @@
+"""Kinematic joint or rigid constraint between two node frames through the joint frame, on a
+subgroup spanned by a constant A (Eqs. (7)-(11), (54)-(59)), optionally between frames attached
+to the nodes at a point (``at``).
+
+Kernel ``se3dyn/_core/elements/joint.hpp``: six constraints ``Phi = vect((H_B X_B)^-1 H_A X_A
+H_J)`` (Eq. (55)), the forces ``B^T lambda`` of the gradient at ``Phi = 0`` (Eq. (58)), the exact
+linearisation of Phi (Eq. (59) at ``Phi = 0``), the geometric stiffness of the node-A force, and
+for the stabilised index-2 form the velocity constraints ``B v`` with their derivative.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from se3dyn import lie
+
+KEY = "joint"
+TRAITS = dict(conservative=True, constraint=True, objective=True)
+
+
+def tables(s, lay) -> dict:
+    M, m = s.M, s.m
+    ja, jb = s.joint_a.astype(np.int64), s.joint_b.astype(np.int64)
+    jf = M + np.arange(m, dtype=np.int64)
+    out = {key: [] for key in ("ca", "cb", "cj", "ac", "bc", "jc", "aj")}
+    for j in range(m):
+        a, b, f = ja[j], jb[j], jf[j]
+        c = lay.mult_group(j)
+        out["ca"].append(lay.block(c, lay.frame_group(a)))
+        out["cb"].append(lay.block(c, lay.frame_group(b)))
+        out["cj"].append(lay.block(c, lay.frame_group(f)))
+        out["ac"].append(lay.block(lay.frame_group(a), c))
+        out["bc"].append(lay.block(lay.frame_group(b), c))
+        out["jc"].append(lay.block(lay.frame_group(f), c))
+        out["aj"].append(lay.frame_block(a, f))
+        lay.block(c, c)  # diagonal: identity for dropped (redundant) equations
+        lay.constraint(j, (a, b, f))
+    XA = np.ascontiguousarray(s.joint_XA, float).reshape(m, 4, 4)
+    XB = np.ascontiguousarray(s.joint_XB, float).reshape(m, 4, 4)
+    eye = np.eye(4)
+    t = dict(fa=ja, fb=jb, fj=jf, mult=s.joint_multadr.astype(np.int64), XA=XA, XB=XB,
+             PA=lie.adjoint_inv(XA) if m else np.zeros((0, 6, 6)),
+             PB=lie.adjoint_inv(XB) if m else np.zeros((0, 6, 6)),
+             offset=np.array([not (np.allclose(XA[j], eye) and np.allclose(XB[j], eye))
+                              for j in range(m)], np.int64))
+    for key, val in out.items():
+        t["off_" + key] = np.array(val, np.int64)
+    return t
+
+
+def index2_tables(s, lay, t: dict) -> None:
+    """Blocks that only the stabilized index-2 matrix has: velocity-constraint rows."""
+    for key, fr in (("xa", t["fa"]), ("xb", t["fb"]), ("xj", t["fj"])):
+        t["off_" + key] = np.array([lay.block(lay.xi_group(j), lay.frame_group(f))
+                                    for j, f in enumerate(fr)], np.int64)
+
+
+def examples(rng):
+    """Every joint type, with and without an attachment point, between two moving bodies."""
+    import se3dyn as sd
+
+    out = []
+    for typ, kw in (("rigid", {}), ("hinge", dict(axis=rng.normal(size=3))),
+                    ("prismatic", dict(axis=rng.normal(size=3))),
+                    ("cylindrical", dict(axis=rng.normal(size=3))), ("spherical", {}),
+                    ("planar", dict(normal=rng.normal(size=3))),
+                    ("screw", dict(axis=rng.normal(size=3), pitch=0.1))):
+        for at in (None, tuple(rng.normal(size=3))):
+            mb = sd.ModelBuilder()
+            mb.node("a", position=tuple(rng.normal(size=3)), mass=1.0, inertia=(1, 1.2, 1.4))
+            mb.node("b", position=tuple(rng.normal(size=3)), mass=2.0, inertia=(1, 1.1, 1.3),
+                    orientation=lie.exp_so3(rng.normal(size=3)))
+            mb.joint("j", typ, "a", "b", at=at, **kw)
+            out.append(mb.build())
+    return out
