@@ -324,11 +324,11 @@ def _springs(model: Model, nidx: dict, H0: np.ndarray) -> tuple:
     """Point spring-dampers as (node a, node b, c_a, c_b, k, d, L0), the points as material
     offsets ``R0^T (p - x0)`` of their nodes."""
     out = []
-    for sp in model.springs:
-        a, b = nidx[sp.node_a], nidx[sp.node_b]
-        ca = H0[a, :3, :3].T @ (sp.at_a - H0[a, :3, 3])
-        cb = H0[b, :3, :3].T @ (sp.at_b - H0[b, :3, 3])
-        out.append((a, b, ca, cb, sp.stiffness, sp.damping, sp.length))
+    for spec in model.springs:
+        a, b = nidx[spec.node_a], nidx[spec.node_b]
+        ca = H0[a, :3, :3].T @ (spec.at_a - H0[a, :3, 3])
+        cb = H0[b, :3, :3].T @ (spec.at_b - H0[b, :3, 3])
+        out.append((a, b, ca, cb, spec.stiffness, spec.damping, spec.length))
     return tuple(out)
 
 
