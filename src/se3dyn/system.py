@@ -529,7 +529,7 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     u = np.ascontiguousarray(inputs["u"], dtype=float)
     f = lambda x: np.ascontiguousarray(x, dtype=float)  # noqa: E731
     fs = eng.evaluate(Hall, f(alpha_n), f(n), f(v), f(vd), f(lam), u, Hout, r, phi, alpha,
-                      psi, vals, energy, float(c[0]), float(c[1]), float(c[2]), idx2 or velocity,
+                      psi, vals, energy, float(c[0]), float(c[1]), float(c[2]), idx2,
                       float(stab["cv"]) if idx2 else 0.0, bool(full_alpha))
     ev = Evaluation(H=Hout[:s.M], HJ=Hout[s.M:], r=r, phi=phi, alpha=alpha, f_scale=fs,
                     values=vals, psi=psi if (velocity or idx2) else None, energy=energy)

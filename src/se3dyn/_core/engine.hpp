@@ -13,6 +13,7 @@
 #include <vector>
 
 #include <memory>
+#include <stdexcept>
 
 #include "elements/registry.hpp"
 #include "sparse_lu.hpp"
@@ -163,7 +164,9 @@ struct Engine {
     X.cK = cK;
     X.energy = o.energy;
     joints->cv_ = cv;
-    for (const auto& b : batches) b->eval(X, index2 && o.psi);
+    // index2: the matrix (when asked) is the stabilised index-2 one, which needs psi
+    if (prod && !o.psi) throw std::invalid_argument("index-2 matrix without velocity constraints");
+    for (const auto& b : batches) b->eval(X, prod);
     if (prod) {
       joints->store_B(T, Hn, joints->Bnu);
       double* vals = o.vals;

@@ -30,7 +30,8 @@
 //              applied: L(:, j) only touches rows > j), values Ux_; the diagonal is Ud_[k].
 //   Refactor scatter map: the entries of A(:, Q_[k]) that are in the factor pattern are
 //              (value index Rv_[q], pivot row Rr_[q]) for q in [Rp_[k], Rp_[k+1]); the value
-//              indices of A entries left out of the pattern (only with drop_zeros) are Rz_.
+//              indices of its entries left out of the pattern (only with drop_zeros) are
+//              Rz_[Rzp_[k] .. Rzp_[k+1]).
 //   work_      n doubles, all zero between calls (every routine that scatters clears again).
 //
 // No exceptions are thrown by factor/refactor/solve (status codes); refactor and solve do not
@@ -435,11 +436,15 @@ class SparseLU {
     // than refactor_tol times the largest entry of its column of candidates, |u_kk| <
     // refactor_tol * max(|u_kk|, max_i |l_ik u_kk|), or not finite.
     double refactor_tol = 1e-8;
-    // factor: leave the entries of A that are exactly zero in the values given to factor out of
-    // the L/U patterns (an iteration matrix whose pattern holds many entries that are zero in
-    // a given configuration). refactor then checks that these entries are still zero and
-    // fails otherwise.
+    // factor: leave the entries of A that are zero in the values given to factor out of the
+    // L/U patterns (an iteration matrix whose pattern holds many entries that are zero in a
+    // given configuration, or always). "Zero": |a_ij| <= drop_tol * max_i |a_ij| (drop_tol = 0:
+    // exact zeros only; 1e-15 also drops round-off residues like 1e-40 next to O(1) entries, at
+    // the price of a backward error of that order). refactor checks that the entries left out
+    // still are "zero" in this sense and fails (kPatternChanged) otherwise. With values given
+    // to analyze, the ordering also ignores them.
     bool drop_zeros = false;
+    double drop_tol = 0.0;
   };
 
   // Status of the last factor / refactor.
@@ -482,6 +487,11 @@ class SparseLU {
   void solve(double* b) const;
   // Solve A^T x = b in place.
   void solve_transposed(double* b) const;
+  // Solve A x = b in place with `iters` steps of iterative refinement in working precision
+  // (x += A^-1 (b - A x); Skeel, Math. Comp. 35 (1980) 817-832: one step makes LU with a
+  // moderately unstable pivot sequence backward stable). `values` are those of the last
+  // factor/refactor (all entries of the pattern are used for the residual). No allocation.
+  void solve_refined(const double* values, double* b, int iters = 1) const;
 
   int n() const { return n_; }
   bool ok() const { return valid_; }
@@ -501,19 +511,6 @@ class SparseLU {
     int c = 0;
     for (int j = 0; j < n_; j = snend_[j]) ++c;
     return c;
-  }
-  // Mean number of columns per supernode update in refactor, weighted by flops
-  double mean_update_width() const {
-    double num = 0, den = 0;
-    for (int k = 0; k < n_; ++k)
-      for (int q = Up_[k]; q < Up_[k + 1];) {
-        const int j = Ui_[q], l = snend_[j], e = std::min(l, k);
-        const double f = static_cast<double>(e - j) * (Lp_[l] - Lp_[l - 1]);
-        num += f * (e - j);
-        den += f;
-        q += e - j;
-      }
-    return den > 0 ? num / den : 0.0;
   }
   // Reciprocal pivot growth of the last factor/refactor, min_k max|A(:, Q_k)| / max|U(:, k)|
   // (KLU's rgrowth; close to 1 is good, tiny means an unstable factorisation).
@@ -546,10 +543,11 @@ class SparseLU {
   std::vector<int> Q_, P_, pinv_;
   std::vector<int> Lp_, Li_, Up_, Ui_;
   std::vector<double> Lx_, Ux_, Ud_;
-  std::vector<int> Rp_, Rv_, Rr_, Rz_;  // refactor scatter map (see the invariants above)
+  std::vector<int> Rp_, Rv_, Rr_, Rz_, Rzp_;  // refactor scatter map (see the invariants)
   std::vector<int> snend_;               // supernode of L containing column j: [.., snend_[j])
   std::vector<int> mark_, xi_, pstack_;  // factor workspace
   mutable std::vector<double> work_;     // zero between calls
+  mutable std::vector<double> xwork_, rwork_;  // solve_refined
   double anorm1_ = 0.0, rgrowth_ = 0.0, rcond_piv_ = 0.0;
   long long flops_ = 0;
 };
@@ -612,6 +610,14 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
         if (values) Tv[q] = p;
       }
   }
+  std::vector<double> colmax;  // analyze with values and drop_zeros: max |A(:, j)|
+  if (values && opt_.drop_zeros) {
+    colmax.assign(n, 0.0);
+    for (int j = 0; j < n; ++j)
+      for (int p = colptr[j]; p < colptr[j + 1]; ++p)
+        colmax[j] = std::max(colmax[j], std::fabs(values[p]));
+  }
+  const double dtol = opt_.drop_tol;
   std::vector<int> Cp(nb + 1, 0), Ci, seen(nb, -1);
   Ci.reserve(static_cast<std::size_t>(2) * nz + 1);
   for (int b = 0; b < nb; ++b) {
@@ -619,7 +625,7 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
     for (int t = bp[b]; t < bp[b + 1]; ++t) {
       const int j = bm[t];
       for (int p = colptr[j]; p < colptr[j + 1]; ++p) {
-        if (values && opt_.drop_zeros && values[p] == 0.0) continue;
+        if (!colmax.empty() && std::fabs(values[p]) <= dtol * colmax[j]) continue;
         const int c = blk[rowind[p]];
         if (seen[c] != b) {
           seen[c] = b;
@@ -627,7 +633,7 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
         }
       }
       for (int p = Tp[j]; p < Tp[j + 1]; ++p) {
-        if (values && opt_.drop_zeros && values[Tv[p]] == 0.0) continue;
+        if (!colmax.empty() && std::fabs(values[Tv[p]]) <= dtol * colmax[Ti[p]]) continue;
         const int c = blk[Ti[p]];
         if (seen[c] != b) {
           seen[c] = b;
@@ -716,6 +722,8 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
   xi_.assign(n, 0);
   pstack_.assign(n, 0);
   work_.assign(n, 0.0);
+  xwork_.assign(n, 0.0);
+  rwork_.assign(n, 0.0);
   analyzed_ = true;
   return 0;
 }
@@ -766,6 +774,7 @@ inline int SparseLU::factor(const double* values) {
   const int n = n_;
   const bool drop = opt_.drop_zeros;
   const double tol = opt_.pivot_tol;
+  const double dtol = opt_.drop_tol;
   std::fill(pinv_.begin(), pinv_.end(), -1);
   std::fill(mark_.begin(), mark_.end(), -1);
   Li_.clear();
@@ -782,10 +791,15 @@ inline int SparseLU::factor(const double* values) {
   for (int k = 0; k < n; ++k) {
     const int c = Q_[k];
     const int pa = colptr_[c], pb = colptr_[c + 1];
+    double cth = 0.0;  // entries with |a| <= cth are left out (drop_zeros)
+    if (drop) {
+      for (int p = pa; p < pb; ++p) cth = std::max(cth, std::fabs(values[p]));
+      cth *= dtol;
+    }
     // --- reach of the pattern of A(:, c) in the graph of L: xi[top..n), topological order
     int top = n;
     for (int p = pa; p < pb; ++p) {
-      if (drop && values[p] == 0.0) continue;
+      if (drop && std::fabs(values[p]) <= cth) continue;
       const int i = rowind_[p];
       if (mark_[i] != k) top = dfs(i, k, top, xi, pstack);
     }
@@ -794,7 +808,7 @@ inline int SparseLU::factor(const double* values) {
     for (int p = pa; p < pb; ++p) {
       const double v = values[p];
       asum += std::fabs(v);
-      if (drop && v == 0.0) continue;
+      if (drop && std::fabs(v) <= cth) continue;
       x[rowind_[p]] += v;
       amax = std::max(amax, std::fabs(v));
     }
@@ -881,10 +895,16 @@ inline int SparseLU::factor(const double* values) {
   Rv_.clear();
   Rr_.clear();
   Rp_[0] = 0;
+  Rzp_.assign(n + 1, 0);
   for (int k = 0; k < n; ++k) {
     const int c = Q_[k];
+    double cth = 0.0;
+    if (drop) {
+      for (int p = colptr_[c]; p < colptr_[c + 1]; ++p) cth = std::max(cth, std::fabs(values[p]));
+      cth *= dtol;
+    }
     for (int p = colptr_[c]; p < colptr_[c + 1]; ++p) {
-      if (drop && values[p] == 0.0) {
+      if (drop && std::fabs(values[p]) <= cth) {
         Rz_.push_back(p);
         continue;
       }
@@ -892,6 +912,7 @@ inline int SparseLU::factor(const double* values) {
       Rr_.push_back(pinv_[rowind_[p]]);
     }
     Rp_[k + 1] = static_cast<int>(Rv_.size());
+    Rzp_[k + 1] = static_cast<int>(Rz_.size());
   }
   find_supernodes();
   double dmin = std::numeric_limits<double>::infinity(), dmax = 0.0;
@@ -991,14 +1012,7 @@ inline int SparseLU::refactor(const double* values) {
     return 1;
   }
   const int n = n_;
-  for (const int p : Rz_)
-    if (values[p] != 0.0) {
-      // the column of entry p: binary search in colptr_
-      const int c = static_cast<int>(std::upper_bound(colptr_.begin(), colptr_.end(), p) -
-                                     colptr_.begin()) - 1;
-      status_ = kPatternChanged;
-      return 1 + c;
-    }
+  const double dtol = opt_.drop_tol;
   double* x = work_.data();
   const int* Lp = Lp_.data();
   const int* Li = Li_.data();
@@ -1016,6 +1030,20 @@ inline int SparseLU::refactor(const double* values) {
       const double av = std::fabs(v);
       asum += av;
       amax = std::max(amax, av);
+    }
+    if (Rzp_[k + 1] > Rzp_[k]) {  // entries left out by factor must still be "zero"
+      double zmax = 0.0;
+      for (int q = Rzp_[k]; q < Rzp_[k + 1]; ++q) {
+        const double az = std::fabs(values[Rz_[q]]);
+        zmax = std::max(zmax, az);
+        if (!(az <= zmax)) zmax = az;  // NaN
+      }
+      asum += zmax;
+      if (!(zmax <= dtol * std::max(amax, zmax))) {
+        for (int q = Rp_[k]; q < Rp_[k + 1]; ++q) x[Rr_[q]] = 0.0;
+        status_ = std::isfinite(zmax) ? kPatternChanged : kNotFinite;
+        return 1 + Q_[k];
+      }
     }
     anorm = std::max(anorm, asum);
     // U(:, k) in increasing order, a supernode suffix j..l-1 at a time: the values inside the
@@ -1129,6 +1157,28 @@ inline void SparseLU::solve_transposed(double* b) const {
     b[P_[k]] = w[k];
     w[k] = 0.0;
   }
+}
+
+inline void SparseLU::solve_refined(const double* values, double* b, int iters) const {
+  const int n = n_;
+  if (!valid_) {
+    for (int i = 0; i < n; ++i) b[i] = std::numeric_limits<double>::quiet_NaN();
+    return;
+  }
+  double* x = xwork_.data();
+  double* r = rwork_.data();
+  std::copy(b, b + n, x);
+  solve(x);
+  for (int it = 0; it < iters; ++it) {
+    std::copy(b, b + n, r);
+    for (int j = 0; j < n; ++j) {
+      const double xj = x[j];
+      for (int p = colptr_[j]; p < colptr_[j + 1]; ++p) r[rowind_[p]] -= values[p] * xj;
+    }
+    solve(r);
+    for (int i = 0; i < n; ++i) x[i] += r[i];
+  }
+  std::copy(x, x + n, b);
 }
 
 inline double SparseLU::condest() const {

@@ -55,21 +55,26 @@ def index2_tables(s, lay, t: dict) -> None:
                                     for j, f in enumerate(fr)], np.int64)
 
 
+def _unit(rng):
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v)
+
+
 def examples(rng):
     """Every joint type, with and without an attachment point, between two moving bodies."""
     import se3dyn as sd
 
     out = []
-    for typ, kw in (("rigid", {}), ("hinge", dict(axis=rng.normal(size=3))),
-                    ("prismatic", dict(axis=rng.normal(size=3))),
-                    ("cylindrical", dict(axis=rng.normal(size=3))), ("spherical", {}),
-                    ("planar", dict(normal=rng.normal(size=3))),
-                    ("screw", dict(axis=rng.normal(size=3), pitch=0.1))):
-        for at in (None, tuple(rng.normal(size=3))):
+    for typ, kw in (("rigid", {}), ("hinge", dict(axis=_unit(rng))),
+                    ("prismatic", dict(axis=_unit(rng))),
+                    ("cylindrical", dict(axis=_unit(rng))), ("spherical", {}),
+                    ("planar", dict(normal=_unit(rng))),
+                    ("screw", dict(axis=_unit(rng), pitch=0.1))):
+        for at in (None, tuple(_unit(rng))):
             mb = sd.ModelBuilder()
-            mb.node("a", position=tuple(rng.normal(size=3)), mass=1.0, inertia=(1, 1.2, 1.4))
-            mb.node("b", position=tuple(rng.normal(size=3)), mass=2.0, inertia=(1, 1.1, 1.3),
-                    orientation=lie.exp_so3(rng.normal(size=3)))
+            mb.node("a", position=tuple(_unit(rng)), mass=1.0, inertia=(1, 1.2, 1.4))
+            mb.node("b", position=tuple(_unit(rng)), mass=2.0, inertia=(1, 1.1, 1.3),
+                    orientation=lie.exp_so3(_unit(rng)))
             mb.joint("j", typ, "a", "b", at=at, **kw)
             out.append(mb.build())
     return out

@@ -56,6 +56,11 @@ def tables(s, lay) -> dict:
                 off=np.array([lay.frame_block(M + j, M + j) for j in ids], np.int64))
 
 
+def _unit(rng):
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v)
+
+
 def examples(rng):
     """Spring, damper, actuator and PD law on abelian joints (hinge, cylindrical)."""
     import se3dyn as sd
@@ -66,7 +71,7 @@ def examples(rng):
         mb.node("g", fixed=True)
         mb.node("b", position=(0.3, 0.1, 0.0), mass=1.5, inertia=(1, 1.2, 1.4))
         k = 1 if typ == "hinge" else 2
-        mb.joint("j", typ, "g", "b", axis=rng.normal(size=3),
+        mb.joint("j", typ, "g", "b", axis=_unit(rng),
                  stiffness=tuple(rng.uniform(1, 3, k)), reference=tuple(rng.normal(size=k)),
                  damping=tuple(rng.uniform(0.1, 1, k)),
                  actuator=sd.Sine(tuple(rng.normal(size=k)), 1.3),

@@ -118,7 +118,7 @@ struct Joints : ElementBatch {
       frame_force(T, b, fb6, 1.0, X.r);
       frame_force(T, j, lam, 1.0, X.r);
       double w[6];
-      if (index2) {
+      if (X.psi) {  // velocity constraints B v*
         double vb[6];
         mv<6, 6>(AdP, &S.v[6 * a], w);
         mv<6, 6>(PBe, &S.v[6 * b], vb);
@@ -167,7 +167,7 @@ struct Joints : ElementBatch {
         mTm<6, 6, 6>(AdP, L, K);
         add_frame_block(T, S, X.vals, off_aj[e], a, j, K, -X.cK, true);
       }
-      if (index2) {
+      if (index2) {  // the matrix is the stabilised index-2 one (w was computed: psi given)
         // velocity-constraint rows: B A + cv ad(w) T_J A, cv = 1/gamma'
         long xo[3] = {off_xa[e], off_xb[e], off_xj[e]};
         for (int s = 0; s < 3; ++s) {
