@@ -14,10 +14,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 
+from se3dyn._lazy import LazyModule
 from se3dyn.integrator import step_inputs
 from se3dyn.system import LinearSolver, System, evaluate
+
+sla = LazyModule("scipy.linalg")
 
 __all__ = ["RankReport", "rank_analysis", "constraint_jacobian", "loop_joints",
            "redundant_equations"]
@@ -69,6 +71,54 @@ def _jacobian(s: System, H=None, HJ=None):
     return A[s.nq:, :s.nq]
 
 
+def _jacobian_rows(s: System, rows: np.ndarray, H=None, HJ=None) -> np.ndarray:
+    """Dense rows ``rows`` (into the 6 m constraints) of ``Phi_q`` restricted to the unknowns
+    they touch, (len(rows), ncols), from the engine's values (no sparse matrix formed)."""
+    H = s.node_H0 if H is None else H
+    HJ = s.joint_H0 if HJ is None else HJ
+    zero = np.zeros(s.nq)
+    ev = evaluate(s, H, HJ, zero, zero, zero, zero, np.zeros(s.nm), step_inputs(s, 0.0),
+                  (0.0, 0.0, 0.0))
+    from se3dyn.system import pattern_entries
+
+    _, prow, pcol = pattern_entries(s)
+    local = -np.ones(s.nq + s.nm, np.int64)
+    local[s.nq + rows] = np.arange(len(rows))
+    sel = (local[prow] >= 0) & (pcol < s.nq)
+    cols, cidx = np.unique(pcol[sel], return_inverse=True)
+    P = np.zeros((len(rows), len(cols)))
+    np.add.at(P, (local[prow[sel]], cidx), ev.values[sel])
+    return P
+
+
+def _pivoted_qr(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Householder QR with column pivoting (Businger & Golub 1965) of A (m, n): the column
+    order ``piv`` (n,) and ``|diag(R)|`` (min(m, n),), as LAPACK's geqp3 gives them."""
+    A = np.array(A, dtype=float)
+    m, n = A.shape
+    piv = np.arange(n)
+    norms = np.einsum("ij,ij->j", A, A)
+    kmax = min(m, n)
+    d = np.zeros(kmax)
+    for k in range(kmax):
+        j = k + int(np.argmax(norms[k:]))
+        if j != k:
+            A[:, [k, j]] = A[:, [j, k]]
+            piv[[k, j]] = piv[[j, k]]
+            norms[[k, j]] = norms[[j, k]]
+        x = A[k:, k]
+        alpha = np.linalg.norm(x)
+        d[k] = alpha
+        if alpha == 0:
+            break
+        v = x.copy()
+        v[0] += np.copysign(alpha, x[0])
+        v /= np.linalg.norm(v)
+        A[k:, k:] -= 2.0 * np.outer(v, v @ A[k:, k:])
+        norms[k + 1:] = np.einsum("ij,ij->j", A[k + 1:, k + 1:], A[k + 1:, k + 1:])
+    return piv, d
+
+
 def loop_joints(s: System) -> np.ndarray:
     """Indices of the joints that lie on closed loops (the 2-core of the joint graph, clamped
     nodes merged into one ground node). Only these can carry redundant constraints: a joint on
@@ -114,11 +164,8 @@ def redundant_equations(s: System, H: np.ndarray | None = None, HJ: np.ndarray |
             s.pattern["redundant0"] = (initial, out)
         return out.copy()
     rows = (6 * loops[:, None] + np.arange(6)).ravel()
-    P = _jacobian(s, H, HJ)[rows]
-    cols = np.unique(P.indices)
-    P = P[:, cols].toarray()
-    _, R, piv = sla.qr(P.T, mode="economic", pivoting=True)
-    d = np.abs(np.diag(R))
+    P = _jacobian_rows(s, rows, H, HJ)
+    piv, d = _pivoted_qr(P.T)
     r = int(np.sum(d > rtol * d[0])) if d.size and d[0] > 0 else 0
     out = np.sort(rows[piv[r:]])
     if initial:

@@ -316,47 +316,34 @@ class GeneralizedAlpha:
                              f"{len(names)} redundant: " + ", ".join(names[:12])
                              + (" ..." if len(names) > 12 else ""),
                              hint="remove the duplicated freedom or use redundant='drop'")
-        solver = LinearSolver(s, drop=dropped)
         v = np.zeros(nq)
         v[s.node_dofidx] = s.node_v0[s.node_free]
         st = State(t=t0, H=s.node_H0.copy(), HJ=s.joint_H0.copy(), v=v, vd=np.zeros(nq),
                    a=np.zeros(nq), lam=np.zeros(nm), alpha=np.zeros(nq), dropped=dropped)
         inputs = step_inputs(s, t0)
         zero = np.zeros(nq)
-        ev = evaluate(s, st.H, st.HJ, st.alpha, zero, v, zero, st.lam, inputs, (1.0, 0.0, 0.0))
+        ev = evaluate(s, st.H, st.HJ, st.alpha, zero, v, zero, st.lam, inputs, (1.0, 0.0, 0.0),
+                      accel=True)
         if nm and np.any(v != 0):
-            st.v = self._project_velocity(s, solver, ev.values, v)
+            st.v = self._project_velocity(s, LinearSolver(s, drop=dropped), ev.values, v)
             ev = evaluate(s, st.H, st.HJ, st.alpha, zero, st.v, zero, st.lam, inputs,
-                          (1.0, 0.0, 0.0))
-        # [M Phi_q^T; Phi_q 0][vd; lam] = [-b; ad(v_J) Ad v_A]  (acceleration-level constraints)
-        rhs = np.concatenate([-ev.r, self._accel_rhs(s, st)])
+                          (1.0, 0.0, 0.0), accel=True)
+        # [M Phi_q^T; Phi_q 0][vd; lam] = [-r; arhs] with the acceleration-level constraints
+        # Phi_q vd = arhs (the time derivative of Phi_q v = 0), by the compiled sparse LU
+        rhs = np.concatenate([-ev.r, ev.arhs])
         rhs[nq + dropped] = 0.0
-        solver.factor(ev.values, f"t={t0:.6g} (initial accelerations)")
-        sol = solver.solve(rhs)
-        st.vd = sol[:nq]
+        code = _stepper(s, False, dropped).solve_values(ev.values, rhs)
+        if code != 0 or not np.all(np.isfinite(rhs)):
+            raise SimulationError(
+                f"t={t0:.6g} (initial accelerations): the iteration matrix is singular; typical "
+                "causes: redundant constraints not detected at the start (a mechanism started "
+                "in a singular configuration), a free massless node whose motion no joint "
+                "determines, or a non-finite state")
+        st.vd = rhs[:nq].copy()
         st.a = st.vd.copy()
-        st.lam = sol[nq:]
-        e = energies(s, st, inputs)
-        st.power = e["power"]
+        st.lam = rhs[nq:].copy()
+        st.power = ev.energy[3:6].copy()  # powers at t0 (velocity-level: vd does not enter)
         return st
-
-    @staticmethod
-    def _accel_rhs(s: System, st: State) -> np.ndarray:
-        """Right-hand side ``ad(A v_J) Ad_{H_J^-1} PA v_A`` (nm,) of the acceleration-level
-        constraints ``Ad PA vd_A - PB vd_B + A vd_J = ad(A v_J) Ad PA v_A``: the time
-        derivative of the velocity constraints (Eq. (58) applied to v), with
-        ``d/dt Ad_{H_J^-1} = -ad(A v_J) Ad_{H_J^-1}`` and constant offsets PA, PB."""
-        out = np.zeros(s.nm)
-        for g in s.groups:
-            if not g.k:
-                continue
-            vJ = np.einsum("jik,jk->ji", g.A, st.v[g.jdof])
-            vA = np.where(g.dof_a[:, :1] < 0, 0.0, st.v[np.maximum(g.dof_a, 0)])
-            Ad = lie.adjoint_inv(st.HJ[g.ids])
-            if g.offset:
-                Ad = Ad @ g.PA  # velocity of the attachment frame X_A: PA v_A
-            out[g.mult] = np.einsum("jil,jl->ji", lie.ad6(vJ) @ Ad, vA)
-        return out
 
     @staticmethod
     def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,

@@ -32,9 +32,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import scipy.linalg as sla
 
 from se3dyn import lie
+from se3dyn._lazy import LazyModule
 from se3dyn.errors import ModelError, SimulationError
 from se3dyn.integrator import step_inputs
 from se3dyn.model import Model
@@ -51,6 +51,8 @@ from se3dyn.timefunc import (
     TimeFunction,
     as_timefunc,
 )
+
+sla = LazyModule("scipy.linalg")
 
 __all__ = ["Assembly", "AssemblyError", "KinematicsResult", "assemble", "kinematics",
            "time_derivatives"]

@@ -29,8 +29,8 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg as sla
 
+from se3dyn._lazy import LazyModule
 from se3dyn.errors import ModelError, SimulationError
 from se3dyn.integrator import step_inputs
 from se3dyn.kinematics import (
@@ -48,6 +48,8 @@ from se3dyn.kinematics import (
 )
 from se3dyn.model import Model
 from se3dyn.system import System, evaluate
+
+sla = LazyModule("scipy.linalg")
 
 __all__ = ["StaticResult", "static_equilibrium"]
 

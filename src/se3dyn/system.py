@@ -26,13 +26,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg as sla
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from se3dyn import lie
+from se3dyn._lazy import LazyModule
 from se3dyn.errors import ModelError, SimulationError
 from se3dyn.model import Model
+
+sla = LazyModule("scipy.linalg")
+sp = LazyModule("scipy.sparse")
+spla = LazyModule("scipy.sparse.linalg")
 
 __all__ = ["System", "JointGroup", "compile_model", "Evaluation", "evaluate", "matrix_values",
            "LinearSolver", "pattern"]
@@ -473,13 +475,14 @@ class Evaluation:
     cache: dict | None = field(default=None, repr=False)
     psi: np.ndarray | None = None
     energy: np.ndarray | None = None
+    arhs: np.ndarray | None = None
 
 
 def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n: np.ndarray,
              v: np.ndarray, vd: np.ndarray, lam: np.ndarray, inputs: dict,
              coef: tuple[float, float, float] | None = None, *,
-             full_alpha: bool = True, velocity: bool = False, stab: dict | None = None
-             ) -> Evaluation:
+             full_alpha: bool = True, velocity: bool = False, stab: dict | None = None,
+             accel: bool = False) -> Evaluation:
     """Evaluate the residual, the constraints and (if ``coef``) the scaled iteration matrix by
     the element kernels of the compiled engine (one implementation, :mod:`se3dyn.assembly`).
 
@@ -507,6 +510,9 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     stab : dict or None
         With ``coef``: the stabilized index-2 matrix, ``cv`` = 1/gamma' (its blocks ``B_n``
         come from the frames at the start of the step, ``Hn``/``HJn``).
+    accel : bool
+        Also evaluate the right-hand side ``arhs`` (nm,) of the acceleration-level constraints
+        ``Phi_q vd = arhs`` (the time derivative of ``Phi_q v = 0``).
 
     Returns
     -------
@@ -525,14 +531,17 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     if coef is not None:
         vals = np.empty(lay.nvals2 if idx2 else lay.nvals)
     energy = np.empty(6)
+    arhs = np.empty(s.nm)
     c = (0.0, 0.0, 0.0) if coef is None else coef
     u = np.ascontiguousarray(inputs["u"], dtype=float)
     f = lambda x: np.ascontiguousarray(x, dtype=float)  # noqa: E731
     fs = eng.evaluate(Hall, f(alpha_n), f(n), f(v), f(vd), f(lam), u, Hout, r, phi, alpha,
                       psi, vals, energy, float(c[0]), float(c[1]), float(c[2]), idx2,
-                      float(stab["cv"]) if idx2 else 0.0, bool(full_alpha))
+                      float(stab["cv"]) if idx2 else 0.0, bool(full_alpha),
+                      arhs if accel else None)
     ev = Evaluation(H=Hout[:s.M], HJ=Hout[s.M:], r=r, phi=phi, alpha=alpha, f_scale=fs,
-                    values=vals, psi=psi if (velocity or idx2) else None, energy=energy)
+                    values=vals, psi=psi if (velocity or idx2) else None, energy=energy,
+                    arhs=arhs if accel else None)
     ev.cache = dict(args=(Hn, HJn, alpha_n, n, v, vd, lam, inputs), full_alpha=full_alpha)
     return ev
 

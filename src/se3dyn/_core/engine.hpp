@@ -128,6 +128,7 @@ struct Engine {
     double* alpha;   // (nq,)
     double* vals;    // (nvals or nvals2,) or nullptr
     double* energy;  // (N_ENERGY,) or nullptr
+    double* arhs = nullptr;  // (nm,) acceleration-level constraint right-hand side or nullptr
   };
 
   // Residual (Eq. (39)), constraints (Eq. (40)), velocity constraints and, when vals, the
@@ -163,6 +164,8 @@ struct Engine {
     X.cC = cC;
     X.cK = cK;
     X.energy = o.energy;
+    X.arhs = o.arhs;
+    if (o.arhs) std::fill(o.arhs, o.arhs + nm, 0.0);
     joints->cv_ = cv;
     // index2: the matrix (when asked) is the stabilised index-2 one, which needs psi
     if (prod && !o.psi) throw std::invalid_argument("index-2 matrix without velocity constraints");

@@ -104,6 +104,9 @@ void build(Engine& E, const nb::dict& d) {
 
 NB_MODULE(_engine, m) {
   m.doc() = "se3dyn compiled engine: element kernels, assembler, Newton step (C++).";
+  // engines live in the caches of System objects, which the interpreter may still hold at
+  // shutdown (results keep their system): nothing leaks while it runs
+  nb::set_leak_warnings(false);
   m.def("set_series", [](DArr c, DArr d, DArr e, DArr f, double cut) {
     Series& S = series();
     S.cut = cut;
@@ -127,7 +130,7 @@ NB_MODULE(_engine, m) {
           [](Engine& E, DArr Hn, DArr alpha_n, DArr n, DArr v, DArr vd, DArr lam, DArr u,
              DArr H, DArr r, DArr phi, DArr alpha, nb::object psi, nb::object vals,
              nb::object energy, double cM, double cC, double cK, bool index2, double cv,
-             bool all_logs) {
+             bool all_logs, nb::object arhs) {
             int F = E.T.F, nq = E.nq, nm = E.nm;
             E.load_frames(cptr(Hn, 16 * F, "Hn"));
             Engine::Out o{ptr(r, nq, "r"), ptr(phi, nm, "phi"), nullptr, ptr(alpha, nq, "alpha"),
@@ -144,6 +147,10 @@ NB_MODULE(_engine, m) {
               DArr p = nb::cast<DArr>(energy);
               o.energy = ptr(p, N_ENERGY, "energy");
             }
+            if (!arhs.is_none()) {
+              DArr p = nb::cast<DArr>(arhs);
+              o.arhs = ptr(p, nm, "arhs");
+            }
             double fs = E.evaluate(cptr(alpha_n, nq, "alpha_n"), cptr(n, nq, "n"),
                                    cptr(v, nq, "v"), cptr(vd, nq, "vd"), cptr(lam, nm, "lam"),
                                    cptr(u, E.nu, "u"), cM, cC, cK, index2, cv,
@@ -154,7 +161,7 @@ NB_MODULE(_engine, m) {
           },
           "Hn"_a, "alpha_n"_a, "n"_a, "v"_a, "vd"_a, "lam"_a, "u"_a, "H"_a, "r"_a, "phi"_a,
           "alpha"_a, "psi"_a.none(), "vals"_a.none(), "energy"_a.none(), "cM"_a, "cC"_a, "cK"_a,
-          "index2"_a, "cv"_a, "all_logs"_a)
+          "index2"_a, "cv"_a, "all_logs"_a, "arhs"_a.none() = nb::none())
       .def("BnT", [](Engine& E, DArr Hn, DArr xi, DArr out) {
         // out (nq,) = B_n^T xi with B_n the constraint gradient at the frames Hn (Eq. (58))
         E.load_frames(cptr(Hn, 16 * E.T.F, "Hn"));
@@ -200,6 +207,18 @@ NB_MODULE(_engine, m) {
             for (int f = 0; f < F; ++f) frame_to4(E.S.H[f], Ho + 16 * f);
             return nb::make_tuple(info.status, info.iterations, info.residual, info.constraint,
                                   info.factorisations);
+          })
+      .def(
+          "solve_values",
+          [](Stepper& S, DArr vals, DArr rhs) {
+            // factorise the matrix of the values (pattern order; dropped equations replaced by
+            // the identity) and solve in place: 0, or the LU's nonzero status
+            if (vals.size() != S.vals.size()) throw std::invalid_argument("solve_values: vals");
+            if (rhs.size() != size_t(S.N)) throw std::invalid_argument("solve_values: rhs");
+            std::copy(vals.data(), vals.data() + vals.size(), S.vals.begin());
+            int code = S.factor();
+            if (code == 0) S.lu.solve(rhs.data());
+            return code;
           })
       .def(
           "run",

@@ -432,6 +432,11 @@ class SparseLU {
     // factor: the diagonal entry is the pivot when |a_kk| >= pivot_tol * max_i |a_ik| (KLU's
     // default 1e-3); pivot_tol = 1 is plain partial pivoting.
     double pivot_tol = 1e-3;
+    // factor, when the diagonal is not usable and unknowns are grouped: the largest candidate
+    // of the column's own block (a pivot inside the diagonal block keeps the block structure
+    // the ordering assumed) when it is >= block_pivot_tol * max_i |a_ik| (a stricter threshold
+    // than the diagonal's: these pivots are not the ones the ordering was made for).
+    double block_pivot_tol = 0.1;
     // refactor fails (returns nonzero; the caller then calls factor) when a pivot is smaller
     // than refactor_tol times the largest entry of its column of candidates, |u_kk| <
     // refactor_tol * max(|u_kk|, max_i |l_ik u_kk|), or not finite.
@@ -843,7 +848,7 @@ inline int SparseLU::factor(const double* values) {
     Status bad = kOk;
     if (ipiv < 0)
       bad = kStructurallyZero;
-    else if (!std::isfinite(usum) || !std::isfinite(anorm))
+    else if (!std::isfinite(usum + asum))
       bad = kNotFinite;
     else if (cmax == 0.0)
       bad = kNumericallyZero;
@@ -867,7 +872,7 @@ inline int SparseLU::factor(const double* values) {
           ib = i;
         }
       }
-      if (ib >= 0 && bmax >= tol * cmax) ipiv = ib;
+      if (ib >= 0 && bmax >= opt_.block_pivot_tol * cmax) ipiv = ib;
     }
     const double piv = x[ipiv];
     umax = std::max(umax, std::fabs(piv));
@@ -1069,9 +1074,13 @@ inline int SparseLU::refactor(const double* values) {
     }
     const double piv = x[k];
     x[k] = 0.0;
-    double cmax = std::fabs(piv);
-    for (int p = Lp[k]; p < Lp[k + 1]; ++p) cmax = std::max(cmax, std::fabs(x[Li[p]]));
-    const bool finite = std::isfinite(usum + cmax + anorm);
+    double cmax = std::fabs(piv), csum = cmax;
+    for (int p = Lp[k]; p < Lp[k + 1]; ++p) {
+      const double av = std::fabs(x[Li[p]]);
+      cmax = std::max(cmax, av);
+      csum += av;  // a NaN survives a sum, not a max
+    }
+    const bool finite = std::isfinite(usum + csum + asum);
     if (!finite || !(std::fabs(piv) > rtol * cmax) || piv == 0.0) {
       for (int p = Lp[k]; p < Lp[k + 1]; ++p) x[Li[p]] = 0.0;
       status_ = finite ? (piv == 0.0 ? kNumericallyZero : kSmallPivot) : kNotFinite;

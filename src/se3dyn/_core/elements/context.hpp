@@ -24,6 +24,7 @@ struct Context {
   double* r;             // (nq,) residual of Eq. (39), accumulated
   double* phi;           // (nm,) constraints Eq. (55)
   double* psi;           // (nm,) velocity constraints (index 2) or nullptr
+  double* arhs = nullptr;  // (nm,) right-hand side of the acceleration-level constraints
   double* vals;          // iteration-matrix values (block storage) or nullptr
   double* velv;          // velocity-level part cM M + cC C_T (index 2) or nullptr
   double cM = 0, cC = 0, cK = 0;  // coefficients of M, C_T and K_T T (Eq. (46))

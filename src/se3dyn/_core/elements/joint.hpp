@@ -118,6 +118,14 @@ struct Joints : ElementBatch {
       frame_force(T, b, fb6, 1.0, X.r);
       frame_force(T, j, lam, 1.0, X.r);
       double w[6];
+      if (X.arhs) {
+        // acceleration-level constraints B vd* = ad(v*_J) Ad PA v*_A: the time derivative of
+        // B v* = 0, with d/dt Ad_{H_J^-1} = -ad(v*_J) Ad_{H_J^-1} and constant PA, PB
+        double ad[36], wa[6];
+        mv<6, 6>(AdP, &S.v[6 * a], wa);
+        ad6(&S.v[6 * j], ad);
+        mv<6, 6>(ad, wa, X.arhs + mult[e]);
+      }
       if (X.psi) {  // velocity constraints B v*
         double vb[6];
         mv<6, 6>(AdP, &S.v[6 * a], w);
