@@ -1,13 +1,20 @@
 """Cost per time step of an N-link spatial pendulum chain (the shape of issue 6's benchmark).
 
-Links of 0.1 m and 1 kg (slender rod inertia), spherical joints, the first to a fixed node,
-released horizontal under gravity; h = 1e-3, rho_inf = 0.9, both formulations. Prints ms per
-step (set-up excluded: the difference of a 0.2 s and a 0.02 s run), Newton iterations and
-factorisations per step and the fitted exponent of cost vs N (measured in this one run); writes
-benchmarks/results/chain_scaling.json. ``--memory N`` instead runs 1 s of the N-link chain
-(every 10th step stored) and prints the peak resident memory.
+Links of 0.1 m and 1 kg (slender rod inertia), spherical joints attached at the link ends with
+``at=``, the first to a fixed node, released horizontal under gravity; h = 1e-3, rho_inf = 0.9,
+se3dyn's defaults (index-2 form, modified Newton; ``--formulations index2 index3`` adds the
+index-3 form). For each N it times the model building, ``compile_model`` and the one-time set-up
+of the first ``simulate`` (a one-step run) separately, then the cost per step without any
+set-up: (wall(0.1 s run) - wall(0.02 s run)) / 80 steps on the same compiled system. It prints
+ms per step, Newton iterations and factorisations per step and the exponent of a least-squares
+fit of log(ms per step) vs log N (measured in this one run), and writes
+benchmarks/results/chain_scaling.json. ``--memory N`` instead runs the N-link chain in this
+process (``--t-end`` model time, every 10th step stored) and prints the peak resident set size
+(``resource.getrusage(...).ru_maxrss``) as one JSON line; ``compare_exudyn.py`` runs it in its
+own subprocess.
 
-Run:  python benchmarks/chain_scaling.py [N ...] | --memory 10000
+Run:  python benchmarks/chain_scaling.py [N ...] [--formulations index2 [index3]]
+      python benchmarks/chain_scaling.py --memory 10000 --t-end 0.1
 """
 
 from __future__ import annotations
@@ -63,42 +70,85 @@ def tip(res, n_links: int) -> np.ndarray:
     return H[:, :3, 3] + H[:, :3, 0] * 0.05
 
 
-def per_step(system, formulation: str, h: float = 1e-3, long: float = 0.2,
-             short: float = 0.02) -> dict:
-    """Cost per step without the set-up: (wall(long run) - wall(short run)) / extra steps."""
-    sd.simulate(system, t_end=h, step=h, formulation=formulation)  # set-up, kernels loaded
-    walls = {}
+def per_step(system, formulation: str = "index2", h: float = 1e-3, long: float = 0.1,
+             short: float = 0.02, newton: str = "modified") -> dict:
+    """Cost per step without the set-up: (wall(long run) - wall(short run)) / extra steps.
+
+    The one-time set-up of the system (first ``simulate``) is paid by a one-step run first and
+    reported as ``setup_s``. Also returns the tip at the end of the long run."""
+    t0 = time.perf_counter()
+    sd.simulate(system, t_end=h, step=h, rho_inf=0.9, formulation=formulation, newton=newton)
+    setup = time.perf_counter() - t0
+    walls, res_long = {}, None
     for t_end in (short, long):
+        n_out = round(t_end / h)
         t0 = time.perf_counter()
         res = sd.simulate(system, t_end=t_end, step=h, rho_inf=0.9, formulation=formulation,
-                          output_every=100)
+                          output_every=n_out, newton=newton)
         walls[t_end] = time.perf_counter() - t0
         walls[f"its{t_end}"] = res.stats["newton_iterations"]
         walls[f"fac{t_end}"] = res.stats.get("factorizations", 0)
+        res_long = res
     nsteps = round((long - short) / h)
+    n_links = sum(1 for name in system.node_names if name.startswith("b"))
     return {"ms_per_step": 1e3 * (walls[long] - walls[short]) / nsteps,
             "newton_per_step": (walls[f"its{long}"] - walls[f"its{short}"]) / nsteps,
             "factorizations_per_step": (walls[f"fac{long}"] - walls[f"fac{short}"]) / nsteps,
-            "wall_long_s": walls[long], "wall_short_s": walls[short],
-            "engine": res.stats["engine"], "linear_solver": res.stats["linear_solver"],
-            "matrix_size": res.stats["matrix_size"]}
+            "setup_s": setup, "wall_long_s": walls[long], "wall_short_s": walls[short],
+            "t_long": long, "t_short": short, "newton": newton,
+            "newton_iterations_long": int(walls[f"its{long}"]),
+            "factorizations_long": int(walls[f"fac{long}"]),
+            "steps_long": int(res_long.stats["steps"]),
+            "tip_long": tip(res_long, n_links)[-1].tolist(),
+            "t_final_long": float(res_long.t[-1]),
+            "engine": res_long.stats["engine"], "linear_solver": res_long.stats["linear_solver"],
+            "matrix_size": res_long.stats["matrix_size"]}
 
 
 def peak_memory(n_links: int, t_end: float = 1.0, output_every: int = 10,
                 formulation: str = "index2") -> dict:
-    """Run the chain in this process and report the peak resident set size."""
+    """Run the chain in this process (se3dyn defaults) and report the peak resident set size,
+    also as it was after importing and after building + compiling the model."""
     import resource
 
+    def maxrss_mb() -> float:
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB -> MB (Linux)
+
+    rss_import = maxrss_mb()
     t0 = time.perf_counter()
     system = sd.compile_model(chain(n_links))
+    build = time.perf_counter() - t0
+    rss_compiled = maxrss_mb()
+    t0 = time.perf_counter()
     res = sd.simulate(system, t_end=t_end, step=1e-3, rho_inf=0.9, output_every=output_every,
                       formulation=formulation)
     wall = time.perf_counter() - t0
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB -> MB on Linux
     return {"N": n_links, "t_end": t_end, "output_every": output_every,
-            "formulation": formulation,
-            "stored_rows": len(res.t), "peak_rss_MB": rss, "wall_s": wall,
+            "formulation": formulation, "stored_rows": len(res.t),
+            "peak_rss_MB": maxrss_mb(), "peak_rss_after_import_MB": rss_import,
+            "peak_rss_after_build_compile_MB": rss_compiled,
+            "build_compile_s": build, "simulate_s": wall,
             "tip_final": tip(res, n_links)[-1].tolist()}
+
+
+def fit_exponent(rows: list[dict]) -> float:
+    """Slope of a least-squares fit of log(ms per step) vs log N."""
+    n = np.array([r["N"] for r in rows], float)
+    ms = np.array([r["ms_per_step"] for r in rows])
+    return float(np.polyfit(np.log(n), np.log(ms), 1)[0])
+
+
+def scaling_row(n: int, formulation: str = "index2", newton: str = "modified") -> dict:
+    """Build, compile, set up and time per step the N-link chain (one row of the table)."""
+    t0 = time.perf_counter()
+    model = chain(n)
+    build = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    system = sd.compile_model(model)
+    compile_s = time.perf_counter() - t0
+    r = per_step(system, formulation, newton=newton)
+    r.update(N=n, formulation=formulation, build_s=build, compile_s=compile_s)
+    return r
 
 
 def main(argv: list[str]) -> int:
@@ -108,6 +158,8 @@ def main(argv: list[str]) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("sizes", nargs="*", type=int, default=[100, 300, 1000, 3000, 10000])
+    ap.add_argument("--formulations", nargs="+", default=["index2"],
+                    choices=["index2", "index3"])
     ap.add_argument("--memory", type=int, help="only: peak RSS of a run with N links")
     ap.add_argument("--t-end", type=float, default=1.0, help="model time of --memory")
     ap.add_argument("--formulation", default="index2", help="formulation of --memory")
@@ -118,33 +170,30 @@ def main(argv: list[str]) -> int:
         print(json.dumps(peak_memory(a.memory, a.t_end, formulation=a.formulation)))
         return 0
     print(f"se3dyn {sd.__version__}, numpy {np.__version__}, scipy {scipy.__version__}, "
-          f"Python {platform.python_version()}, {platform.machine()}, {os.cpu_count()} CPUs")
-    import numba
-
+          f"Python {platform.python_version()}, {platform.machine()}, {os.cpu_count()} CPUs, "
+          f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     report = {"machine": platform.platform(), "python": platform.python_version(),
-              "numba": numba.__version__,
               "numpy": np.__version__, "scipy": scipy.__version__, "se3dyn": sd.__version__,
-              "h": 1e-3, "method": "(wall(0.2 s) - wall(0.02 s)) / 180 steps", "rows": []}
+              "load_average_start": os.getloadavg(),
+              "h": 1e-3, "method": "(wall(0.1 s) - wall(0.02 s)) / 80 steps, set-up excluded",
+              "rows": []}
     for n in a.sizes:
-        t0 = time.perf_counter()
-        system = sd.compile_model(chain(n))
-        build = time.perf_counter() - t0
-        for form in ("index3", "index2"):
-            r = per_step(system, form)
-            r.update(N=n, formulation=form, build_s=build)
+        for form in a.formulations:
+            r = scaling_row(n, form)
             report["rows"].append(r)
             print(f"N = {n:5d} {form}: matrix {r['matrix_size']:7d}, {r['ms_per_step']:9.3f} "
                   f"ms/step, {r['newton_per_step']:.2f} Newton iterations and "
-                  f"{r['factorizations_per_step']:.2f} factorisations per step", flush=True)
-    for form in ("index3", "index2"):
+                  f"{r['factorizations_per_step']:.2f} factorisations per step; set-up: build "
+                  f"{r['build_s']:.2f} s, compile {r['compile_s']:.2f} s, first simulate "
+                  f"{r['setup_s']:.2f} s", flush=True)
+    for form in a.formulations:
         rows = [r for r in report["rows"] if r["formulation"] == form]
         if len(rows) >= 2:
-            n = np.array([r["N"] for r in rows], float)
-            ms = np.array([r["ms_per_step"] for r in rows])
-            slope = float(np.polyfit(np.log(n), np.log(ms), 1)[0])
+            slope = fit_exponent(rows)
             report[f"exponent_{form}"] = slope
             print(f"{form}: fitted exponent of cost per step vs N "
-                  f"({int(n.min())}..{int(n.max())}): {slope:.3f}")
+                  f"({min(r['N'] for r in rows)}..{max(r['N'] for r in rows)}): {slope:.3f}")
+    report["load_average_end"] = os.getloadavg()
     Path(a.out).write_text(json.dumps(report, indent=2) + "\n")
     print(f"wrote {a.out}")
     return 0

@@ -24,7 +24,7 @@ import numpy as np
 
 from se3dyn import lie
 from se3dyn.errors import ModelError, NewtonError, SimulationError
-from se3dyn.system import LinearSolver, System, evaluate, fill_log_coordinates
+from se3dyn.system import LinearSolver, System, evaluate
 
 __all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "input_table", "energies",
            "interpolate"]
@@ -428,7 +428,6 @@ class GeneralizedAlpha:
                       "iterate)"}[status]
             self._fail(s, t1, h, it, ev, why)
         H, HJ = Hout[:s.M], Hout[s.M:]
-        fill_log_coordinates(s, HJ, alpha)  # coordinates of non-abelian joints
         # local truncation error of the increment (Zienkiewicz-Xie): the position update
         # n = h v + h^2 ((1/2 - beta) a_n + beta a_{n+1}) reproduces the Taylor term
         # h^3 q^(3) / 6 as beta h^2 (a_{n+1} - a_n) ~ beta h^3 q^(3), leaving
@@ -518,7 +517,11 @@ def interpolate(s: System, st0: State, st1: State, n: np.ndarray, theta: float) 
         D = h10 * h * vJ0 + h01 * nJ + h11 * h * vJ1
         HJ[g.ids] = st0.HJ[g.ids] @ lie.exp_se3(D)
         alpha[jd] = st0.alpha[jd] + h10 * h * st0.v[jd] + h01 * n[jd] + h11 * h * st1.v[jd]
-    fill_log_coordinates(s, HJ, alpha)
+    # coordinates of non-abelian joints: log coordinates of the interpolated H_J (the kernels'
+    # coordinates at n = 0 from the interpolated frames; abelian ones are kept)
+    z = np.zeros(s.nq)
+    alpha = evaluate(s, H, HJ, alpha, z, z, z, np.zeros(s.nm), dict(u=np.zeros(s.inputs.nu)),
+                     full_alpha=True).alpha
     v = h00 * st0.v + h10 * h * st0.vd + h01 * st1.v + h11 * h * st1.vd
     lin = lambda x0, x1: (1 - th) * x0 + th * x1  # noqa: E731
     return State(t=st0.t + th * h, H=H, HJ=HJ, v=v, vd=lin(st0.vd, st1.vd),

@@ -559,19 +559,6 @@ def increment_correction(s: System, Hn: np.ndarray, HJn: np.ndarray, xi: np.ndar
     return out
 
 
-def fill_log_coordinates(s: System, HJ: np.ndarray, alpha: np.ndarray) -> None:
-    """Write the log coordinates of all non-abelian joints into ``alpha`` (nq,), in place."""
-    for g in s.groups:
-        if g.k and not np.all(g.abelian):
-            sel = ~g.abelian
-            alpha[g.jdof[sel]] = log_coordinates(g, HJ[g.ids])[sel]
-
-
-def log_coordinates(g: JointGroup, HJ: np.ndarray) -> np.ndarray:
-    """Log coordinates of joints in the basis A: ``A^+ log(H_J0^-1 H_J)``, shape (nj, k)."""
-    return np.einsum("jki,ji->jk", g.Apinv, lie.log_se3(lie.inverse(g.H0) @ HJ))
-
-
 def matrix_values(s: System, ev: Evaluation, coef: tuple[float, float, float],
                   stab: dict | None = None) -> np.ndarray:
     """Values of the scaled iteration matrix (Eq. (46)) at an evaluated iterate, pattern order

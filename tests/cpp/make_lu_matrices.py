@@ -5,11 +5,13 @@ For every model: the scaled iteration matrix of GeneralizedAlpha.step at the pre
 of the same pattern a few steps later (a realistic refactor), a group id per unknown (the 6
 unknowns of a node, the k unknowns of a joint, the 6 multipliers of a joint, the 6 index-2
 multipliers of a joint), a coarser grouping (each joint with its child node: see joint_groups)
-and a right-hand side. The bodies get random initial angular velocities (3D motion, so that no
-entry of the pattern is zero by symmetry), except in "chainplanar" (the planar fall of
-benchmarks/chain_scaling.py, two thirds of whose pattern entries are exact zeros). Next to each matrix file a ``.splu`` text file
-holds what SciPy's SuperLU (COLAMD) does on the same matrix: nnz(L+U), factor and solve times
-(best of a few runs) and the backward error, which the C++ driver prints next to its own.
+and a right-hand side. The bodies get random initial angular velocities (3D motion: no entry
+is zero by the symmetry of a planar motion, though about a third to a half of the pattern's
+entries are zero in every configuration), except in "chainplanar" (the planar fall of
+benchmarks/chain_scaling.py, where about two thirds are zero). Next to each matrix file a
+``.splu`` text file holds what SciPy's SuperLU (COLAMD) does on the same matrix: nnz(L+U)
+(SciPy counts only the numerically nonzero entries), factor and solve times (thread CPU time,
+best of a few runs) and the backward error, which the C++ driver prints next to its own.
 
 Run (from anywhere; writes into OUTDIR, default /work/scratch-lu/matrices):
 
@@ -168,11 +170,13 @@ def joint_groups(s, index2):
 
 
 def best_of(fn, reps):
+    """Best thread CPU time of `reps` calls (as the C++ driver measures: the machine may be
+    shared) and the last result."""
     t = []
     for _ in range(reps):
-        t0 = time.perf_counter()
+        t0 = time.thread_time()
         r = fn()
-        t.append(time.perf_counter() - t0)
+        t.append(time.thread_time() - t0)
     return min(t), r
 
 

@@ -37,6 +37,12 @@ namespace {
 
 int g_pass = 0, g_fail = 0;
 
+std::string sci(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2e", v);
+  return buf;
+}
+
 void check(bool ok, const std::string& what) {
   if (ok) {
     ++g_pass;
@@ -140,9 +146,12 @@ double timeit(const std::function<void()>& f, int inner, int rounds) {
 // Factor, solve, refactor with other values, solve again; solve_transposed. Returns the worst
 // backward error; `tag` names the checks.
 double accuracy_checks(const Csc& A, const int* group, const std::string& tag, std::mt19937_64& rng,
-                       const SparseLU::Options& opt = SparseLU::Options(), double tol = 1e-13) {
+                       const SparseLU::Options& opt = SparseLU::Options(), double tol = 1e-13,
+                       bool values_in_analyze = false) {
   SparseLU lu(opt);
-  check(lu.analyze(A.n, A.p.data(), A.i.data(), group) == 0, tag + ": analyze");
+  check(lu.analyze(A.n, A.p.data(), A.i.data(), group,
+                   values_in_analyze ? A.x.data() : nullptr) == 0,
+        tag + ": analyze");
   const int st = lu.factor(A.x.data());
   check(st == 0, tag + ": factor status " + std::to_string(st) + " (" +
                      std::to_string(static_cast<int>(lu.status())) + ")");
@@ -152,11 +161,11 @@ double accuracy_checks(const Csc& A, const int* group, const std::string& tag, s
   x = b;
   lu.solve(x.data());
   double worst = backward_error(A, A.x, x.data(), b.data());
-  check(worst <= tol, tag + ": backward error after factor " + std::to_string(worst));
+  check(worst <= tol, tag + ": backward error after factor " + sci(worst));
   x = b;
   lu.solve_transposed(x.data());
   const double et = backward_error_t(A, A.x, x.data(), b.data());
-  check(et <= tol, tag + ": backward error of the transposed solve " + std::to_string(et));
+  check(et <= tol, tag + ": backward error of the transposed solve " + sci(et));
   worst = std::max(worst, et);
   // refactor with values perturbed by up to 1 % (the same pattern)
   std::uniform_real_distribution<double> ud(-0.01, 0.01);
@@ -169,7 +178,7 @@ double accuracy_checks(const Csc& A, const int* group, const std::string& tag, s
   x = b;
   lu.solve(x.data());
   const double e2 = backward_error(A, v2, x.data(), b.data());
-  check(e2 <= tol, tag + ": backward error after refactor " + std::to_string(e2));
+  check(e2 <= tol, tag + ": backward error after refactor " + sci(e2));
   worst = std::max(worst, e2);
   // refactor back to the original values: the same solution as the factor
   check(lu.refactor(A.x.data()) == 0, tag + ": refactor with the factor's values");
@@ -177,7 +186,12 @@ double accuracy_checks(const Csc& A, const int* group, const std::string& tag, s
   lu.solve(x.data());
   const double e3 = backward_error(A, A.x, x.data(), b.data());
   check(e3 <= tol, tag + ": backward error after refactor (original values) " +
-                       std::to_string(e3));
+                       sci(e3));
+  x = b;
+  lu.solve_refined(A.x.data(), x.data(), 1);
+  const double e4 = backward_error(A, A.x, x.data(), b.data());
+  check(e4 <= std::max(e3, 1e-15), tag + ": backward error with one refinement step " +
+                                       sci(e4));
   return std::max(worst, e3);
 }
 
@@ -217,9 +231,7 @@ Csc random_unsym(int n, int deg, double zero_diag_frac, std::mt19937_64& rng) {
       v.push_back(0.0);
     }
   }
-  Csc A = from_triplets(n, r, c, v);
-  for (auto& col : {0}) (void)col;
-  return A;
+  return from_triplets(n, r, c, v);
 }
 
 // Random KKT matrix [[K, B^T], [C, 0]]: K sparse unsymmetric with a dominant diagonal, B (m x n1)
@@ -269,11 +281,31 @@ Csc random_kkt(int n1, int m, int deg, std::mt19937_64& rng, std::vector<int>* g
   return from_triplets(n, r, c, v);
 }
 
-// Block-structured multibody-like KKT matrix: nb bodies (6 unknowns each, SPD mass block, or a
-// zero block for "massless" bodies), joints from body parent[i] (-1: ground) to body i with
-// `nc` constraint rows coupling both bodies (dense random blocks, C = B^T), optional loop
-// joints. Unknowns numbered body by body then joint by joint (a random shuffle of the blocks
-// when `shuffle`). groups: one per body and one per joint.
+// Random orthogonal 6x6 matrix (Gram-Schmidt of a Gaussian matrix), row-major.
+void random_orthogonal(std::mt19937_64& rng, double* Q) {
+  std::normal_distribution<double> nd;
+  for (int i = 0; i < 6; ++i) {
+    double* q = Q + 6 * i;
+    for (int t = 0; t < 6; ++t) q[t] = nd(rng);
+    for (int k = 0; k < i; ++k) {
+      double d = 0;
+      for (int t = 0; t < 6; ++t) d += q[t] * Q[6 * k + t];
+      for (int t = 0; t < 6; ++t) q[t] -= d * Q[6 * k + t];
+    }
+    double nrm = 0;
+    for (int t = 0; t < 6; ++t) nrm += q[t] * q[t];
+    nrm = std::sqrt(nrm);
+    for (int t = 0; t < 6; ++t) q[t] /= nrm;
+  }
+}
+
+// Block-structured multibody-like KKT matrix [[M, B^T], [B, 0]]: nb bodies (6 unknowns each,
+// SPD mass block, or an explicit zero block for "massless" bodies), joints from body parent[i]
+// (-1: ground) to body i with `nc` constraint rows coupling both bodies (the first nc rows of
+// random orthogonal 6x6 blocks, like the adjoint matrices of real joints: a chain of them stays
+// well conditioned), optional loop joints (only for nc < 6: with nc = 6 a loop is redundant).
+// Unknowns numbered body by body then joint by joint (the blocks shuffled when `shuffle`).
+// group: one id per body and one per joint.
 Csc body_kkt(const std::vector<int>& parent, int nc, double massless_frac,
              const std::vector<std::pair<int, int>>& loops, bool shuffle, std::mt19937_64& rng,
              std::vector<int>& group) {
@@ -285,7 +317,6 @@ Csc body_kkt(const std::vector<int>& parent, int nc, double massless_frac,
   for (auto& l : loops) joints.push_back(l);
   const int nj = static_cast<int>(joints.size());
   const int n = 6 * nb + nc * nj;
-  // block numbering
   std::vector<int> border(nb + nj);
   for (int t = 0; t < nb + nj; ++t) border[t] = t;
   if (shuffle) std::shuffle(border.begin(), border.end(), rng);
@@ -312,21 +343,26 @@ Csc body_kkt(const std::vector<int>& parent, int nc, double massless_frac,
     for (double& g : G) g = nd(rng);
     for (int a = 0; a < 6; ++a)
       for (int b = 0; b < 6; ++b) {
-        double s = 0;
-        for (int k = 0; k < 6; ++k) s += G[a * 6 + k] * G[b * 6 + k];
-        add(start[i] + a, start[i] + b, massless ? 0.0 : s / 6.0 + (a == b ? 0.5 : 0.0));
+        double sum = 0;
+        for (int k = 0; k < 6; ++k) sum += G[a * 6 + k] * G[b * 6 + k];
+        add(start[i] + a, start[i] + b, massless ? 0.0 : sum / 6.0 + (a == b ? 0.5 : 0.0));
       }
   }
   for (int t = 0; t < nj; ++t) {
     const int jr = start[nb + t];
+    double sign = 1.0;
     for (const int body : {joints[t].first, joints[t].second}) {
-      if (body < 0) continue;
-      for (int a = 0; a < nc; ++a)
-        for (int b = 0; b < 6; ++b) {
-          const double x = nd(rng);
-          add(jr + a, start[body] + b, x);
-          add(start[body] + b, jr + a, x);
-        }
+      if (body >= 0) {
+        double Q[36];
+        random_orthogonal(rng, Q);
+        for (int a = 0; a < nc; ++a)
+          for (int b = 0; b < 6; ++b) {
+            const double x = sign * Q[6 * a + b];
+            add(jr + a, start[body] + b, x);
+            add(start[body] + b, jr + a, x);
+          }
+      }
+      sign = -1.0;
     }
     for (int a = 0; a < nc; ++a) add(jr + a, jr + a, 0.0);
   }
@@ -404,25 +440,26 @@ void test_random(std::mt19937_64& rng) {
     std::vector<int> group;
     Csc A = random_kkt(n1, m, 1 + static_cast<int>(rng() % 4), rng, &group);
     worst = std::max(worst, accuracy_checks(A, t % 2 ? group.data() : nullptr,
-                                            "random KKT #" + std::to_string(t), rng));
+                                            "random KKT #" + std::to_string(t), rng,
+                                            SparseLU::Options(), 1e-13, t % 3 == 0));
     SparseLU::Options o;
     o.drop_zeros = true;
     worst = std::max(worst, accuracy_checks(A, group.data(), "random KKT dz #" + std::to_string(t),
-                                            rng, o));
+                                            rng, o, 1e-13, t % 2 == 0));
   }
   std::printf("   worst backward error %.2e\n", worst);
   std::printf("== block KKT chains / trees (massless bodies, loops, shuffled numbering)\n");
   worst = 0;
-  for (int t = 0; t < 24; ++t) {
+  for (int t = 0; t < 32; ++t) {
     const int nb = 2 + static_cast<int>(rng() % 200);
     auto par = t % 2 ? tree_parent(nb) : chain_parent(nb);
+    const int nc = t % 4 < 2 ? 6 : 3;  // rigid-like (massless bodies allowed), spherical-like
     std::vector<std::pair<int, int>> loops;
-    if (t % 3 == 0) loops.push_back({-1, nb - 1});
-    const int nc = t % 4 < 2 ? 6 : 3;  // rigid-like: massless bodies allowed; spherical-like
+    if (nc == 3 && t % 3 == 0) loops.push_back({-1, nb - 1});
     std::vector<int> group;
     Csc A = body_kkt(par, nc, nc == 6 ? 0.5 : 0.0, loops, t % 5 == 0, rng, group);
     worst = std::max(worst, accuracy_checks(A, group.data(), "block KKT #" + std::to_string(t),
-                                            rng, SparseLU::Options(), 1e-13));
+                                            rng, SparseLU::Options(), 1e-13, t % 8 >= 4));
   }
   std::printf("   worst backward error %.2e\n", worst);
 }
@@ -494,15 +531,20 @@ void test_singular(std::mt19937_64& rng) {
       for (std::size_t at : {std::size_t(0), A.x.size() / 2, A.x.size() - 1}) {
         std::vector<double> v(A.x);
         v[at] = bad;
+        check(lu.factor(A.x.data()) == 0, "NaN test: factor");
         const int s1 = lu.refactor(v.data());
         check(s1 > 0 && lu.status() == SparseLU::kNotFinite,
-              "non-finite value: refactor status " + std::to_string(s1));
+              "non-finite value: refactor status " +
+                  std::to_string(static_cast<int>(lu.status())));
         std::vector<double> b(A.n, 1.0);
         lu.solve(b.data());
         check(std::isnan(b[0]), "solve after a failed refactor gives NaN");
         const int s2 = lu.factor(v.data());
         check(s2 > 0 && lu.status() == SparseLU::kNotFinite,
-              "non-finite value: factor status " + std::to_string(s2));
+              "non-finite value: factor status " +
+                  std::to_string(static_cast<int>(lu.status())));
+        check(lu.refactor(A.x.data()) > 0 && lu.status() == SparseLU::kNotAnalyzed,
+              "refactor after a failed factor fails");
       }
     }
     check(lu.factor(A.x.data()) == 0, "factor again after failures");
@@ -594,99 +636,107 @@ void test_scaling(std::mt19937_64& rng) {
   }
 }
 
+// One configuration of the solver on one engine matrix: accuracy checks and timings.
+struct EngineRun {
+  long long nlu = 0, flops = 0;
+  double ta = 0, tf = 0, tr = 0, ts = 0, bf = 0, br = 0, rg = 0, rc = 0;
+  int fallback = 0;  // status of a refactor that had to be replaced by a factor
+};
+
+EngineRun engine_run(const Csc& A, const std::string& tag, const int* group, bool values_hint,
+                     const SparseLU::Options& opt, std::mt19937_64& rng) {
+  EngineRun out;
+  const int n = A.n;
+  const bool small = n < 5000;
+  SparseLU lu(opt);
+  out.ta = timeit([&] { lu.analyze(n, A.p.data(), A.i.data(), group,
+                                   values_hint ? A.x.data() : nullptr); },
+                  1, small ? 20 : 3);
+  int st = 0;
+  out.tf = timeit([&] { st = lu.factor(A.x.data()); }, small ? 20 : 1, small ? 10 : 3);
+  check(st == 0, tag + ": factor");
+  std::vector<double> x(A.b);
+  lu.solve(x.data());
+  out.bf = backward_error(A, A.x, x.data(), A.b.data());
+  check(out.bf <= 1e-13, tag + ": backward error after factor " + sci(out.bf));
+  out.rg = lu.rgrowth();
+  out.rc = n <= 60000 ? 1.0 / lu.condest() : NAN;
+  out.nlu = lu.nnz_L() + lu.nnz_U() - n;
+  out.flops = lu.refactor_flops();
+  // refactor with the values of a later time step (timed), then solve (timed)
+  int rs = lu.refactor(A.x2.data());
+  if (rs != 0) {  // e.g. drop_zeros and an entry zero at the first step is not any more
+    out.fallback = lu.status();
+    check(lu.factor(A.x2.data()) == 0, tag + ": factor (later step)");
+  }
+  out.tr = timeit([&] { rs = lu.refactor(A.x2.data()); }, small ? 50 : 3, small ? 10 : 7);
+  check(rs == 0, tag + ": refactor (later step), status " +
+                     std::to_string(static_cast<int>(lu.status())));
+  std::vector<double> y(A.b);
+  out.ts = timeit(
+      [&] {
+        std::copy(A.b.begin(), A.b.end(), y.begin());
+        lu.solve(y.data());
+      },
+      small ? 200 : 5, small ? 10 : 7);
+  out.br = backward_error(A, A.x2, y.data(), A.b.data());
+  // refactor with all values perturbed by up to 1 % (factor again if refactor refuses)
+  std::uniform_real_distribution<double> ud(-0.01, 0.01);
+  std::vector<double> v3(A.x);
+  for (auto& v : v3) v *= 1.0 + ud(rng);
+  if (lu.refactor(v3.data()) != 0) check(lu.factor(v3.data()) == 0, tag + ": factor (perturbed)");
+  x = A.b;
+  lu.solve(x.data());
+  out.br = std::max(out.br, backward_error(A, v3, x.data(), A.b.data()));
+  check(out.br <= 1e-13, tag + ": backward error after refactor " + sci(out.br));
+  x = A.b;
+  lu.solve_refined(v3.data(), x.data(), 1);
+  const double be = backward_error(A, v3, x.data(), A.b.data());
+  check(be <= 1e-15, tag + ": backward error after one refinement step " + sci(be));
+  return out;
+}
+
 void test_engine(const std::string& dir, std::mt19937_64& rng) {
-  const char* names[] = {"slider_crank_i3", "slider_crank_i2", "chain10_i3",  "chain10_i2",
-                         "chain100_i3",     "chain100_i2",     "chain1000_i3", "chain1000_i2",
-                         "chainnodes1000_i2", "closedchain100_i3", "closedchain100_i2",
-                         "tree10_i3",       "tree10_i2",       "chain10000_i3", "chain10000_i2"};
+  const char* names[] = {"slider_crank_i3",    "slider_crank_i2",    "chain10_i3",
+                         "chain10_i2",         "chain100_i3",        "chain100_i2",
+                         "chain1000_i3",       "chain1000_i2",       "chainplanar1000_i3",
+                         "chainplanar1000_i2", "chainnodes1000_i2",  "closedchain100_i3",
+                         "closedchain100_i2",  "tree10_i3",          "tree10_i2",
+                         "chain10000_i3",      "chain10000_i2"};
   std::printf("== se3dyn iteration matrices from %s\n", dir.c_str());
-  std::printf(
-      "%-18s %7s %8s | %9s %9s %9s | %8s %8s %8s %8s | %8s %8s | %7s %7s %7s | %7s %7s\n",
-      "matrix", "n", "nnz(A)", "LU ours", "LU ours0", "LU splu", "analyze", "factor",
-      "refactor", "solve", "splu fac", "splu sol", "berr f", "berr rf", "berr sp", "rgrowth",
-      "1/cond");
-  std::printf("%-18s %7s %8s | %9s %9s %9s | %8s %8s %8s %8s | %8s %8s |\n", "", "", "", "", "",
-              "", "ms", "ms", "ms", "ms", "ms", "ms");
+  std::printf("   times: thread CPU time, best of several runs; splu: SciPy 'COLAMD', measured by\n"
+              "   make_lu_matrices.py (wall time); nnz(L+U): ours structural (explicit zeros of\n"
+              "   the pattern included), splu's as SciPy reports it (numerically nonzero only)\n");
+  std::printf("   a: item groups (node / joint / multipliers / index-2 multipliers), defaults\n"
+              "   b: joint groups (joint + child node), values to analyze, drop_zeros\n"
+              "   (*: the refactor to the later step's values fell back to factor: an entry zero\n"
+              "   at the first step was not any more)\n");
+  std::printf("%-18s %s  %6s %7s | %8s %8s %9s | %7s %7s %7s %7s | %7s %7s | %7s %7s %7s | %7s "
+              "%7s\n",
+              "matrix", "c", "n", "nnz(A)", "LU ours", "LU splu", "flops", "analyze", "factor",
+              "refact", "solve", "splu f", "splu s", "berr f", "berr rf", "berr sp", "rgrowth",
+              "1/cond");
+  std::printf("%-18s %s  %6s %7s | %8s %8s %9s | %7s %7s %7s %7s | %7s %7s |\n", "", " ", "", "",
+              "", "", "", "ms", "ms", "ms", "ms", "ms", "ms");
   int found = 0;
   for (const char* nm : names) {
     Csc A;
     if (!load(dir + "/" + nm + ".bin", A)) continue;
     ++found;
-    const int n = A.n;
-    const bool small = n < 5000;
-    SparseLU lu;
-    const double ta = timeit([&] { lu.analyze(n, A.p.data(), A.i.data(), A.group.data()); }, 1,
-                             small ? 20 : 3);
-    int st = 0;
-    const double tf = timeit([&] { st = lu.factor(A.x.data()); }, small ? 20 : 1, small ? 10 : 3);
-    check(st == 0, std::string(nm) + ": factor");
-    std::vector<double> x(A.b);
-    lu.solve(x.data());
-    const double bf = backward_error(A, A.x, x.data(), A.b.data());
-    check(bf <= 1e-13, std::string(nm) + ": backward error after factor " + std::to_string(bf));
-    const double rg = lu.rgrowth();
-    const double rc = n <= 60000 ? 1.0 / lu.condest() : NAN;
-    const long long nlu = lu.nnz_L() + lu.nnz_U() - n;
-    // refactor with the values of a later step, and with random perturbations
-    int rs = 0;
-    const double tr = timeit([&] { rs = lu.refactor(A.x2.data()); }, small ? 50 : 3,
-                             small ? 10 : 5);
-    check(rs == 0, std::string(nm) + ": refactor (later step)");
-    x = A.b;
-    lu.solve(x.data());
-    double br = backward_error(A, A.x2, x.data(), A.b.data());
-    std::uniform_real_distribution<double> ud(-0.05, 0.05);
-    std::vector<double> v3(A.x);
-    for (auto& v : v3) v *= 1.0 + ud(rng);
-    rs = lu.refactor(v3.data());
-    if (rs != 0) check(lu.factor(v3.data()) == 0, std::string(nm) + ": factor after refactor");
-    x = A.b;
-    lu.solve(x.data());
-    br = std::max(br, backward_error(A, v3, x.data(), A.b.data()));
-    check(br <= 1e-13, std::string(nm) + ": backward error after refactor " + std::to_string(br));
-    check(lu.refactor(A.x.data()) == 0, std::string(nm) + ": refactor back");
-    std::vector<double> y(A.b);
-    const double ts = timeit(
-        [&] {
-          y = A.b;
-          lu.solve(y.data());
-        },
-        small ? 200 : 5, small ? 10 : 5);
-    // drop_zeros variant: pattern of the nonzero values
-    SparseLU::Options o;
-    o.drop_zeros = true;
-    SparseLU lz(o);
-    lz.analyze(n, A.p.data(), A.i.data(), A.group.data());
-    check(lz.factor(A.x.data()) == 0, std::string(nm) + ": factor (drop_zeros)");
-    const long long nlz = lz.nnz_L() + lz.nnz_U() - n;
-    x = A.b;
-    lz.solve(x.data());
-    check(backward_error(A, A.x, x.data(), A.b.data()) <= 1e-13,
-          std::string(nm) + ": backward error (drop_zeros)");
-    std::printf(
-        "%-18s %7d %8d | %9lld %9lld %9lld | %8.3f %8.3f %8.3f %8.4f | %8.3f %8.4f | %7.1e "
-        "%7.1e %7.1e | %7.1e %7.1e\n",
-        nm, n, A.p[n], nlu, nlz, A.splu_nnz, 1e3 * ta, 1e3 * tf, 1e3 * tr, 1e3 * ts,
-        1e3 * A.splu_fac, 1e3 * A.splu_sol, bf, br, A.splu_berr, rg, rc);
-    // the drop_zeros variant's timings, same columns
-    int sz = 0;
-    const double tfz = timeit([&] { sz = lz.factor(A.x.data()); }, small ? 20 : 1, small ? 10 : 3);
-    const double trz = timeit([&] { sz |= lz.refactor(A.x2.data()); }, small ? 50 : 3,
-                              small ? 10 : 5);
-    const double tsz = timeit(
-        [&] {
-          y = A.b;
-          lz.solve(y.data());
-        },
-        small ? 200 : 5, small ? 10 : 5);
-    x = A.b;
-    lz.solve(x.data());
-    const double brz = backward_error(A, A.x2, x.data(), A.b.data());
-    check(sz == 0 && brz <= 1e-13, std::string(nm) + ": drop_zeros refactor " +
-                                       std::to_string(brz));
-    std::printf("%-18s %7s %8s | %9s %9s %9s | %8s %8.3f %8.3f %8.4f | %8s %8s | %7s %7.1e\n",
-                "  (drop_zeros)", "", "", "", "", "", "", 1e3 * tfz, 1e3 * trz, 1e3 * tsz, "",
-                "", "", brz);
+    for (const char cfg : {'a', 'b'}) {
+      SparseLU::Options o;
+      if (cfg == 'b') {
+        o.drop_zeros = true;
+      }
+      const EngineRun r =
+          engine_run(A, std::string(nm) + " (" + cfg + ")",
+                     cfg == 'a' ? A.group.data() : A.group2.data(), cfg == 'b', o, rng);
+      std::printf("%-18s %c%s%6d %7d | %8lld %8lld %9lld | %7.3f %7.3f %7.3f %7.4f | %7.3f %7.4f "
+                  "| %7.1e %7.1e %7.1e | %7.1e %7.1e\n",
+                  cfg == 'a' ? nm : "", cfg, r.fallback ? "*" : " ", A.n, A.p[A.n], r.nlu, A.splu_nnz, r.flops,
+                  1e3 * r.ta, 1e3 * r.tf, 1e3 * r.tr, 1e3 * r.ts, 1e3 * A.splu_fac,
+                  1e3 * A.splu_sol, r.bf, r.br, A.splu_berr, r.rg, r.rc);
+    }
   }
   if (!found) std::printf("   no matrix files found (run tests/cpp/make_lu_matrices.py)\n");
 }

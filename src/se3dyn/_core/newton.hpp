@@ -191,6 +191,7 @@ struct Stepper {
     if (info.status == CONVERGED) {
       double c1 = (1 - af) / (1 - am);
       for (int i = 0; i < nq; ++i) a[i] += c1 * (vd[i] - vd_n[i]);
+      G.coordinates(alpha_n, n, alpha, true);  // log coordinates of non-abelian joints too
     }
     return info;
   }
@@ -240,7 +241,6 @@ struct Stepper {
       }
       R.residual = info.residual;
       R.constraint = info.constraint;
-      G.coordinates(c.alpha, n.data(), alpha.data(), true);  // log coordinates for the output
       for (int f = 0; f < F; ++f) frame_to4(G.S.H[f], c.H + 16 * f);
       // energies and powers of the new state (its frames as the step start, n = 0)
       G.load_frames(c.H);
