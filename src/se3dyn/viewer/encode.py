@@ -9,7 +9,10 @@ instead of 128):
   largest magnitude ``q_i`` (at least 1/2) is dropped after making it positive (``q`` and ``-q``
   are the same rotation); the other three lie in [-1/sqrt 2, 1/sqrt 2] and are stored in 15 bits
   each, ``v = round((c sqrt 2 + 1) / 2 * 32767)``; the index i takes the top bits of the first two
-  words. The dropped component is ``sqrt(1 - sum c^2)``. The angle error is below 1e-4 rad.
+  words. The dropped component is ``sqrt(1 - sum c^2)``. With the step ``d = sqrt 2 / 32767``
+  each stored component is off by at most d/2, the dropped one (>= 1/2) by at most
+  ``sqrt 3 d``, so the quaternion by ``sqrt 3 d`` and the rotation angle by at most
+  ``2 sqrt 3 d = 1.5e-4`` rad (:data:`ANGLE_BOUND`).
 
 The (n, M, 6) words are then differenced along time (mod 2^16: smooth motion gives small
 numbers), split into low and high bytes and deflated (zlib): :func:`decode_frames` and the page's
@@ -24,10 +27,12 @@ import zlib
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-__all__ = ["quaternions", "encode_frames", "decode_frames", "pack", "unpack", "Blob"]
+__all__ = ["ANGLE_BOUND", "quaternions", "encode_frames", "decode_frames", "pack", "unpack", "Blob"]
 
 _Q15 = 32767.0
 _S = np.sqrt(0.5)
+#: Largest rotation angle error of the quantised rotations (rad), see the module docstring.
+ANGLE_BOUND = 2.0 * np.sqrt(3.0) * np.sqrt(2.0) / _Q15
 
 
 def quaternions(R: np.ndarray, continuous: bool = True) -> np.ndarray:

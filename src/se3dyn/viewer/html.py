@@ -24,6 +24,7 @@ import fnmatch
 import html
 import json
 import os
+import re
 import zlib
 from base64 import b64encode
 from functools import lru_cache
@@ -72,39 +73,79 @@ def _json(obj) -> str:
     return json.dumps(obj, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
 
 
+def _units(res, names: list[str]) -> list[str]:
+    """Units of channels (as :func:`se3dyn.channels.channel_unit`), the joint units computed
+    once for all joint channels."""
+    from se3dyn.channels import channel_unit, joint_units, unescape_name
+
+    s = res.system
+    per_dof = joint_units(s)
+    k = np.asarray(s.joint_k, dtype=int)
+    start = np.cumsum(k) - k
+    out = []
+    for c in names:
+        parts = c.split("/")
+        unit = channel_unit(c)
+        if parts[0] == "joint" and len(parts) == 4 and parts[2] in ("alpha", "velocity"):
+            cols = [u for j in res._joints(unescape_name(parts[1]))
+                    for u in per_dof[start[j]:start[j] + k[j]]]
+            u = cols[int(parts[3])] if int(parts[3]) < len(cols) and cols[int(parts[3])] else ""
+            if u:
+                unit = u if parts[2] == "alpha" else u + "/s"
+        out.append(unit)
+    return out
+
+
+def _matcher(patterns):
+    rx = re.compile("|".join(f"(?:{fnmatch.translate(p)})" for p in patterns))
+    return lambda name: rx.match(name) is not None
+
+
 def _channels(res, patterns, budget: int) -> tuple[list[str], list[str], np.ndarray, str]:
-    from se3dyn.channels import channel_unit, get_channel, list_channels
+    from se3dyn.channels import get_channel, list_channels
 
     every = list_channels(res)
-    derived = [c for c in every if any(fnmatch.fnmatchcase(c, p) for p in _DERIVED)]
-    pool = [c for c in every if c != "time" and c not in set(derived)]
+    is_derived = _matcher(_DERIVED)
+    derived = [c for c in every if is_derived(c)]
+    skip = set(derived) | {"time"}
+    pool = [c for c in every if c not in skip]
     n = len(res.t)
+    chosen: list[str] = []
+    seen: set[str] = set()
     if patterns is not None:
-        chosen: list[str] = []
         for pat in patterns:
-            hits = fnmatch.filter(pool, pat) if any(ch in pat for ch in "*?[") else (
-                [pat] if pat in pool else [])
-            if not hits and not any(fnmatch.fnmatchcase(d, pat) for d in derived):
+            if any(ch in pat for ch in "*?["):
+                m = _matcher([pat])
+                hits = [c for c in pool if m(c)]
+                known = bool(hits) or any(m(d) for d in derived)
+            else:
+                hits = [pat] if pat in pool else []
+                known = bool(hits) or pat in derived
+            if not known:
                 import difflib
 
                 close = difflib.get_close_matches(pat, every, n=1)
                 raise ViewerError(f"channel: field 'name': expected a channel or pattern of the "
                                   f"results (see 'se3dyn channels'), got {pat!r}"
                                   + (f" (did you mean '{close[0]}'?)" if close else ""))
-            chosen += [h for h in hits if h not in chosen]
+            for h in hits:
+                if h not in seen:
+                    seen.add(h)
+                    chosen.append(h)
     else:
-        chosen = []
         cap = max(0, budget // max(4 * n, 1))
         for pat in _PRIORITY:
+            m = _matcher([pat])
             for c in pool:
                 if len(chosen) >= cap:
                     break
-                if fnmatch.fnmatchcase(c, pat) and c not in chosen:
+                if c not in seen and m(c):
+                    seen.add(c)
                     chosen.append(c)
     data = np.zeros((len(chosen), n), dtype=np.float32)
     for k, c in enumerate(chosen):
         data[k] = np.asarray(get_channel(res, c), dtype=float)
-    units = [channel_unit(c, res) for c in chosen]
+    units = _units(res, chosen)
     left = len(pool) - len(chosen)
     note = ""
     if left > 0:
