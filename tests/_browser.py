@@ -79,6 +79,7 @@ class Browser:
         self._cv = threading.Condition()
         self.events: queue.Queue = queue.Queue()
         self.log: list[dict] = []
+        self.requests: list[str] = []  # URLs the page asked for (Network.requestWillBeSent)
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
         try:
@@ -86,7 +87,7 @@ class Browser:
             page = next(t for t in targets if t["type"] == "page")
             self.session = self.call("Target.attachToTarget", targetId=page["targetId"],
                                      flatten=True)["sessionId"]
-            for domain in ("Page", "Runtime", "Log"):
+            for domain in ("Page", "Runtime", "Log", "Network"):
                 self.call(f"{domain}.enable", session=True)
             self.call("Emulation.setDeviceMetricsOverride", session=True, width=width,
                       height=height, deviceScaleFactor=1, mobile=False)
@@ -125,8 +126,11 @@ class Browser:
             self.log.append({"level": "error", "text": str(
                 d.get("exception", {}).get("description") or d.get("text"))})
         elif m == "Runtime.consoleAPICalled":
-            text = " ".join(str(a.get("value", a.get("description", ""))) for a in p.get("args", []))
+            text = " ".join(str(a.get("value", a.get("description", "")))
+                            for a in p.get("args", []))
             self.log.append({"level": p.get("type", "log"), "text": text})
+        elif m == "Network.requestWillBeSent":
+            self.requests.append(p.get("request", {}).get("url", ""))
         elif m == "Log.entryAdded":
             e = p.get("entry", {})
             self.log.append({"level": e.get("level", "info"), "text": e.get("text", ""),
@@ -191,8 +195,8 @@ class Browser:
 
     def frames(self, count: int = 2) -> None:
         """Wait for ``count`` animation frames (the page has drawn its last change)."""
-        self.evaluate("new Promise(r => { let k = %d; const f = () => --k > 0 ? "
-                      "requestAnimationFrame(f) : r(true); requestAnimationFrame(f); })" % count)
+        self.evaluate(f"new Promise(r => {{ let k = {int(count)}; const f = () => --k > 0 ? "
+                      "requestAnimationFrame(f) : r(true); requestAnimationFrame(f); })")
 
     def screenshot(self) -> np.ndarray:
         """The viewport as an RGB array, shape (height, width, 3), uint8."""

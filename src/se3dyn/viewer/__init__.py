@@ -65,8 +65,8 @@ class Viewer:
         import html as _html
 
         return (f'<iframe srcdoc="{_html.escape(self.html, quote=True)}" '
-                f'style="width:100%;height:{self.height}px;border:1px solid #ddd" '
-                'sandbox="allow-scripts allow-downloads" loading="lazy"></iframe>')
+                f'style="width:100%;height:{self.height}px;border:1px solid #ddd">'
+                '</iframe>')
 
     def save(self, path) -> None:
         """Write the page to ``path``."""

@@ -211,14 +211,17 @@ const HUD_PX = 110;
 
 // ------------------------------------------------------------------------------------------
 // parts: instanced meshes, one per (geometry, role)
-function unitGeometry(g, meshes) {
+function unitGeometry(g, meshes, count) {
+  // fewer facets when many instances share the geometry (long chains stay light to draw)
+  const fine = count <= 100;
+  const seg = fine ? 28 : 12;
   let geo;
   if (g.kind === 'box') geo = new THREE.BoxGeometry(1, 1, 1);
-  else if (g.kind === 'sphere') geo = new THREE.SphereGeometry(1, 28, 18);
-  else if (g.kind === 'cylinder') geo = new THREE.CylinderGeometry(1, 1, 1, 28).rotateX(Math.PI / 2);
+  else if (g.kind === 'sphere') geo = new THREE.SphereGeometry(1, seg, fine ? 18 : 8);
+  else if (g.kind === 'cylinder') geo = new THREE.CylinderGeometry(1, 1, 1, seg).rotateX(Math.PI / 2);
   else if (g.kind === 'cone') geo = new THREE.ConeGeometry(1, 1, 4).rotateX(Math.PI / 2);
   else if (g.kind === 'capsule') {
-    geo = new THREE.CapsuleGeometry(g.params[0], g.params[1], 8, 24).rotateX(Math.PI / 2);
+    geo = new THREE.CapsuleGeometry(g.params[0], g.params[1], fine ? 8 : 4, seg).rotateX(Math.PI / 2);
   } else if (g.kind === 'mesh') {
     const m = meshes[g.mesh];
     geo = new THREE.BufferGeometry();
@@ -776,8 +779,8 @@ async function main() {
   const color = new THREE.Color();
   for (const g of byGroup.values()) {
     const mat = new THREE.MeshStandardMaterial(ROLE_MATERIAL[g.role]);
-    const mesh = new THREE.InstancedMesh(unitGeometry(META.geometries[g.geom], meshes), mat,
-      g.parts.length);
+    const mesh = new THREE.InstancedMesh(unitGeometry(META.geometries[g.geom], meshes,
+      g.parts.length), mat, g.parts.length);
     mesh.instanceMatrix.setUsage(THREE.DynamicDrawUsage);
     mesh.frustumCulled = false;
     g.parts.forEach((p, j) => { mesh.setColorAt(j, color.setHex(pi[5 * p + 2])); });
