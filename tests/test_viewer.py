@@ -408,7 +408,8 @@ def test_page_of_a_results_file_uses_the_stored_model(tmp_path, crank):
 
 
 def test_chain_of_1000_links_with_1000_frames_fits_in_20_mb():
-    """Worst case for the size: every frame a random pose (incompressible), 1001 nodes."""
+    """Worst case for the size: every frame a random pose and every channel random
+    (incompressible), 1001 nodes."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     try:
         from chain_scaling import chain
@@ -422,11 +423,12 @@ def test_chain_of_1000_links_with_1000_frames_fits_in_20_mb():
     H[..., :3, :3] = Rotation.random(n * M, random_state=rng).as_matrix().reshape(n, M, 3, 3)
     H[..., :3, 3] = rng.uniform(-100, 100, size=(n, M, 3))
     H[..., 3, 3] = 1.0
-    z = np.zeros(n)
-    res = sd.Results(system=s, t=np.linspace(0, 1, n), H=H, v=np.zeros((n, s.nq)),
-                     vd=np.zeros((n, s.nq)), lam=np.zeros((n, s.nm)), alpha=np.zeros((n, s.nq)),
-                     kinetic=z, potential=z, spring=z, work_actuators=z, work_loads=z,
-                     dissipation=z, iterations=np.zeros(n, int), residual=z, constraint=z)
+    z = rng.normal(size=n)
+    res = sd.Results(system=s, t=np.linspace(0, 1, n), H=H, v=rng.normal(size=(n, s.nq)),
+                     vd=rng.normal(size=(n, s.nq)), lam=rng.normal(size=(n, s.nm)),
+                     alpha=rng.normal(size=(n, s.nq)), kinetic=z, potential=z, spring=z,
+                     work_actuators=z, work_loads=z, dissipation=z,
+                     iterations=np.zeros(n, int), residual=z, constraint=z)
     text = html_page(res, model=model)
     assert len(text.encode()) <= 20_000_000
     tags = parse_page(text)

@@ -90,17 +90,23 @@ class VisualSpec:
     file: str | None = None
 
 
+def _arc(b: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Shortest-arc rotation taking unit b to unit a (b . a > -1/2, well conditioned)."""
+    v = np.cross(b, a)
+    V = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return np.eye(3) + V + V @ V / (1.0 + float(b @ a))
+
+
 def axis_rotation(axis: np.ndarray) -> np.ndarray:
-    """A rotation (3, 3) whose third column is the unit vector ``axis`` (3,): the shortest arc
-    from e_z to it (a half turn about x for ``-e_z``)."""
+    """A rotation (3, 3) whose third column is the direction ``axis`` (3,): the shortest arc from
+    e_z to it; for axes in the lower half-space, a half turn about x followed by the shortest arc
+    from -e_z (so that the formula never divides by a small ``1 + cos``)."""
     a = np.asarray(axis, dtype=float)
     a = a / np.linalg.norm(a)
-    c = float(a[2])
-    if c < -1.0 + 1e-12:
-        return np.diag([1.0, -1.0, -1.0])
-    v = np.array([-a[1], a[0], 0.0])  # e_z x a
-    V = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    return np.eye(3) + V + V @ V / (1.0 + c)
+    ez = np.array([0.0, 0.0, 1.0])
+    if a[2] >= 0.0:
+        return _arc(ez, a)
+    return _arc(-ez, a) @ np.diag([1.0, -1.0, -1.0])
 
 
 def _color(item: str, color: Any) -> str | None:
@@ -131,9 +137,19 @@ def _vec3(item: str, fld: str, v: Any) -> np.ndarray:
         a = np.asarray(v, dtype=float)
     except (TypeError, ValueError):
         raise ModelError(item, fld, "3 numbers", v) from None
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
+    if a.shape != (3,):
+        raise ModelError(item, fld, "3 numbers", v)
+    if not np.all(np.isfinite(a)):
         raise ModelError(item, fld, "3 finite numbers", v)
     return a
+
+
+def _shown(v: Any) -> Any:
+    """An array argument as a nested list, so error messages stay on one line."""
+    try:
+        return np.asarray(v, dtype=float).tolist()
+    except (TypeError, ValueError):
+        return v
 
 
 def make_visual(name: str, node: str, shape: str, *, size: Any = None, color: Any = None,
@@ -161,7 +177,7 @@ def make_visual(name: str, node: str, shape: str, *, size: Any = None, color: An
         except (TypeError, ValueError):
             raise ModelError(item, "size", _SIZE_TEXT[shape], size) from None
         if sz.ndim != 1 or not np.all(np.isfinite(sz)) or np.any(sz <= 0):
-            raise ModelError(item, "size", _SIZE_TEXT[shape], size)
+            raise ModelError(item, "size", _SIZE_TEXT[shape], _shown(size))
         if len(sz) == 1 and shape in ("box", "mesh"):
             sz = np.repeat(sz, 3)
         if len(sz) != n:
@@ -182,7 +198,7 @@ def make_visual(name: str, node: str, shape: str, *, size: Any = None, color: An
         if (R.shape != (3, 3) or not np.all(np.isfinite(R))
                 or np.abs(R.T @ R - np.eye(3)).max() > 1e-9 or np.linalg.det(R) < 0):
             raise ModelError(item, "orientation", "a 3x3 rotation matrix (orthonormal, det +1)",
-                             orientation)
+                             _shown(orientation))
     else:
         R = np.eye(3)
     fname = None

@@ -42,6 +42,9 @@ THREE_VERSION = "0.187.0"
 STATIC = Path(__file__).parent / "static"
 #: Default budget of embedded channels (bytes of float32 before compression).
 CHANNEL_BUDGET = 4_000_000
+#: The page stays below this size (bytes): the channel budget shrinks to fit beside the frames.
+PAGE_LIMIT = 20_000_000
+_PAGE_MARGIN = 800_000  # metadata, labels, page code
 _LIBS = (("se3dyn-lib-three-core", "three.core.js"),
          ("se3dyn-lib-three-module", "three.module.js"),
          ("se3dyn-lib-orbit-controls", "OrbitControls.js"))
@@ -207,7 +210,10 @@ def page_data(res, scene: Scene, *, channels=None, plot=None,
     for k, (V, F) in enumerate(scene.meshes):
         blobs += [pack(f"mesh{k}_v", np.asarray(V, dtype=np.float32)),
                   pack(f"mesh{k}_f", np.asarray(F, dtype=np.uint32))]
-    names, units, data, note = _channels(res, channels, channel_budget)
+    # channels fill what the page limit leaves (base64 of incompressible float32 at worst)
+    used = sum(len(b.text) for b in blobs) + len(_libraries()) + _PAGE_MARGIN
+    budget = min(channel_budget, max(0, (PAGE_LIMIT - used) * 3 // 4))
+    names, units, data, note = _channels(res, channels, budget)
     if len(names):
         blobs.append(pack("channels", data))
     if plot is None:
