@@ -610,3 +610,11 @@ def test_results_show_is_an_inline_frame(crank):
     html = v._repr_html_()
     assert html.startswith("<iframe srcdoc=") and "height:400px" in html
     assert "&lt;script" in html and "<script" not in html  # the page is escaped into srcdoc
+
+
+def test_the_core_never_imports_the_viewer():
+    code = ("import sys, se3dyn, se3dyn.modelfile, se3dyn.h5, se3dyn.cli; "
+            "m = sorted(k for k in sys.modules if k.startswith(('se3dyn.viewer', 'trimesh', "
+            "'pygltflib'))); print(m); assert not m")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stdout + p.stderr

@@ -226,6 +226,26 @@ def test_playing_advances_time_and_toggles_redraw(browser, pendulum_page):
     assert_clean(browser)
 
 
+def test_hover_names_a_body_and_a_click_toggles_its_trace(browser, pendulum_page):
+    res, path = pendulum_page
+    browser.open(url(path, 0))
+    bob = res.H[0, res.system.node_names.index("bob"), :3, 3]
+    x, y = browser.evaluate(f"se3dyn.project({bob[0]}, {bob[1]}, {bob[2]})")
+    assert browser.evaluate("[...se3dyn.state.traces].map(i => se3dyn.meta.nodes[i])") == ["bob"]
+    browser.call("Input.dispatchMouseEvent", session=True, type="mouseMoved", x=x, y=y,
+                 button="none")
+    browser.wait_for("!document.getElementById('tooltip').hidden", timeout=10)
+    assert browser.evaluate("document.getElementById('tooltip').textContent") == \
+        "visual 'ball' (sphere) on node 'bob'"
+    browser.click(x, y)
+    browser.frames()
+    assert browser.evaluate("se3dyn.state.traces.size") == 0
+    assert browser.evaluate("document.getElementById('show-traces').checked") is True
+    browser.click(x, y)
+    assert browser.evaluate("[...se3dyn.state.traces].map(i => se3dyn.meta.nodes[i])") == ["bob"]
+    assert_clean(browser)
+
+
 def test_notebook_frame_renders(browser, pendulum_page, tmp_path):
     res, _ = pendulum_page
     page = tmp_path / "notebook.html"

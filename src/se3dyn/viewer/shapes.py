@@ -148,11 +148,6 @@ class Scene:
     model_name: str = "model"
     notes: list = field(default_factory=list)
 
-    @property
-    def size(self) -> float:
-        """Diagonal of the bounds (m), at least the glyph size."""
-        return float(max(np.linalg.norm(self.hi - self.lo), 4.0 * self.glyph))
-
 
 # ---------------------------------------------------------------------------------------------
 def equivalent_box(mass: float, inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -301,7 +296,8 @@ def build_scene(res, model=None, *, model_path=None, mesh_dirs=(), traces=None) 
         dirs += [Path(d) for d in mesh_dirs] + [Path.cwd()]
         _from_model(scene, res, model, diag, dirs)
     if traces is None:
-        bodies = scene.bodies or [i for i in range(M) if not fixed[i]]
+        bodies = [i for i in scene.bodies if not fixed[i]] or [i for i in range(M)
+                                                               if not fixed[i]]
         scene.traces = list(bodies) if len(bodies) <= 6 else list(bodies[-1:])
     else:
         idx = []

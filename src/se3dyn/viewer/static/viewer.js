@@ -246,7 +246,6 @@ const state = {
 let frames = null;
 let partLocal = [];
 let partNode = null;
-let partRole = null;
 let partLabel = null;
 const groups = [];
 const nodeMat = Array.from({ length: M }, () => new THREE.Matrix4());
@@ -760,7 +759,6 @@ async function main() {
   }
   const P = pi.length / 5;
   partNode = new Int32Array(P);
-  partRole = [];
   partLabel = new Int32Array(P);
   const byGroup = new Map();
   for (let p = 0; p < P; p++) {
@@ -770,7 +768,6 @@ async function main() {
     partNode[p] = pi[5 * p];
     const geom = pi[5 * p + 1];
     const role = META.roles[pi[5 * p + 3]];
-    partRole.push(role);
     partLabel[p] = pi[5 * p + 4];
     const key = geom + ':' + role;
     if (!byGroup.has(key)) byGroup.set(key, { geom, role, parts: [] });
