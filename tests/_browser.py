@@ -53,25 +53,27 @@ class Browser:
             raise BrowserError("no chromium on PATH")
         self.width, self.height, self.timeout = width, height, timeout
         self.profile = tempfile.mkdtemp(prefix="se3dyn-chromium-")
-        cmd_r, self._cmd_w = os.pipe()
-        self._out_r, out_w = os.pipe()
-
-        def child_fds():  # descriptors 3 (commands in) and 4 (replies out) of the child
-            a = fcntl.fcntl(cmd_r, fcntl.F_DUPFD, 10)
-            b = fcntl.fcntl(out_w, fcntl.F_DUPFD, 10)
-            os.dup2(a, 3)
-            os.dup2(b, 4)
-
-        args = [exe, "--headless", "--no-sandbox", "--remote-debugging-pipe",
+        r, self._cmd_w = os.pipe()
+        self._out_r, w = os.pipe()
+        # the child's ends on descriptors >= 20, so that they are neither 3 nor 4
+        cmd_r, out_w = fcntl.fcntl(r, fcntl.F_DUPFD, 20), fcntl.fcntl(w, fcntl.F_DUPFD, 20)
+        os.close(r)
+        os.close(w)
+        args = ["--headless", "--no-sandbox", "--remote-debugging-pipe",
                 "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
                 "--disable-gpu-sandbox", "--no-first-run", "--no-default-browser-check",
                 "--disable-extensions", "--disable-background-networking", "--mute-audio",
                 "--hide-scrollbars", "--force-device-scale-factor=1",
                 f"--user-data-dir={self.profile}", f"--window-size={width},{height}",
                 "about:blank"]
-        self.proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.DEVNULL, preexec_fn=child_fds,
-                                     pass_fds=(3, 4), close_fds=True)
+        # bash puts the pipe ends on descriptors 3 (commands in) and 4 (replies out) and becomes
+        # Chromium (no preexec_fn: safe beside the reader threads of other browsers; dash, the
+        # usual /bin/sh, cannot redirect descriptors above 9)
+        shell = f'exec "$0" "$@" 3<&{cmd_r} 4>&{out_w} {cmd_r}<&- {out_w}>&-'
+        self.proc = subprocess.Popen([shutil.which("bash") or "/bin/bash", "-c", shell, exe,
+                                      *args],
+                                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.DEVNULL, pass_fds=(cmd_r, out_w))
         os.close(cmd_r)
         os.close(out_w)
         self._id = 0
