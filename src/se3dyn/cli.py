@@ -9,6 +9,8 @@ file), 2 bad input or usage. Errors are one clear line on stderr, never a Python
     se3dyn channels RESULTS
     se3dyn plot RESULTS CHANNEL... [-o PNG]
     se3dyn export RESULTS --csv FILE [CHANNEL...]
+    se3dyn export RESULTS --gltf FILE.glb
+    se3dyn view RESULTS [-o FILE.html] [--model MODEL] [--channel PATTERN] [--trace NODE]
 """
 
 from __future__ import annotations
@@ -287,10 +289,17 @@ def cmd_plot(args) -> int:
 
 
 def cmd_export(args) -> int:
-    """Export channels of a results file to CSV (header: time and channel names)."""
+    """Export channels of a results file to CSV (header: time and channel names), or the
+    animation to glTF (se3dyn.viewer)."""
     from se3dyn.channels import list_channels
 
     res = _read(args.results)
+    if args.gltf is not None:
+        if args.channels:
+            raise _Usage("--gltf exports the motion of every node; give no channels")
+        path = _viewer("export_gltf", res, args.gltf)
+        print(f"wrote {path}: {len(res.t)} times, t = {res.t[0]:g} ... {res.t[-1]:g} s")
+        return 0
     names = args.channels or list_channels(res)
     data = _channels(res, names)
     cols = np.column_stack([res.t] + [y for _, y in data])
@@ -300,6 +309,38 @@ def cmd_export(args) -> int:
     except OSError as exc:
         raise _Usage(f"--csv {args.csv}: cannot write ({exc.strerror})") from None
     print(f"wrote {args.csv}: {cols.shape[0]} rows, {cols.shape[1]} columns")
+    return 0
+
+
+def _viewer(func: str, res, *args, **kwargs):
+    """Call se3dyn.viewer.<func>; its input errors become one-line usage errors."""
+    from se3dyn import viewer
+    from se3dyn.errors import ModelError
+
+    try:
+        return getattr(viewer, func)(res, *args, **kwargs)
+    except (viewer.ViewerError, ModelError) as exc:
+        raise _Usage(str(exc)) from None
+
+
+def cmd_view(args) -> int:
+    """Write the 3D viewer page of a results file; without -o open it in the browser."""
+    import os
+    import tempfile
+    import webbrowser
+
+    res = _read(args.results)
+    if args.output:
+        out = Path(args.output)
+    else:
+        fd, name = tempfile.mkstemp(prefix=Path(args.results).stem + "-", suffix=".html")
+        os.close(fd)
+        out = Path(name)
+    path = _viewer("write_html", res, out, model_path=args.model, channels=args.channel,
+                   traces=args.trace)
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
+    if not args.output:
+        webbrowser.open(path.resolve().as_uri())
     return 0
 
 
@@ -360,11 +401,24 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("-o", "--output", help="PNG file (default: next to the results file)")
     pl.add_argument("--title")
     pl.set_defaults(func=cmd_plot)
-    ex = sub.add_parser("export", help="export channels to CSV")
+    ex = sub.add_parser("export", help="export channels to CSV, or the motion to glTF")
     ex.add_argument("results")
-    ex.add_argument("--csv", required=True, help="CSV file to write")
+    fmt = ex.add_mutually_exclusive_group(required=True)
+    fmt.add_argument("--csv", help="CSV file to write")
+    fmt.add_argument("--gltf", help="animated glTF 2.0 file to write (.glb or .gltf)")
     ex.add_argument("channels", nargs="*", help="channels (default: all)")
     ex.set_defaults(func=cmd_export)
+    vw = sub.add_parser("view", help="3D viewer page (HTML) of a results file")
+    vw.add_argument("results")
+    vw.add_argument("-o", "--output", help="HTML file (default: a temporary file, opened in "
+                    "the browser)")
+    vw.add_argument("--model", help="draw with this model file (visuals) instead of the "
+                    "stored model")
+    vw.add_argument("--channel", action="append", metavar="PATTERN",
+                    help="channel or pattern to embed for the plot (repeatable)")
+    vw.add_argument("--trace", action="append", metavar="NODE", help="node traced first "
+                    "(repeatable)")
+    vw.set_defaults(func=cmd_view)
     return p
 
 

@@ -31,9 +31,10 @@ import numpy as np
 from se3dyn.errors import ModelError
 from se3dyn.joints import JOINT_TYPES, is_abelian, unit_vector
 from se3dyn.timefunc import Component, TimeFunction, as_timefunc
+from se3dyn.visuals import VisualSpec, make_visual
 
 __all__ = ["NodeSpec", "JointSpec", "LoadSpec", "SpringDamperSpec", "PD", "Model",
-           "ModelBuilder"]
+           "ModelBuilder", "VisualSpec"]
 
 
 @dataclass(frozen=True)
@@ -195,6 +196,8 @@ class Model:
     composites: dict = field(default_factory=dict)
     name: str = "model"
     springs: tuple[SpringDamperSpec, ...] = ()
+    #: shapes drawn by the viewer (never used by the physics), see :mod:`se3dyn.visuals`
+    visuals: tuple[VisualSpec, ...] = ()
 
     def node(self, name: str) -> NodeSpec:
         """The node called ``name`` (KeyError listing valid names otherwise)."""
@@ -295,6 +298,7 @@ class ModelBuilder:
         self._loads: dict[str, LoadSpec] = {}
         self._springs: dict[str, SpringDamperSpec] = {}
         self._composites: dict[str, tuple[str, ...]] = {}
+        self._visuals: dict[str, VisualSpec] = {}
 
     # -----------------------------------------------------------------------------------------
     def node(self, name: str, position: Any = (0.0, 0.0, 0.0), *, orientation: Any = None,
@@ -692,6 +696,45 @@ class ModelBuilder:
                                                vals["stiffness"], vals["damping"], L0)
 
     # -----------------------------------------------------------------------------------------
+    def visual(self, name: str, node: str, shape: str, *, size: Any = None, color: Any = None,
+               offset: Any = None, orientation: Any = None, axis: Any = None,
+               file: Any = None) -> None:
+        """Draw a shape with a node (pictures only: no mass, no effect on the motion).
+
+        Parameters
+        ----------
+        name : str
+            Unique visual name.
+        node : str
+            The node the shape moves with (a node may carry several shapes). A node with
+            visuals is drawn by them instead of the viewer's default solid.
+        shape : {"box", "sphere", "cylinder", "capsule", "mesh"}
+        size : float or array_like
+            box: side lengths (3,) or one number; sphere: radius; cylinder and capsule:
+            (radius, length) along the shape's z axis; mesh: scale, one or 3 numbers (default 1).
+        color : str or array_like, shape (3,), optional
+            ``"#rrggbb"``, a colour name or RGB in [0, 1]; default: a palette colour.
+        offset : array_like, shape (3,), optional
+            Origin of the shape in the material frame of the node (m).
+        orientation : array_like, shape (3, 3), optional
+            Rotation of the shape in the material frame of the node (columns: its axes).
+        axis : array_like, shape (3,), optional
+            Instead of ``orientation``: the direction of the shape's z axis (cylinder, capsule).
+        file : str, optional
+            Mesh file (STL, OBJ, glTF/GLB) for ``shape="mesh"``; a relative path is looked up
+            next to the model file when viewed.
+        """
+        v = make_visual(name, node, shape, size=size, color=color, offset=offset,
+                        orientation=orientation, axis=axis, file=file)
+        if name in self._visuals:
+            raise ModelError(f"visual {name!r}", "name", "a unique visual name", name,
+                             "defined twice")
+        if node not in self._nodes:
+            raise ModelError(f"visual {name!r} ({shape})", "node", "the name of a defined node",
+                             node, _unknown("node", node, list(self._nodes)))
+        self._visuals[name] = v
+
+    # -----------------------------------------------------------------------------------------
     def build(self) -> Model:
         """Validate the whole model and return the immutable :class:`Model`."""
         if not self._nodes:
@@ -709,4 +752,5 @@ class ModelBuilder:
                                              else ""))
         return Model(tuple(self._nodes.values()), tuple(self._joints.values()),
                      tuple(self._loads.values()), self._gravity.copy(), dict(self._composites),
-                     self._name, tuple(self._springs.values()))
+                     self._name, tuple(self._springs.values()),
+                     visuals=tuple(self._visuals.values()))

@@ -48,6 +48,7 @@ from se3dyn.errors import ModelError
 from se3dyn.joints import JOINT_TYPES
 from se3dyn.model import PD, Model, ModelBuilder
 from se3dyn.timefunc import Component, Constant, Ramp, Sine, Step, Table, TimeFunction
+from se3dyn.visuals import SHAPES, visual_to_dict
 
 __all__ = [
     "FORMAT_VERSION", "FIELDS", "ModelFileError", "load_model", "loads_model", "save_model",
@@ -570,6 +571,26 @@ class TimeFunc(_Type):
 
 
 @dataclass(frozen=True)
+class Color(_Type):
+    """A colour: a string (``#rrggbb``, ``#rgb`` or a name, checked by the builder) or 3
+    numbers in [0, 1]."""
+
+    text = "`'#rrggbb'`, a colour name, or 3 numbers in [0, 1]"
+
+    def schema(self) -> dict:
+        return {"oneOf": [{"type": "string"}, {"type": "array", "items": _NUMBER,
+                                               "minItems": 3, "maxItems": 3}]}
+
+    def convert(self, ctx, node, item, fld):
+        if isinstance(node, SequenceNode):
+            return _numlist(ctx, node, item, fld, "3 numbers in [0, 1]", 3, 3)
+        if not isinstance(node, ScalarNode) or node.tag != "tag:yaml.org,2002:str":
+            ctx.fail(node, item, fld, "a colour: '#rrggbb', a colour name or 3 numbers in "
+                     "[0, 1]")
+        return str(node.value)
+
+
+@dataclass(frozen=True)
 class Field:
     """One field of a section: name, type, default (``None``: absent), description."""
 
@@ -599,6 +620,8 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("joints", Named("joint"), {}, "Kinematic joints by name, in order."),
         Field("loads", Named("load"), {}, "External loads by name."),
         Field("springs", Named("spring_damper"), {}, "Point-to-point spring-dampers by name."),
+        Field("visuals", Named("visual"), {}, "Shapes drawn by the viewer, by name (pictures "
+              "only, no effect on the motion)."),
         Field("simulation", Section("simulation"), {}, "Simulation settings, returned by "
               "`load_model` as a dict for `se3dyn.simulate(model, **settings)`."),
     ),
@@ -676,6 +699,25 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("damping", Num(minimum=0), 0, "Damping (N s/m) on the rate of the distance."),
         Field("length", Num(minimum=0), "initial distance", "Free length (m)."),
     ),
+    "visual": (
+        Field("node", Str(ref="node"), None, "The node the shape moves with (required).", True),
+        Field("shape", Str(tuple(SHAPES)), None, "Shape (required).", True),
+        Field("size", OneOf((Num(exclusive_minimum=0), Vec(None, 1, 3))), None, "box: side "
+              "lengths (a, b, c) or one number (cube); sphere: radius; cylinder, capsule: "
+              "(radius, length) along the shape's z axis (capsule: length between the "
+              "hemisphere centres); mesh: scale, one or 3 numbers (default 1). Required "
+              "except for meshes (m)."),
+        Field("color", Color(), "palette", "Colour: `'#rrggbb'`, `'#rgb'`, a name (red, green, "
+              "blue, orange, grey, ...) or RGB in [0, 1]."),
+        Field("offset", _V3, [0, 0, 0], "Origin of the shape in the material frame of the node "
+              "(m)."),
+        Field("axis", _V3, None, "Direction of the shape's z axis in the material frame of the "
+              "node (instead of `orientation`)."),
+        Field("orientation", _M33, "identity", "Rotation of the shape in the material frame of "
+              "the node (rows of the matrix; its columns are the shape's axes)."),
+        Field("file", Str(), None, "Mesh file (STL, OBJ, glTF/GLB) for `shape: mesh`; a "
+              "relative path is looked up next to the model file."),
+    ),
     "simulation": (
         Field("t_end", Num(), None, "Final time (s)."),
         Field("step", Num(exclusive_minimum=0), None, "Time step h (s)."),
@@ -743,6 +785,10 @@ _SECTION_DOC = {
     "spring_damper": "An entry of `springs:` (key: the name). Force stiffness (L - length) + "
                      "damping dL/dt along the line of two points attached to nodes `a` and "
                      "`b`.",
+    "visual": "An entry of `visuals:` (key: the visual name). A shape drawn with a node by "
+              "`se3dyn view` and `se3dyn export --gltf`, placed in the material frame of the "
+              "node; it has no mass and no effect on the motion. A node with visuals is drawn "
+              "by them instead of the default solid sized from its inertia.",
     "simulation": "The `simulation:` mapping: keyword arguments of `se3dyn.simulate`.",
     "constant": "Time function `{constant: {...}}`.",
     "step": "Time function `{step: {...}}`.",
@@ -972,6 +1018,13 @@ def _build(ctx: _Ctx, top: _Obj) -> tuple[Model, dict]:
             mb.spring_damper(obj.name, kw.pop("a"), kw.pop("b"), **kw)
         except ModelError as e:
             _rethrow(ctx, e, obj, items)
+    for obj in v.get("visuals", []):
+        items[f"visual {obj.name!r}"] = obj.line
+        kw = dict(obj.values)
+        try:
+            mb.visual(obj.name, kw.pop("node"), kw.pop("shape"), **kw)
+        except ModelError as e:
+            _rethrow(ctx, e, obj, items)
     try:
         model = mb.build()
     except ModelError as e:
@@ -1156,6 +1209,8 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
                                     "at_b": _py(sp.at_b), "stiffness": float(sp.stiffness),
                                     "damping": float(sp.damping), "length": float(sp.length)}
                           for sp in model.springs}
+    if model.visuals:
+        doc["visuals"] = {v.name: visual_to_dict(v) for v in model.visuals}
     if settings:
         known = {f.name: f for f in FIELDS["simulation"]}
         sim = {}

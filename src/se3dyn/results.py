@@ -165,3 +165,10 @@ class Results:
 
     def __len__(self) -> int:
         return len(self.t)
+
+    def show(self, height: int = 520, **kwargs):
+        """The 3D viewer of this result inline in a Jupyter notebook (an iframe); keyword
+        arguments of :func:`se3dyn.viewer.write_html`. Save the page with ``.save(path)``."""
+        from se3dyn.viewer import show  # an opt-in layer: imported only here
+
+        return show(self, height=height, **kwargs)

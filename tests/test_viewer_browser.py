@@ -1,0 +1,305 @@
+"""The viewer page in a real browser: headless Chromium (Debian's ``chromium``) driven through
+the DevTools protocol over a pipe (``tests/_browser.py``; no browser is downloaded).
+
+Facts checked: the page draws a non-blank picture, logs no console error and requests nothing
+but its own file and the blob: URLs it makes; ``#t=SECONDS`` opens it paused at that time; the
+pictures at two times differ where a body moved and agree pixel for pixel where nodes are fixed
+(positions projected with the page's own camera); the frames decoded by the page's JavaScript
+equal the results within the quantisation bounds; moving the scrubber moves time and changes the
+picture; the notebook frame (``Results.show()``) renders too.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import se3dyn as sd
+from _browser import Browser, find_chromium
+from se3dyn.viewer import write_html
+from se3dyn.viewer.encode import ANGLE_BOUND
+
+pytestmark = pytest.mark.skipif(
+    find_chromium() is None,
+    reason="chromium is not installed (apt-get install chromium; .ci/run installs it)")
+
+W, H = 1000, 700
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with Browser(W, H) as b:
+        yield b
+
+
+def pendulum():
+    """A bob on a hinge about y through the origin, released horizontal, and a fixed post."""
+    mb = sd.ModelBuilder(gravity=(0, 0, -9.81), name="pendulum")
+    mb.node("pivot", position=(0, 0, 0), fixed=True)
+    mb.node("post", position=(0.9, 0.0, 0.6), fixed=True)
+    mb.node("bob", position=(0.5, 0, 0), mass=1.0, inertia=(1e-3, 1e-2, 1e-2))
+    mb.joint("hinge", "hinge", "pivot", "bob", axis=(0, 1, 0), at=(0, 0, 0))
+    mb.visual("post", "post", "box", size=0.12, color="#2ca02c")
+    mb.visual("ball", "bob", "sphere", size=0.07, color="#1f77b4")
+    return mb.build()
+
+
+@pytest.fixture(scope="module")
+def pendulum_page(tmp_path_factory):
+    model = pendulum()
+    res = sd.simulate(model, t_end=0.6, step=1e-2)
+    path = tmp_path_factory.mktemp("page") / "pendulum.html"
+    write_html(res, path)
+    return res, path
+
+
+@pytest.fixture(scope="module")
+def crank_page(tmp_path_factory):
+    model = sd.examples.slider_crank()
+    res = sd.simulate(model, t_end=1.0, step=1e-2)
+    path = tmp_path_factory.mktemp("page") / "slider_crank.html"
+    write_html(res, path)
+    return res, path
+
+
+def url(path: Path, t: float | None = None) -> str:
+    u = path.resolve().as_uri()
+    return u if t is None else f"{u}#t={t}"
+
+
+def region(img: np.ndarray, xy, r: int = 4) -> np.ndarray:
+    x, y = (int(round(c)) for c in xy)
+    return img[y - r:y + r + 1, x - r:x + r + 1].astype(int)
+
+
+def on_canvas(b: Browser, xy) -> bool:
+    return b.evaluate(f"document.elementFromPoint({xy[0]}, {xy[1]}) === "
+                      "document.querySelector('#stage canvas')")
+
+
+def assert_clean(b: Browser) -> None:
+    assert b.errors() == [], b.errors()
+    foreign = [u for u in b.requests if not u.startswith(("file:", "blob:", "data:", "about:"))]
+    assert foreign == []
+
+
+# ---------------------------------------------------------------------------------------------
+def test_console_errors_would_be_seen(browser):
+    """The harness itself: a page that logs an error is caught (so 'no errors' means none)."""
+    browser.open("data:text/html,<script>console.error('boom')</script><p>x",
+                 ready="document.body !== null")
+    assert any("boom" in e["text"] for e in browser.errors())
+    browser.log.clear()
+
+
+def test_page_renders_a_picture_without_errors_or_network(browser, crank_page):
+    res, path = crank_page
+    browser.log.clear()
+    browser.requests.clear()
+    browser.open(url(path, 0.5))
+    img = browser.screenshot()
+    stage = img[:H - 46]
+    background = np.array([244, 245, 247])
+    drawn = np.any(np.abs(stage.astype(int) - background) > 12, axis=-1)
+    assert drawn.mean() > 0.05  # panels, grid and the mechanism
+    colours = len(np.unique(stage.reshape(-1, 3), axis=0))
+    assert colours > 200  # shaded solids, not a flat fill
+    # the mechanism is drawn where the camera sees the node positions
+    x = res.H[50, :, :3, 3]
+    pts = [browser.evaluate(f"se3dyn.project({p[0]}, {p[1]}, {p[2]})") for p in x]
+    hits = sum(bool(drawn[int(y), int(xx)]) for xx, y in pts if 0 <= y < H - 46 and 0 <= xx < W)
+    assert hits >= len(pts) - 1
+    assert_clean(browser)
+
+
+def test_time_in_the_address_opens_paused_at_that_time(browser, crank_page):
+    _, path = crank_page
+    browser.open(url(path, 0.35))
+    assert browser.evaluate("se3dyn.time()") == pytest.approx(0.35)
+    assert browser.evaluate("se3dyn.state.playing") is False
+    assert browser.evaluate("document.getElementById('time').textContent") == "t = 0.350 s"
+    time.sleep(0.3)
+    assert browser.evaluate("se3dyn.time()") == pytest.approx(0.35)
+    # a new hash on the open page jumps there too
+    browser.evaluate("location.hash = '#t=0.8'")
+    browser.wait_for("Math.abs(se3dyn.time() - 0.8) < 1e-12", timeout=10)
+    assert_clean(browser)
+
+
+def test_page_decodes_the_results_frames(browser, crank_page):
+    res, path = crank_page
+    browser.open(url(path, 0))
+    n, M = res.H.shape[:2]
+    span = np.ptp(res.H[:, :, :3, 3], axis=0)  # (M, 3)
+    for k in (0, n // 3, n - 1):
+        got = np.array(browser.evaluate(
+            f"Array.from({{length: {M}}}, (_, i) => se3dyn.nodePosition(i, {k}))"))
+        # quantisation (span / 131070) plus float32 storage in the page
+        tol = span / 131070 + 1e-6 * (1 + np.abs(res.H[k, :, :3, 3]))
+        assert np.all(np.abs(got - res.H[k, :, :3, 3]) <= tol)
+        q = np.array(browser.evaluate(
+            f"Array.from({{length: {M}}}, (_, i) => se3dyn.nodeQuaternion(i, {k}))"))
+        ang = (Rotation.from_quat(q).inv() * Rotation.from_matrix(res.H[k, :, :3, :3]))
+        assert ang.magnitude().max() <= ANGLE_BOUND + 1e-6
+
+
+def test_two_times_differ_where_bodies_moved_and_agree_where_nodes_are_fixed(
+        browser, pendulum_page):
+    res, path = pendulum_page
+    names = res.system.node_names
+    bob0 = res.H[0, names.index("bob"), :3, 3]
+    bob1 = res.H[-1, names.index("bob"), :3, 3]
+    assert np.linalg.norm(bob1 - bob0) > 0.3  # the bob did swing away
+    browser.open(url(path, 0))
+    img0 = browser.screenshot()
+    project = lambda p: browser.evaluate(f"se3dyn.project({p[0]}, {p[1]}, {p[2]})")  # noqa: E731
+    glyph = browser.evaluate("se3dyn.meta.glyph")
+    plate = (0.9, 0.0, 0.6 - 2.2 * glyph)  # the ground symbol under the fixed post
+    at_bob0, at_bob1, at_post, at_plate = (project(p) for p in (bob0, bob1, (0.9, 0.0, 0.6),
+                                                                plate))
+    for xy in (at_bob0, at_bob1, at_post, at_plate):
+        assert on_canvas(browser, xy)
+    browser.open(url(path, float(res.t[-1])))
+    assert project(bob0) == pytest.approx(at_bob0)  # same camera
+    img1 = browser.screenshot()
+    # where the bob was (and went), the pictures differ
+    assert np.abs(region(img0, at_bob0) - region(img1, at_bob0)).mean() > 25
+    assert np.abs(region(img0, at_bob1) - region(img1, at_bob1)).mean() > 25
+    # at the fixed post and its ground symbol they are the same, pixel for pixel
+    assert np.abs(region(img0, at_post) - region(img1, at_post)).max() <= 2
+    assert np.abs(region(img0, at_plate, 2) - region(img1, at_plate, 2)).max() <= 2
+    assert np.abs(region(img0, at_plate, 2) - [244, 245, 247]).mean() > 40  # drawn, not empty
+    # the post is drawn there, in its colour (green dominates)
+    r, g, b = region(img0, at_post, 2).reshape(-1, 3).mean(axis=0)
+    assert g > r + 30 and g > b + 10
+    assert_clean(browser)
+
+
+def test_moving_the_scrubber_changes_the_frame(browser, pendulum_page):
+    res, path = pendulum_page
+    browser.open(url(path, 0))
+    before = browser.screenshot()
+    rect = json.loads(browser.evaluate(
+        "JSON.stringify(document.getElementById('scrub').getBoundingClientRect())"))
+    frame0 = browser.evaluate("document.getElementById('frame').textContent")
+    browser.click(rect["left"] + 0.75 * rect["width"], rect["top"] + rect["height"] / 2)
+    browser.frames()
+    t0, t1 = float(res.t[0]), float(res.t[-1])
+    t = browser.evaluate("se3dyn.time()")
+    assert t == pytest.approx(t0 + 0.75 * (t1 - t0), abs=0.05 * (t1 - t0))
+    assert browser.evaluate("document.getElementById('frame').textContent") != frame0
+    after = browser.screenshot()
+    bob0 = res.H[0, res.system.node_names.index("bob"), :3, 3]
+    at_bob0 = browser.evaluate(f"se3dyn.project({bob0[0]}, {bob0[1]}, {bob0[2]})")
+    assert np.abs(region(before, at_bob0) - region(after, at_bob0)).mean() > 25
+    # the plot's time cursor moved with it
+    prect = json.loads(browser.evaluate(
+        "JSON.stringify(document.getElementById('plot-canvas').getBoundingClientRect())"))
+    y0, y1 = int(prect["top"]), int(prect["bottom"])
+    x0, x1 = int(prect["left"]), int(prect["right"])
+    assert np.abs(before[y0:y1, x0:x1].astype(int) - after[y0:y1, x0:x1]).max() > 50
+    # the paused time is in the address, for sharing
+    assert browser.evaluate("location.hash").startswith("#t=0.4")
+    assert_clean(browser)
+
+
+def test_playing_advances_time_and_toggles_redraw(browser, pendulum_page):
+    res, path = pendulum_page
+    browser.open(url(path))  # no time in the address: it plays
+    start = browser.evaluate("se3dyn.time()")
+    browser.wait_for(f"se3dyn.time() > {start} + 0.05", timeout=20)
+    assert browser.evaluate("se3dyn.state.playing") is True
+    browser.evaluate("se3dyn.pause(), se3dyn.setTime(0.3)")
+    browser.frames()
+    plain = browser.screenshot()
+    for box in ("show-frames", "show-traces"):
+        browser.evaluate(f"document.getElementById('{box}').click()")
+        browser.frames()
+        shown = browser.screenshot()
+        assert np.abs(shown.astype(int) - plain).max() > 50, box
+        plain = shown
+    assert_clean(browser)
+
+
+def test_hover_names_a_body_and_a_click_toggles_its_trace(browser, pendulum_page):
+    res, path = pendulum_page
+    browser.open(url(path, 0))
+    bob = res.H[0, res.system.node_names.index("bob"), :3, 3]
+    x, y = browser.evaluate(f"se3dyn.project({bob[0]}, {bob[1]}, {bob[2]})")
+    assert browser.evaluate("[...se3dyn.state.traces].map(i => se3dyn.meta.nodes[i])") == ["bob"]
+    browser.call("Input.dispatchMouseEvent", session=True, type="mouseMoved", x=x, y=y,
+                 button="none")
+    browser.wait_for("!document.getElementById('tooltip').hidden", timeout=10)
+    assert browser.evaluate("document.getElementById('tooltip').textContent") == \
+        "visual 'ball' (sphere) on node 'bob'"
+    browser.click(x, y)
+    browser.frames()
+    assert browser.evaluate("se3dyn.state.traces.size") == 0
+    assert browser.evaluate("document.getElementById('show-traces').checked") is True
+    browser.click(x, y)
+    assert browser.evaluate("[...se3dyn.state.traces].map(i => se3dyn.meta.nodes[i])") == ["bob"]
+    assert_clean(browser)
+
+
+def test_notebook_frame_renders(browser, pendulum_page, tmp_path):
+    res, _ = pendulum_page
+    page = tmp_path / "notebook.html"
+    page.write_text("<!doctype html><html><body>" + res.show(height=500)._repr_html_()
+                    + "</body></html>", encoding="utf-8")
+    browser.open(page.as_uri(), ready="(() => { const f = document.querySelector('iframe'); "
+                 "return f && f.contentDocument && "
+                 "f.contentDocument.documentElement.dataset.ready === '1'; })()")
+    assert_clean(browser)
+
+
+def test_chain_of_1000_links_loads_and_plays(browser, tmp_path):
+    """The scale case: 1000 links, 1000 stored times (synthetic swinging motion)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    try:
+        from chain_scaling import chain
+    finally:
+        sys.path.pop(0)
+    model = chain(1000)
+    s = sd.compile_model(model)
+    n, M = 1000, len(model.nodes)
+    t = np.linspace(0.0, 1.0, n)
+    # every link turns about y by its own angle: a travelling wave down the chain
+    ang = 0.6 * np.sin(2 * np.pi * (t[:, None] - np.arange(M)[None, :] / 200.0))
+    Hs = np.zeros((n, M, 4, 4))
+    Hs[..., :3, :3] = Rotation.from_rotvec(
+        np.stack([np.zeros_like(ang), ang, np.zeros_like(ang)], axis=-1).reshape(-1, 3)
+    ).as_matrix().reshape(n, M, 3, 3)
+    x0 = np.array([nd.position for nd in model.nodes])
+    Hs[..., :3, 3] = x0[None] + np.stack([np.zeros_like(ang), np.zeros_like(ang),
+                                           0.05 * ang], axis=-1)
+    Hs[..., 3, 3] = 1.0
+    z = np.zeros(n)
+    res = sd.Results(system=s, t=t, H=Hs, v=np.zeros((n, s.nq)), vd=np.zeros((n, s.nq)),
+                     lam=np.zeros((n, s.nm)), alpha=np.zeros((n, s.nq)), kinetic=z, potential=z,
+                     spring=z, work_actuators=z, work_loads=z, dissipation=z,
+                     iterations=np.zeros(n, int), residual=z, constraint=z)
+    path = write_html(res, tmp_path / "chain.html", model=model)
+    assert path.stat().st_size <= 20_000_000
+    start = time.monotonic()
+    browser.open(url(path, 0.5), timeout=90)
+    loaded = time.monotonic() - start
+    assert loaded < 60
+    img = browser.screenshot()
+    assert len(np.unique(img[:H - 46].reshape(-1, 3), axis=0)) > 100
+    # the page's own work per frame (interpolating 1001 frames, 4000 instance matrices) is a
+    # few ms; the drawing itself is the graphics card's (software GL in this test, so it is
+    # only required to finish)
+    per_frame = browser.evaluate("""(() => {
+        const t0 = performance.now();
+        for (let k = 0; k < 20; k++) se3dyn.setTime(0.2 + 0.01 * k);
+        return (performance.now() - t0) / 20; })()""")
+    assert per_frame < 50
+    browser.frames()
+    assert_clean(browser)
