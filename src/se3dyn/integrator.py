@@ -54,9 +54,10 @@ def _stepper(s: System, index2: bool, dropped: np.ndarray):
     return stp
 
 
-@dataclass
+@dataclass(frozen=True)
 class State:
-    """Exactly what integration needs, so a restart from a State is bit-exact.
+    """Exactly what integration needs, so a restart from a State is bit-exact; immutable (a
+    frozen dataclass whose arrays are read-only: ``dataclasses.replace`` makes a new one).
 
     Attributes
     ----------
@@ -89,7 +90,14 @@ class State:
     dropped: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
     h_last: float = 0.0
 
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            x = getattr(self, f.name)
+            if isinstance(x, np.ndarray):
+                x.flags.writeable = False
+
     def copy(self) -> State:
+        """A State with writeable copies of the arrays (not shared with this one)."""
         return dataclasses.replace(self, **{f.name: np.copy(getattr(self, f.name))
                                             for f in dataclasses.fields(self)
                                             if isinstance(getattr(self, f.name), np.ndarray)})
@@ -318,16 +326,15 @@ class GeneralizedAlpha:
                              hint="remove the duplicated freedom or use redundant='drop'")
         v = np.zeros(nq)
         v[s.node_dofidx] = s.node_v0[s.node_free]
-        st = State(t=t0, H=s.node_H0.copy(), HJ=s.joint_H0.copy(), v=v, vd=np.zeros(nq),
-                   a=np.zeros(nq), lam=np.zeros(nm), alpha=np.zeros(nq), dropped=dropped)
+        H, HJ = s.node_H0.copy(), s.joint_H0.copy()
         inputs = step_inputs(s, t0)
         zero = np.zeros(nq)
-        ev = evaluate(s, st.H, st.HJ, st.alpha, zero, v, zero, st.lam, inputs, (1.0, 0.0, 0.0),
-                      accel=True)
+        lam0 = np.zeros(nm)
+        ev = evaluate(s, H, HJ, zero, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0), accel=True)
         if nm and np.any(v != 0):
-            st.v = self._project_velocity(s, LinearSolver(s, drop=dropped), ev.values, v)
-            ev = evaluate(s, st.H, st.HJ, st.alpha, zero, st.v, zero, st.lam, inputs,
-                          (1.0, 0.0, 0.0), accel=True)
+            v = self._project_velocity(s, LinearSolver(s, drop=dropped), ev.values, v)
+            ev = evaluate(s, H, HJ, zero, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0),
+                          accel=True)
         # [M Phi_q^T; Phi_q 0][vd; lam] = [-r; arhs] with the acceleration-level constraints
         # Phi_q vd = arhs (the time derivative of Phi_q v = 0), by the compiled sparse LU
         rhs = np.concatenate([-ev.r, ev.arhs])
@@ -339,11 +346,10 @@ class GeneralizedAlpha:
                 "causes: redundant constraints not detected at the start (a mechanism started "
                 "in a singular configuration), a free massless node whose motion no joint "
                 "determines, or a non-finite state")
-        st.vd = rhs[:nq].copy()
-        st.a = st.vd.copy()
-        st.lam = rhs[nq:].copy()
-        st.power = ev.energy[3:6].copy()  # powers at t0 (velocity-level: vd does not enter)
-        return st
+        # powers at t0 (velocity-level: vd does not enter)
+        return State(t=t0, H=H, HJ=HJ, v=v, vd=rhs[:nq].copy(), a=rhs[:nq].copy(),
+                     lam=rhs[nq:].copy(), alpha=np.zeros(nq), power=ev.energy[3:6].copy(),
+                     dropped=dropped)
 
     @staticmethod
     def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,
@@ -434,15 +440,14 @@ class GeneralizedAlpha:
         # (beta - 1/6) h^2 (a_{n+1} - a_n)
         err = (b - 1.0 / 6.0) * h * h * (a - a_n)
         new = State(t=t1, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
-                    work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated,
                     dropped=st.dropped, h_last=h)
         e = energies(s, new, inputs)
         p = e["power"]
-        new.power = p
         # trapezoidal accumulation of the powers (second order, like the integrator)
-        new.work_act += 0.5 * h * (st.power[0] + p[0])
-        new.work_ext += 0.5 * h * (st.power[1] + p[1])
-        new.dissipated += 0.5 * h * (st.power[2] + p[2])
+        new = dataclasses.replace(new, power=p,
+                                  work_act=st.work_act + 0.5 * h * (st.power[0] + p[0]),
+                                  work_ext=st.work_ext + 0.5 * h * (st.power[1] + p[1]),
+                                  dissipated=st.dissipated + 0.5 * h * (st.power[2] + p[2]))
         return new, StepInfo(int(it), float(er), float(ep), e, n, err)
 
     def _fail(self, s: System, t: float, h: float, it: int, ev, why: str):

@@ -134,64 +134,31 @@ _C4 = _c4_series()
 _C5 = _c5_series()
 
 
-_SERIES = {"c": _C2, "d": _C3, "e": _C4, "f": _C5}
+# The series-based maps (exp, log, tangent operators and their coefficient functions) are
+# computed by the compiled kernel se3dyn/_core/lie.hpp, which the element kernels of the engine
+# use too: one implementation. It receives the series above (they exist once, here).
+from se3dyn import _engine as _core  # noqa: E402
+
+_core.set_series(_C2, _C3, _C4, _C5, float(SERIES_CUTOFF))
 
 
-def _series(letters: str, t2: np.ndarray) -> dict[str, np.ndarray]:
-    """The Taylor series of the cancelling coefficients at t^2 from one table of powers.
-
-    The terms decay by a factor of at least 15 for t < 1 (module docstring), so summing them in
-    increasing powers loses no more than Horner's rule would.
-    """
-    if not letters:
-        return {}
-    P = t2[..., None] ** np.arange(SERIES_TERMS)  # (..., SERIES_TERMS)
-    # one product per coefficient: the same summation order whichever others are asked for,
-    # so e.g. the T_SO(3) blocks of tangent_se3 equal tangent_so3 bit for bit
-    return {k: P @ _SERIES[k] for k in letters}
+def _batched(fn, x, inner: tuple[int, ...], out: tuple[int, ...], name: str) -> np.ndarray:
+    """Apply a compiled single-element map over the leading axes of x."""
+    x = np.asarray(x, dtype=float)
+    if x.shape[x.ndim - len(inner):] != inner:
+        raise ValueError(f"{name}: expected an array of shape (..., "
+                         f"{', '.join(map(str, inner))}), got shape {x.shape}")
+    lead = x.shape[:x.ndim - len(inner)]
+    return np.asarray(fn(np.ascontiguousarray(x).reshape(-1, int(np.prod(inner))))).reshape(
+        lead + out)
 
 
-def _angle(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    t2 = np.einsum("...i,...i->...", w, w)
-    return np.sqrt(t2), t2
-
-
-def _coeffs(w: np.ndarray, which: str) -> dict[str, np.ndarray]:
-    """Coefficient functions of t = |w|, accurate for every t (see module docstring).
-
-    ``which`` is a string of letters among ``a`` (sin t/t), ``h`` ((1-cos t)/t^2 = b/2),
-    ``c`` ((1-a)/t^2), ``d`` ((b-a)/t^2), ``e`` ((b/2 - 3(1-a)/t^2)/t^2),
-    ``f`` ((1 - (t/2)cot(t/2))/t^2).
-    """
-    t, t2 = _angle(w)
-    small = t < SERIES_CUTOFF
-    tb = np.where(small, 1.0, t)  # a safe (large) angle for the closed forms
-    tb2 = tb * tb
-    out: dict[str, np.ndarray] = {}
-    pos = t > 0
-    tp = np.where(pos, t, 1.0)
-    if any(k in which for k in "acde"):
-        out["a"] = np.where(pos, np.sin(tp) / tp, 1.0)
-    if any(k in which for k in "hde"):
-        half = 0.5 * tp
-        s = np.where(pos, np.sin(half) / half, 1.0)
-        out["h"] = 0.5 * s * s
-    ser = _series("".join(k for k in "cdef" if k in which or (k == "c" and "e" in which)), t2)
-    if any(k in which for k in "cde"):
-        ab = np.sin(tb) / tb
-        hb = 0.5 * (np.sin(0.5 * tb) / (0.5 * tb)) ** 2
-        c_big = (1.0 - ab) / tb2
-        if "c" in ser:
-            out["c"] = np.where(small, ser["c"], c_big)
-        if "d" in ser:
-            out["d"] = np.where(small, ser["d"], (2.0 * hb - ab) / tb2)
-        if "e" in ser:
-            out["e"] = np.where(small, ser["e"], (hb - 3.0 * c_big) / tb2)
-    if "f" in which:
-        x = 0.5 * tb
-        f_big = (1.0 - x * np.cos(x) / np.sin(x)) / tb2
-        out["f"] = np.where(small, ser["f"], f_big)
-    return out
+def _coeffs(w: np.ndarray, which: str = "ahcdef") -> dict[str, np.ndarray]:
+    """Coefficient functions of t = |w| (see the module docstring): ``a`` (sin t/t), ``h``
+    ((1-cos t)/t^2 = b/2), ``c`` ((1-a)/t^2), ``d`` ((b-a)/t^2), ``e``
+    ((b/2 - 3(1-a)/t^2)/t^2), ``f`` ((1 - (t/2)cot(t/2))/t^2), from the compiled kernel."""
+    k = _batched(_core.coefficients, w, (3,), (6,), "coefficients")
+    return {c: k[..., i] for i, c in enumerate("ahcdef") if c in which}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -309,10 +276,7 @@ def exp_so3(w: np.ndarray) -> np.ndarray:
     ndarray, shape (..., 3, 3)
         Rotation matrix.
     """
-    w = np.asarray(w, dtype=float)
-    k = _coeffs(w, "ah")
-    W = hat3(w)
-    return _I3 + k["a"][..., None, None] * W + k["h"][..., None, None] * (W @ W)
+    return _batched(_core.exp_so3, w, (3,), (3, 3), "exp_so3")
 
 
 def tangent_so3(w: np.ndarray) -> np.ndarray:
@@ -328,10 +292,7 @@ def tangent_so3(w: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (..., 3, 3)
     """
-    w = np.asarray(w, dtype=float)
-    k = _coeffs(w, "hc")
-    W = hat3(w)
-    return _I3 - k["h"][..., None, None] * W + k["c"][..., None, None] * (W @ W)
+    return _batched(_core.tangent_so3, w, (3,), (3, 3), "tangent_so3")
 
 
 def tangent_so3_inv(w: np.ndarray) -> np.ndarray:
@@ -347,10 +308,7 @@ def tangent_so3_inv(w: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (..., 3, 3)
     """
-    w = np.asarray(w, dtype=float)
-    f = _coeffs(w, "f")["f"]
-    W = hat3(w)
-    return _I3 + 0.5 * W + f[..., None, None] * (W @ W)
+    return _batched(_core.tangent_so3_inv, w, (3,), (3, 3), "tangent_so3_inv")
 
 
 def log_so3(R: np.ndarray) -> np.ndarray:
@@ -368,51 +326,12 @@ def log_so3(R: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (..., 3)
     """
-    R = np.asarray(R, dtype=float)
-    s = vee3(R)  # sin(t) a
-    c = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)  # cos(t)
-    sn = np.sqrt(np.einsum("...i,...i->...", s, s))
-    t = np.arctan2(sn, c)
-    # Branch 1 (c >= 0): w = s t / sin t, with t/sin t -> 1 at 0.
-    ratio = np.where(sn > 0, t / np.where(sn > 0, sn, 1.0), 1.0)
-    w1 = s * ratio[..., None]
-    # Branch 2 (c < 0): axis from the symmetric part (1 - c) a a^T.
-    S = 0.5 * (R + np.swapaxes(R, -1, -2)) - c[..., None, None] * _I3
-    d = np.diagonal(S, axis1=-2, axis2=-1)
-    j = np.argmax(d, axis=-1)
-    col = np.take_along_axis(S, j[..., None, None], axis=-1)[..., 0]  # (..., 3) = (1-c) a a_j
-    djj = np.take_along_axis(d, j[..., None], axis=-1)[..., 0]
-    axis = col / np.sqrt(np.where(djj > 0, djj, 1.0))[..., None]
-    axis = axis / np.linalg.norm(axis, axis=-1, keepdims=True).clip(min=1e-300)
-    sign = np.where(np.einsum("...i,...i->...", axis, s) < 0, -1.0, 1.0)
-    w2 = axis * (sign * t)[..., None]
-    return np.where((c >= 0)[..., None], w1, w2)
+    return _batched(_core.log_so3, R, (3, 3), (3,), "log_so3")
 
 
 # ---------------------------------------------------------------------------------------------
 # SE(3)
 # ---------------------------------------------------------------------------------------------
-def _exp_se3_from(n, W, W2, k) -> np.ndarray:
-    a = k["a"][..., None, None]
-    h = k["h"][..., None, None]
-    c = k["c"][..., None, None]
-    out = np.zeros(n.shape[:-1] + (4, 4))
-    out[..., :3, :3] = _I3 + a * W + h * W2
-    # T_SO3^T = I + (b/2) W + c W^2
-    out[..., :3, 3] = np.einsum("...ij,...j->...i", _I3 + h * W + c * W2, n[..., :3])
-    out[..., 3, 3] = 1.0
-    return out
-
-
-def _tangent_se3_from(n, W, W2, k) -> np.ndarray:
-    Tso = _I3 - k["h"][..., None, None] * W + k["c"][..., None, None] * W2
-    out = np.zeros(n.shape[:-1] + (6, 6))
-    out[..., :3, :3] = Tso
-    out[..., 3:, 3:] = Tso
-    out[..., :3, 3:] = _t_uo_plus(n[..., :3], n[..., 3:], k, W, W2)
-    return out
-
-
 def exp_se3(n: np.ndarray) -> np.ndarray:
     """Exponential map of SE(3), Eq. (17): ``[[exp_so3(n_O), T_SO3(n_O)^T n_U], [0, 1]]``.
 
@@ -425,21 +344,7 @@ def exp_se3(n: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (..., 4, 4)
     """
-    n = np.asarray(n, dtype=float)
-    W = hat3(n[..., 3:])
-    return _exp_se3_from(n, W, W @ W, _coeffs(n[..., 3:], "ahc"))
-
-
-def _t_uo_plus(nU: np.ndarray, w: np.ndarray, k: dict[str, np.ndarray], W: np.ndarray,
-               W2: np.ndarray) -> np.ndarray:
-    """The coupling block T_UOmega+ of Eq. (22), shape (..., 3, 3)."""
-    U = hat3(nU)
-    h = k["h"][..., None, None]
-    c = k["c"][..., None, None]
-    d = k["d"][..., None, None]
-    e = k["e"][..., None, None]
-    wu = np.einsum("...i,...i->...", w, nU)[..., None, None]
-    return -h * U + c * (U @ W + W @ U) + wu * (d * W + e * W2)
+    return _batched(_core.exp_se3, n, (6,), (4, 4), "exp_se3")
 
 
 def tangent_se3(n: np.ndarray) -> np.ndarray:
@@ -456,9 +361,7 @@ def tangent_se3(n: np.ndarray) -> np.ndarray:
     ndarray, shape (..., 6, 6)
         ``[[T_SO3(n_O), T_UO+(n_U, n_O)], [0, T_SO3(n_O)]]``.
     """
-    n = np.asarray(n, dtype=float)
-    W = hat3(n[..., 3:])
-    return _tangent_se3_from(n, W, W @ W, _coeffs(n[..., 3:], "hcde"))
+    return _batched(_core.tangent_se3, n, (6,), (6, 6), "tangent_se3")
 
 
 def exp_tangent_se3(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -475,11 +378,7 @@ def exp_tangent_se3(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     T : ndarray, shape (..., 6, 6)
         Eqs. (21)-(22).
     """
-    n = np.asarray(n, dtype=float)
-    W = hat3(n[..., 3:])
-    W2 = W @ W
-    k = _coeffs(n[..., 3:], "ahcde")
-    return _exp_se3_from(n, W, W2, k), _tangent_se3_from(n, W, W2, k)
+    return exp_se3(n), tangent_se3(n)
 
 
 def tangent_se3_inv(n: np.ndarray) -> np.ndarray:
@@ -494,18 +393,7 @@ def tangent_se3_inv(n: np.ndarray) -> np.ndarray:
     ndarray, shape (..., 6, 6)
         ``[[Ti, -Ti C Ti], [0, Ti]]`` with ``Ti = tangent_so3_inv(n_O)``, ``C = T_UO+``.
     """
-    n = np.asarray(n, dtype=float)
-    w = n[..., 3:]
-    k = _coeffs(w, "hcdef")
-    W = hat3(w)
-    W2 = W @ W
-    Ti = _I3 + 0.5 * W + k["f"][..., None, None] * W2
-    C = _t_uo_plus(n[..., :3], w, k, W, W2)
-    out = np.zeros(n.shape[:-1] + (6, 6))
-    out[..., :3, :3] = Ti
-    out[..., 3:, 3:] = Ti
-    out[..., :3, 3:] = -Ti @ C @ Ti
-    return out
+    return _batched(_core.tangent_se3_inv, n, (6,), (6, 6), "tangent_se3_inv")
 
 
 def log_se3(H: np.ndarray) -> np.ndarray:
@@ -521,13 +409,7 @@ def log_se3(H: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (..., 6)
     """
-    H = np.asarray(H, dtype=float)
-    w = log_so3(H[..., :3, :3])
-    f = _coeffs(w, "f")["f"][..., None, None]
-    W = hat3(w)
-    TinvT = _I3 - 0.5 * W + f * (W @ W)  # (T_SO3^{-1})^T
-    u = np.einsum("...ij,...j->...i", TinvT, H[..., :3, 3])
-    return np.concatenate([u, w], axis=-1)
+    return _batched(_core.log_se3, H, (4, 4), (6,), "log_se3")
 
 
 def adjoint(H: np.ndarray) -> np.ndarray:

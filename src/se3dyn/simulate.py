@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import time
@@ -275,7 +276,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                 new, info = integ.step(s, st, h, solver)
             except SimulationError as exc:
                 fail(exc)
-        new.t = t1  # exact times, no drift
+        new = dataclasses.replace(new, t=t1)  # exact times, no drift
         i += 1
         stats["newton_iterations"] += info.iterations
         stats["h_min_used"] = min(stats["h_min_used"], h)
@@ -286,10 +287,10 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                 if abs(tg - t1) <= 1e-12 * span:
                     out = new
                 else:
-                    out = interpolate(s, st, new, info.increment, (tg - st.t) / h)
-                    out.t = tg
+                    out = dataclasses.replace(
+                        interpolate(s, st, new, info.increment, (tg - st.t) / h), t=tg)
                 ei = energies(s, out, step_inputs(s, tg))
-                out.power = ei["power"]
+                out = dataclasses.replace(out, power=ei["power"])
                 rec.add(out, ei["kinetic"], ei["potential"], ei["spring"], info.iterations,
                         info.residual, info.constraint)
                 gi += 1
@@ -348,15 +349,16 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times: np.ndarr
             for r in range(n0, count):
                 row = State(t=float(rec.t[r]), H=rec.H[r], HJ=np.zeros((0, 4, 4)), v=rec.v[r],
                             vd=rec.vd[r], a=rec.vd[r], lam=rec.lam[r], alpha=rec.alpha[r])
+                # (read-only views of the recorder's rows)
                 rec.sink(row, dict(zip(SCALARS, rec.scal[r].tolist(), strict=True)))
         if progress is not None and done > 0:
             progress(float(times[done - 1]), done)
         if status != 0:
             break
         chunk = max(1, min(4 * chunk, int(chunk * 0.1 / max(dt, 1e-6))))
-    st = State(t=float(acc[7]), H=H[:s.M].copy(), HJ=H[s.M:].copy(), v=v, vd=vd, a=a, lam=lam,
-               alpha=alpha, work_act=float(acc[3]), work_ext=float(acc[4]),
-               dissipated=float(acc[5]), power=acc[:3].copy(), dropped=st.dropped,
+    st = State(t=float(acc[7]), H=H[:s.M].copy(), HJ=H[s.M:].copy(), v=v.copy(), vd=vd.copy(),
+               a=a.copy(), lam=lam.copy(), alpha=alpha.copy(), work_act=float(acc[3]),
+               work_ext=float(acc[4]), dissipated=float(acc[5]), power=acc[:3].copy(), dropped=st.dropped,
                h_last=float(acc[6]))
     return st, i, fac
 

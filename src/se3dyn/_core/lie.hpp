@@ -173,29 +173,39 @@ inline Coeffs coeffs(const double* w, bool de) {
   return k;
 }
 
+// W = hat(w) and W^2 = w w^T - |w|^2 I: every map below forms its matrices from these, entry
+// by entry in the same order, so that shared blocks agree bit for bit (e.g. the T_SO(3) blocks
+// of T_SE(3) and tangent_so3, exp_se3 with and without its tangent operator)
+inline void hat_and_square(const double* w, double* W, double* W2) {
+  hat3(w, W);
+  double t2 = dot3(w, w);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) W2[3 * i + j] = w[i] * w[j] - (i == j ? t2 : 0.0);
+}
+
 // exp_so3 (Eq. (18)): R = I + a W + h W^2
 inline void exp_so3(const double* w, const Coeffs& k, double* R) {
-  double t2 = dot3(w, w);
-  double W2[9] = {w[0] * w[0] - t2, w[0] * w[1], w[0] * w[2], w[1] * w[0], w[1] * w[1] - t2,
-                  w[1] * w[2], w[2] * w[0], w[2] * w[1], w[2] * w[2] - t2};
-  for (int i = 0; i < 9; ++i) R[i] = k.h * W2[i];
-  R[0] += 1.0; R[4] += 1.0; R[8] += 1.0;
-  add_hat3(w, R, 3, k.a);
+  double W[9], W2[9];
+  hat_and_square(w, W, W2);
+  for (int q = 0; q < 9; ++q) R[q] = (q % 4 == 0 ? 1.0 : 0.0) + k.a * W[q] + k.h * W2[q];
 }
 
 // exp_se3 (Eq. (17)): (exp_so3(w), T_so3(w)^T u) with T_so3^T = I + h W + c W^2
 inline void exp_se3(const double* n, Frame& E) {
   const double* w = n + 3;
   Coeffs k = coeffs(w, false);
-  exp_so3(w, k, E.R);
-  double t2 = dot3(w, w);
-  double W2[9] = {w[0] * w[0] - t2, w[0] * w[1], w[0] * w[2], w[1] * w[0], w[1] * w[1] - t2,
-                  w[1] * w[2], w[2] * w[0], w[2] * w[1], w[2] * w[2] - t2};
-  double Tt[9];
-  for (int i = 0; i < 9; ++i) Tt[i] = k.c * W2[i];
-  Tt[0] += 1.0; Tt[4] += 1.0; Tt[8] += 1.0;
-  add_hat3(w, Tt, 3, k.h);
-  mv<3, 3>(Tt, n, E.x);
+  double W[9], W2[9];
+  hat_and_square(w, W, W2);
+  for (int i = 0; i < 3; ++i) {
+    double s = 0.0;
+    for (int j = 0; j < 3; ++j) {
+      int q = 3 * i + j;
+      double dij = i == j ? 1.0 : 0.0;
+      E.R[q] = dij + k.a * W[q] + k.h * W2[q];
+      s += (dij + k.h * W[q] + k.c * W2[q]) * n[j];
+    }
+    E.x[i] = s;
+  }
 }
 
 // exp_se3 and its tangent operator T_SE(3)(n) (Eqs. (21)-(22)), T (6x6) row-major
@@ -204,9 +214,8 @@ inline void exp_tangent_se3(const double* n, Frame& E, double* T) {
   const double* u = n;
   Coeffs k = coeffs(w, true);
   double W[9], W2[9], U[9], UW[9], WU[9];
-  hat3(w, W);
+  hat_and_square(w, W, W2);
   hat3(u, U);
-  mm<3, 3, 3>(W, W, W2);
   mm<3, 3, 3>(U, W, UW);
   mm<3, 3, 3>(W, U, WU);
   double wu = dot3(w, u);
@@ -225,6 +234,26 @@ inline void exp_tangent_se3(const double* n, Frame& E, double* T) {
     }
     E.x[i] = s;
   }
+}
+
+// tangent_so3 (Eq. (19)): I - h W + c W^2
+inline void tangent_so3(const double* w, double* T) {
+  Coeffs k = coeffs(w, false);
+  double W[9], W2[9];
+  hat_and_square(w, W, W2);
+  for (int q = 0; q < 9; ++q) T[q] = (q % 4 == 0 ? 1.0 : 0.0) - k.h * W[q] + k.c * W2[q];
+}
+
+// The coupling block T_UOmega+ of Eq. (22) (3x3) with the coefficients k of w = n_Omega
+inline void t_uo_plus(const double* u, const double* w, const Coeffs& k, double* C) {
+  double W[9], W2[9], U[9], UW[9], WU[9];
+  hat_and_square(w, W, W2);
+  hat3(u, U);
+  mm<3, 3, 3>(U, W, UW);
+  mm<3, 3, 3>(W, U, WU);
+  double wu = dot3(w, u);
+  for (int q = 0; q < 9; ++q)
+    C[q] = -k.h * U[q] + k.c * (UW[q] + WU[q]) + wu * (k.d * W[q] + k.e * W2[q]);
 }
 
 // log_so3 of a rotation (|w| <= pi); see the docstring of se3dyn/lie.py for the branches
@@ -277,13 +306,28 @@ inline void log_se3(const Frame& H, double* out) {
 
 // T_so3(w)^-1 = I + W/2 + f W^2 (3x3, row-major)
 inline void tangent_so3_inv(const double* w, double* Ti) {
-  double t2 = dot3(w, w);
-  double f = coeff_f(t2);
-  double W2[9] = {w[0] * w[0] - t2, w[0] * w[1], w[0] * w[2], w[1] * w[0], w[1] * w[1] - t2,
-                  w[1] * w[2], w[2] * w[0], w[2] * w[1], w[2] * w[2] - t2};
-  for (int i = 0; i < 9; ++i) Ti[i] = f * W2[i];
-  Ti[0] += 1.0; Ti[4] += 1.0; Ti[8] += 1.0;
-  add_hat3(w, Ti, 3, 0.5);
+  double f = coeff_f(dot3(w, w));
+  double W[9], W2[9];
+  hat_and_square(w, W, W2);
+  for (int q = 0; q < 9; ++q) Ti[q] = (q % 4 == 0 ? 1.0 : 0.0) + 0.5 * W[q] + f * W2[q];
+}
+
+// T_SE(3)(n)^-1 = [[Ti, -Ti C Ti], [0, Ti]] (block inverse of Eq. (21)), |n_Omega| < 2 pi
+inline void tangent_se3_inv(const double* n, double* out) {
+  const double* w = n + 3;
+  Coeffs k = coeffs(w, true);
+  double Ti[9], C[9], t1[9], t2[9];
+  tangent_so3_inv(w, Ti);
+  t_uo_plus(n, w, k, C);
+  mm<3, 3, 3>(Ti, C, t1);
+  mm<3, 3, 3>(t1, Ti, t2);
+  std::memset(out, 0, 36 * sizeof(double));
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      out[6 * i + j] = Ti[3 * i + j];
+      out[6 * (3 + i) + 3 + j] = Ti[3 * i + j];
+      out[6 * i + 3 + j] = -t2[3 * i + j];
+    }
 }
 
 // Ad(H^-1) (Eq. (57)) = [[R^T, -R^T hat(x)], [0, R^T]]

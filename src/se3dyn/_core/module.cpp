@@ -5,6 +5,7 @@
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
 
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 
@@ -22,7 +23,8 @@ Series& series() {
 
 using namespace se3dyn;
 
-using DArr = nb::ndarray<double, nb::c_contig, nb::device::cpu>;
+using DArr = nb::ndarray<double, nb::c_contig, nb::device::cpu>;        // written
+using CArr = nb::ndarray<const double, nb::c_contig, nb::device::cpu>;  // read (may be read-only)
 using IArr = nb::ndarray<int64_t, nb::c_contig, nb::device::cpu>;
 
 namespace {
@@ -54,7 +56,7 @@ double* ptr(DArr& a, size_t n, const char* what) {
                                 " values, got " + std::to_string(a.size()));
   return a.data();
 }
-const double* cptr(const DArr& a, size_t n, const char* what) {
+const double* cptr(const CArr& a, size_t n, const char* what) {
   if (a.size() != n)
     throw std::invalid_argument(std::string(what) + ": expected " + std::to_string(n) +
                                 " values, got " + std::to_string(a.size()));
@@ -118,6 +120,60 @@ NB_MODULE(_engine, m) {
     }
   });
 
+  // The Lie-group kernel of se3dyn.lie, batched over a leading axis (lie.py reshapes): the
+  // one implementation of the series-based maps, shared with the element kernels.
+  auto batch = [](CArr x, size_t in, size_t out, auto fn) {
+    size_t N = x.size() / in;
+    if (N * in != x.size()) throw std::invalid_argument("lie: bad input size");
+    double* o = new double[std::max<size_t>(N * out, 1)];
+    const double* xi = x.data();
+    for (size_t i = 0; i < N; ++i) fn(xi + in * i, o + out * i);
+    nb::capsule owner(o, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+    return nb::ndarray<nb::numpy, double>(o, {N, out}, owner);
+  };
+  m.def("coefficients", [batch](CArr w) {  // (a, h, c, d, e, f) of |w| (lie.hpp)
+    return batch(w, 3, 6, [](const double* a, double* o) {
+      Coeffs k = coeffs(a, true);
+      o[0] = k.a; o[1] = k.h; o[2] = k.c; o[3] = k.d; o[4] = k.e;
+      o[5] = coeff_f(dot3(a, a));
+    });
+  });
+  m.def("exp_se3", [batch](CArr n) {
+    return batch(n, 6, 16, [](const double* a, double* o) {
+      Frame E;
+      exp_se3(a, E);
+      frame_to4(E, o);
+    });
+  });
+  m.def("tangent_se3", [batch](CArr n) {
+    return batch(n, 6, 36, [](const double* a, double* o) {
+      Frame E;
+      exp_tangent_se3(a, E, o);
+    });
+  });
+  m.def("tangent_se3_inv", [batch](CArr n) {
+    return batch(n, 6, 36, [](const double* a, double* o) { tangent_se3_inv(a, o); });
+  });
+  m.def("log_se3", [batch](CArr H) {
+    return batch(H, 16, 6, [](const double* a, double* o) {
+      Frame F;
+      frame_from4(a, F);
+      log_se3(F, o);
+    });
+  });
+  m.def("exp_so3", [batch](CArr w) {
+    return batch(w, 3, 9, [](const double* a, double* o) { exp_so3(a, coeffs(a, false), o); });
+  });
+  m.def("tangent_so3", [batch](CArr w) {
+    return batch(w, 3, 9, [](const double* a, double* o) { tangent_so3(a, o); });
+  });
+  m.def("tangent_so3_inv", [batch](CArr w) {
+    return batch(w, 3, 9, [](const double* a, double* o) { tangent_so3_inv(a, o); });
+  });
+  m.def("log_so3", [batch](CArr R) {
+    return batch(R, 9, 3, [](const double* a, double* o) { log_so3(a, o); });
+  });
+
   nb::class_<Engine>(m, "Engine")
       .def("__init__", [](Engine* E, nb::dict d) {
         new (E) Engine();
@@ -127,7 +183,7 @@ NB_MODULE(_engine, m) {
       .def_ro("nm", &Engine::nm)
       .def(
           "evaluate",
-          [](Engine& E, DArr Hn, DArr alpha_n, DArr n, DArr v, DArr vd, DArr lam, DArr u,
+          [](Engine& E, CArr Hn, CArr alpha_n, CArr n, CArr v, CArr vd, CArr lam, CArr u,
              DArr H, DArr r, DArr phi, DArr alpha, nb::object psi, nb::object vals,
              nb::object energy, double cM, double cC, double cK, bool index2, double cv,
              bool all_logs, nb::object arhs) {
@@ -162,7 +218,7 @@ NB_MODULE(_engine, m) {
           "Hn"_a, "alpha_n"_a, "n"_a, "v"_a, "vd"_a, "lam"_a, "u"_a, "H"_a, "r"_a, "phi"_a,
           "alpha"_a, "psi"_a.none(), "vals"_a.none(), "energy"_a.none(), "cM"_a, "cC"_a, "cK"_a,
           "index2"_a, "cv"_a, "all_logs"_a, "arhs"_a.none() = nb::none())
-      .def("BnT", [](Engine& E, DArr Hn, DArr xi, DArr out) {
+      .def("BnT", [](Engine& E, CArr Hn, CArr xi, DArr out) {
         // out (nq,) = B_n^T xi with B_n the constraint gradient at the frames Hn (Eq. (58))
         E.load_frames(cptr(Hn, 16 * E.T.F, "Hn"));
         E.joints->store_B(E.T, E.Hn, E.joints->Bnu);
@@ -190,8 +246,8 @@ NB_MODULE(_engine, m) {
            nb::keep_alive<1, 2>())
       .def(
           "step",
-          [](Stepper& S, DArr Hn, DArr alpha_n, DArr v_n, DArr vd_n, DArr a_n, DArr lam_n,
-             DArr u, double h, double am, double af, double g, double b, double tol_r,
+          [](Stepper& S, CArr Hn, CArr alpha_n, CArr v_n, CArr vd_n, CArr a_n, CArr lam_n,
+             CArr u, double h, double am, double af, double g, double b, double tol_r,
              double ltol, double lscale, int max_iter, bool reuse, double kmax, DArr H,
              DArr alpha, DArr v, DArr vd, DArr a, DArr lam, DArr n) {
             Engine& E = *S.E;
@@ -210,7 +266,7 @@ NB_MODULE(_engine, m) {
           })
       .def(
           "solve_values",
-          [](Stepper& S, DArr vals, DArr rhs) {
+          [](Stepper& S, CArr vals, DArr rhs) {
             // factorise the matrix of the values (pattern order; dropped equations replaced by
             // the identity) and solve in place: 0, or the LU's nonzero status
             if (vals.size() != S.vals.size()) throw std::invalid_argument("solve_values: vals");
@@ -222,7 +278,7 @@ NB_MODULE(_engine, m) {
           })
       .def(
           "run",
-          [](Stepper& S, DArr times, int i0, int i1, int last, DArr U, int output_every,
+          [](Stepper& S, CArr times, int i0, int i1, int last, CArr U, int output_every,
              double am, double af, double g, double b, double tol_r, double ltol, double lscale,
              int max_iter, bool reuse, double kmax, DArr H, DArr alpha, DArr v, DArr vd, DArr a,
              DArr lam, DArr acc, DArr rt, DArr rH, DArr rv, DArr rvd, DArr rlam, DArr ralpha,

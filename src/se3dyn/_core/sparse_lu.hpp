@@ -461,6 +461,9 @@ class SparseLU {
     // to analyze, the ordering also ignores them.
     bool drop_zeros = false;
     double drop_tol = 0.0;
+    // analyze without values: the ordering is computed by the first factor, with its values
+    // (weak blocks, see analyze). Off: analyze computes the pattern-only ordering.
+    bool order_with_values = true;
   };
 
   // Status of the last factor / refactor.
@@ -485,7 +488,8 @@ class SparseLU {
   // (optional, in CSC order: typical values, e.g. those of the first factor): blocks with a
   // numerically singular diagonal block wait in the ordering until a neighbour is eliminated
   // (see above), and with drop_zeros the zero entries are left out of the ordering's graph.
-  // The pattern is copied. Returns 0, or -1 for an invalid pattern (then factor fails with
+  // Without values (and Options::order_with_values, the default) the ordering is left to the
+  // first factor, which does the same with its values. The pattern is copied. Returns 0, or -1 for an invalid pattern (then factor fails with
   // kNotAnalyzed).
   int analyze(int n, const int* colptr, const int* rowind, const int* group = nullptr,
               const double* values = nullptr);
@@ -517,7 +521,9 @@ class SparseLU {
   int n() const { return n_; }
   bool ok() const { return valid_; }
   Status status() const { return status_; }
-  // Ordering (column order Q: step k eliminates column col_perm()[k]) and row pivots.
+  // Ordering (column order Q: step k eliminates column col_perm()[k]; computed by analyze, or
+  // by the first factor when analyze had no values and order_with_values is set) and the row
+  // pivots of the last factor.
   const std::vector<int>& col_perm() const { return Q_; }
   const std::vector<int>& row_perm() const { return P_; }
   // Number of entries of L and of U including their diagonals (as SuperLU counts them):
@@ -545,6 +551,7 @@ class SparseLU {
 
  private:
   int dfs(int j, int stamp, int top, int* xi, int* pstack);
+  void compute_ordering(const double* values);
   void find_supernodes();
   void count_flops() {
     flops_ = 0;
@@ -561,7 +568,11 @@ class SparseLU {
   bool analyzed_ = false, valid_ = false, have_pattern_ = false;
   Status status_ = kNotAnalyzed;
   std::vector<int> colptr_, rowind_;  // the pattern of analyze
-  std::vector<int> blk_;              // block (group) of every unknown; empty without groups
+  std::vector<int> blk_;              // block of every unknown (0..nb_-1; unknown i without groups)
+  std::vector<int> bp_, bm_;          // members of block b: bm_[bp_[b] .. bp_[b+1]), increasing
+  int nb_ = 0;
+  bool grouped_ = false;              // groups given: pivots inside the block are preferred
+  bool ordered_with_values_ = false;  // the ordering has seen values (see order_with_values)
   std::vector<int> Q_, P_, pinv_;
   std::vector<int> Lp_, Li_, Up_, Ui_;
   std::vector<double> Lx_, Ux_, Ud_;
@@ -619,15 +630,55 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
     std::vector<int> c(bp.begin(), bp.end() - 1);
     for (int i = 0; i < n; ++i) bm[c[blk[i]]++] = i;
   }
+  blk_.swap(blk);
+  bp_.swap(bp);
+  bm_.swap(bm);
+  nb_ = nb;
+  grouped_ = group != nullptr;
+  ordered_with_values_ = false;
+  if (values || !opt_.order_with_values) {
+    compute_ordering(values);
+  } else {  // deferred to the first factor, which has values
+    Q_.resize(n);
+    for (int k = 0; k < n; ++k) Q_[k] = k;
+  }
+  // --- storage of the numeric phases
+  P_.assign(n, -1);
+  pinv_.assign(n, -1);
+  Lp_.assign(n + 1, 0);
+  Up_.assign(n + 1, 0);
+  Ud_.assign(n, 0.0);
+  Rp_.assign(n + 1, 0);
+  mark_.assign(n, -1);
+  xi_.assign(n, 0);
+  pstack_.assign(n, 0);
+  work_.assign(n, 0.0);
+  xwork_.assign(n, 0.0);
+  rwork_.assign(n, 0.0);
+  analyzed_ = true;
+  return 0;
+}
+
+// The ordering Q (called by analyze, and by the first factor when analyze had no values and
+// Options::order_with_values is set): AMD on the block graph of A + A^T, see analyze.
+inline void SparseLU::compute_ordering(const double* values) {
+  const int n = n_;
+  const int nb = nb_;
+  const int* cp = colptr_.data();
+  const int* ri = rowind_.data();
+  const int nz = cp[n];
+  const std::vector<int>& blk = blk_;
+  const std::vector<int>& bp = bp_;
+  const std::vector<int>& bm = bm_;
   // --- block graph of A + A^T without self loops: pattern of A^T first (row lists)
   std::vector<int> Tp(n + 1, 0), Ti(nz), Tv(values ? nz : 0);  // Tv: position in A's arrays
-  for (int p = 0; p < nz; ++p) ++Tp[rowind[p] + 1];
+  for (int p = 0; p < nz; ++p) ++Tp[ri[p] + 1];
   for (int i = 0; i < n; ++i) Tp[i + 1] += Tp[i];
   {
     std::vector<int> c(Tp.begin(), Tp.end() - 1);
     for (int j = 0; j < n; ++j)
-      for (int p = colptr[j]; p < colptr[j + 1]; ++p) {
-        const int q = c[rowind[p]]++;
+      for (int p = cp[j]; p < cp[j + 1]; ++p) {
+        const int q = c[ri[p]]++;
         Ti[q] = j;
         if (values) Tv[q] = p;
       }
@@ -636,7 +687,7 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
   if (values && opt_.drop_zeros) {
     colmax.assign(n, 0.0);
     for (int j = 0; j < n; ++j)
-      for (int p = colptr[j]; p < colptr[j + 1]; ++p)
+      for (int p = cp[j]; p < cp[j + 1]; ++p)
         colmax[j] = std::max(colmax[j], std::fabs(values[p]));
   }
   const double dtol = opt_.drop_tol;
@@ -646,9 +697,9 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
     seen[b] = b;
     for (int t = bp[b]; t < bp[b + 1]; ++t) {
       const int j = bm[t];
-      for (int p = colptr[j]; p < colptr[j + 1]; ++p) {
+      for (int p = cp[j]; p < cp[j + 1]; ++p) {
         if (!colmax.empty() && std::fabs(values[p]) <= dtol * colmax[j]) continue;
-        const int c = blk[rowind[p]];
+        const int c = blk[ri[p]];
         if (seen[c] != b) {
           seen[c] = b;
           Ci.push_back(c);
@@ -686,8 +737,8 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
         for (int q = bp[b]; q < bp[b + 1] && !weak[b]; ++q) {
           const int j = bm[q];
           double d = 0.0;
-          for (int p = colptr[j]; p < colptr[j + 1]; ++p)
-            if (rowind[p] == j) d += values[p];
+          for (int p = cp[j]; p < cp[j + 1]; ++p)
+            if (ri[p] == j) d += values[p];
           if (d == 0.0) weak[b] = 1;
         }
         continue;
@@ -696,8 +747,8 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
       double dmax = 0.0;
       for (int q = bp[b]; q < bp[b + 1]; ++q) {
         const int j = bm[q];
-        for (int p = colptr[j]; p < colptr[j + 1]; ++p)
-          if (blk[rowind[p]] == b) D[loc[rowind[p]] * sb + loc[j]] += values[p];
+        for (int p = cp[j]; p < cp[j + 1]; ++p)
+          if (blk[ri[p]] == b) D[loc[ri[p]] * sb + loc[j]] += values[p];
       }
       for (const double v : D) dmax = std::max(dmax, std::fabs(v));
       bool singular = !(dmax > 0.0);
@@ -729,25 +780,7 @@ inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const 
     const int b = bperm[t];
     for (int q = bp[b]; q < bp[b + 1]; ++q) Q_[k++] = bm[q];
   }
-  if (group)
-    blk_.swap(blk);
-  else
-    blk_.clear();
-  // --- storage of the numeric phases
-  P_.assign(n, -1);
-  pinv_.assign(n, -1);
-  Lp_.assign(n + 1, 0);
-  Up_.assign(n + 1, 0);
-  Ud_.assign(n, 0.0);
-  Rp_.assign(n + 1, 0);
-  mark_.assign(n, -1);
-  xi_.assign(n, 0);
-  pstack_.assign(n, 0);
-  work_.assign(n, 0.0);
-  xwork_.assign(n, 0.0);
-  rwork_.assign(n, 0.0);
-  analyzed_ = true;
-  return 0;
+  ordered_with_values_ = values != nullptr;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -794,6 +827,7 @@ inline int SparseLU::factor(const double* values) {
     status_ = kNotAnalyzed;
     return 1;
   }
+  if (!ordered_with_values_ && opt_.order_with_values) compute_ordering(values);
   const int n = n_;
   const bool drop = opt_.drop_zeros;
   const double tol = opt_.pivot_tol;
@@ -877,7 +911,7 @@ inline int SparseLU::factor(const double* values) {
     }
     if (pinv_[c] < 0 && mark_[c] == k && std::fabs(x[c]) >= tol * cmax) {
       ipiv = c;
-    } else if (!blk_.empty()) {
+    } else if (grouped_) {
       // no usable diagonal: prefer the largest candidate of the column's own block (a pivot
       // inside the diagonal block keeps the block structure that the ordering assumed)
       const int bc = blk_[c];
