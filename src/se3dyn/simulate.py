@@ -358,8 +358,8 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times: np.ndarr
         chunk = max(1, min(4 * chunk, int(chunk * 0.1 / max(dt, 1e-6))))
     st = State(t=float(acc[7]), H=H[:s.M].copy(), HJ=H[s.M:].copy(), v=v.copy(), vd=vd.copy(),
                a=a.copy(), lam=lam.copy(), alpha=alpha.copy(), work_act=float(acc[3]),
-               work_ext=float(acc[4]), dissipated=float(acc[5]), power=acc[:3].copy(), dropped=st.dropped,
-               h_last=float(acc[6]))
+               work_ext=float(acc[4]), dissipated=float(acc[5]), power=acc[:3].copy(),
+               dropped=st.dropped, h_last=float(acc[6]))
     return st, i, fac
 
 
