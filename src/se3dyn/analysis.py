@@ -16,8 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from se3dyn._lazy import LazyModule
-from se3dyn.integrator import step_inputs
-from se3dyn.system import LinearSolver, System, evaluate
+from se3dyn.system import LinearSolver, System, evaluate, step_inputs
 
 sla = LazyModule("scipy.linalg")
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from se3dyn import lie
 from se3dyn.errors import ModelError, NewtonError, SimulationError
-from se3dyn.system import LinearSolver, System, evaluate
+from se3dyn.system import LinearSolver, System, evaluate, input_table, step_inputs
 
 __all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "input_table", "energies",
            "interpolate"]
@@ -116,76 +116,6 @@ class StepInfo:
     energies: dict | None = None
     increment: np.ndarray | None = None
     error: np.ndarray | None = None
-
-
-def _sample(f, t: float, shape: tuple[int, ...], item: str, what: str) -> np.ndarray:
-    """Evaluate a time function, checking shape and finiteness, naming the item on failure."""
-    try:
-        val = np.asarray(f(t), dtype=float)
-        val = np.broadcast_to(val, shape)
-    except Exception as exc:  # user callables may raise anything
-        raise SimulationError(f"t={t:.9g}: {item}: {what} could not be evaluated to "
-                              f"{shape[0]} component(s): {type(exc).__name__}: {exc}") from None
-    if not np.all(np.isfinite(val)):
-        raise SimulationError(f"t={t:.9g}: {item}: {what} returned a non-finite value {val}")
-    return val
-
-
-def step_inputs(s: System, t: float) -> dict:
-    """Time-dependent inputs at time t.
-
-    Returns
-    -------
-    dict
-        ``u`` (nu,): gravity, load forces and torques, actuator values, PD targets and target
-        rates in the slots of :class:`se3dyn.system._Inputs` (what the element kernels read).
-
-    Raises
-    ------
-    SimulationError
-        When a time function fails, changes size or returns a non-finite value (naming it).
-    """
-    ins = s.inputs
-    u = np.zeros(ins.nu)
-    u[:3] = ins.gravity
-    for slot, k, tf, item, what, rate in ins.sources:
-        u[slot:slot + k] = _sample(tf.rate if rate else tf, t, (k,), item, what)
-    return dict(u=u)
-
-
-def input_table(s: System, times: np.ndarray) -> tuple[np.ndarray, int]:
-    """The inputs ``u`` of :func:`step_inputs` at many times, (nt, nu), one vectorised
-    evaluation per time function (:meth:`se3dyn.timefunc.TimeFunction.sample`); where that is
-    not possible, time by time. Returns the table and the number of leading rows filled: less
-    than nt when a time function fails at ``times[n_ok]`` (the step to that time then
-    reports the error, naming the function)."""
-    ins = s.inputs
-    nt = len(times)
-    U = np.zeros((nt, ins.nu))
-    U[:, :3] = ins.gravity
-    slow = []
-    for src in ins.sources:
-        slot, k, tf, _item, _what, rate = src
-        fn = getattr(tf, "sample_rate" if rate else "sample", None)
-        try:
-            val = np.asarray(fn(times), dtype=float).reshape(nt, -1)
-            val = np.broadcast_to(val, (nt, k))
-            ok = bool(np.all(np.isfinite(val)))
-        except Exception:  # user code: anything; the per-time path names the failure
-            ok = False
-        if ok:
-            U[:, slot:slot + k] = val
-        else:
-            slow.append(src)
-    if not slow:
-        return U, nt
-    for row, t in enumerate(times):
-        try:
-            for slot, k, tf, item, what, rate in slow:
-                U[row, slot:slot + k] = _sample(tf.rate if rate else tf, t, (k,), item, what)
-        except SimulationError:
-            return U, row
-    return U, nt
 
 
 def energies(s: System, st: State, inputs: dict) -> dict:

@@ -36,10 +36,9 @@ import numpy as np
 from se3dyn import lie
 from se3dyn._lazy import LazyModule
 from se3dyn.errors import ModelError, SimulationError
-from se3dyn.integrator import step_inputs
 from se3dyn.model import Model
 from se3dyn.results import node_dofs
-from se3dyn.system import LinearSolver, System, compile_model, evaluate, matrix_values
+from se3dyn.system import LinearSolver, System, compile_model, evaluate, matrix_values, step_inputs
 from se3dyn.timefunc import (
     Callable,
     Component,

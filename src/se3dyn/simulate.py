@@ -313,7 +313,8 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times: np.ndarr
     reached, the number of steps done (less than ``len(times)`` when a step failed) and the
     factorisations. Progress is reported and stored rows are streamed between chunks of
     steps that last about 0.1 s each."""
-    from se3dyn.integrator import KMAX, _stepper, input_table
+    from se3dyn.integrator import KMAX, _stepper
+    from se3dyn.system import input_table
 
     nsteps = len(times)
     U, n_ok = input_table(s, times)

@@ -32,7 +32,6 @@ import numpy as np
 
 from se3dyn._lazy import LazyModule
 from se3dyn.errors import ModelError, SimulationError
-from se3dyn.integrator import step_inputs
 from se3dyn.kinematics import (
     _RCOND,
     _Accessors,
@@ -47,7 +46,7 @@ from se3dyn.kinematics import (
     _unknown_scale,
 )
 from se3dyn.model import Model
-from se3dyn.system import System, evaluate
+from se3dyn.system import System, evaluate, step_inputs
 
 sla = LazyModule("scipy.linalg")
 

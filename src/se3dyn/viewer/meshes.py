@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from se3dyn.viewer.shapes import ViewerError
+from se3dyn.viewer.errors import ViewerError
 
 __all__ = ["find_mesh", "load_mesh"]
 

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from se3dyn.errors import Se3dynError
+from se3dyn.viewer.errors import ViewerError
 
 __all__ = ["Part", "Scene", "ViewerError", "build_scene", "equivalent_box", "PALETTE",
            "resolve_model"]
@@ -56,9 +56,6 @@ MIN_ASPECT = 0.08
 ROLES = ("body", "visual", "joint", "link", "ground")
 
 
-class ViewerError(Se3dynError, ValueError):
-    """Bad input to the viewer (missing mesh file, unknown channel, model not matching the
-    results); the message is one line naming the item, the field, what was expected and got."""
 
 
 @dataclass(frozen=True)
