@@ -34,24 +34,11 @@ __all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "input_table"
 KMAX = 8.0
 
 
-def _stepper(s: System, index2: bool, dropped: np.ndarray):
-    """The compiled Newton stepper of a system for one formulation and one set of dropped
-    (redundant) equations, with its sparse LU analysed once (cached on the system)."""
-    from se3dyn.system import _core, _engine, pattern
+def _stepper(s: System, index2: bool, dropped: np.ndarray, ws=None):
+    """The compiled Newton stepper of a workspace (the system's default one)."""
+    from se3dyn.system import workspace
 
-    key = ("stepper", bool(index2), dropped.tobytes())
-    stp = s.pattern.get(key)
-    if stp is None:
-        eng, lay = _engine(s)
-        p = pattern(s, index2)
-        drop = np.zeros(s.nm, np.int64)
-        drop[dropped] = 1
-        groups = lay.groups2 if index2 else lay.groups3
-        stp = _core().Stepper(eng, bool(index2), int(p["N"]), p["indptr"].astype(np.int64),
-                              p["indices"].astype(np.int64), p["inv"].astype(np.int64),
-                              np.ascontiguousarray(groups, np.int64), drop)
-        s.pattern[key] = stp
-    return stp
+    return (ws or workspace(s)).stepper(index2, dropped)
 
 
 @dataclass(frozen=True)
@@ -118,7 +105,7 @@ class StepInfo:
     error: np.ndarray | None = None
 
 
-def energies(s: System, st: State, inputs: dict) -> dict:
+def energies(s: System, st: State, inputs: dict, ws=None) -> dict:
     """Kinetic, gravity-potential and elastic energy of a state, and the three powers, from
     the element kernels.
 
@@ -129,7 +116,7 @@ def energies(s: System, st: State, inputs: dict) -> dict:
     dissipation).
     """
     z = np.zeros(s.nq)
-    ev = evaluate(s, st.H, st.HJ, st.alpha, z, st.v, z, st.lam, inputs, full_alpha=False)
+    ev = evaluate(s, st.H, st.HJ, st.alpha, z, st.v, z, st.lam, inputs, full_alpha=False, ws=ws)
     e = ev.energy
     return dict(kinetic=float(e[0]), potential=float(e[1]), spring=float(e[2]),
                 power=e[3:6].copy())
@@ -235,7 +222,8 @@ class GeneralizedAlpha:
         return am, af, g, b
 
     # -----------------------------------------------------------------------------------------
-    def init(self, s: System, t0: float = 0.0, solver: LinearSolver | None = None) -> State:
+    def init(self, s: System, t0: float = 0.0, solver: LinearSolver | None = None,
+             ws=None) -> State:
         """Initial state: frames from the model, velocities made consistent with the velocity
         constraints, consistent accelerations and multipliers at t0 (Eqs. (36)-(37)).
 
@@ -260,16 +248,17 @@ class GeneralizedAlpha:
         inputs = step_inputs(s, t0)
         zero = np.zeros(nq)
         lam0 = np.zeros(nm)
-        ev = evaluate(s, H, HJ, zero, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0), accel=True)
+        ev = evaluate(s, H, HJ, zero, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0), accel=True,
+                      ws=ws)
         if nm and np.any(v != 0):
             v = self._project_velocity(s, LinearSolver(s, drop=dropped), ev.values, v)
             ev = evaluate(s, H, HJ, zero, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0),
-                          accel=True)
+                          accel=True, ws=ws)
         # [M Phi_q^T; Phi_q 0][vd; lam] = [-r; arhs] with the acceleration-level constraints
         # Phi_q vd = arhs (the time derivative of Phi_q v = 0), by the compiled sparse LU
         rhs = np.concatenate([-ev.r, ev.arhs])
         rhs[nq + dropped] = 0.0
-        code = _stepper(s, False, dropped).solve_values(ev.values, rhs)
+        code = _stepper(s, False, dropped, ws).solve_values(ev.values, rhs)
         if code != 0 or not np.all(np.isfinite(rhs)):
             raise SimulationError(
                 f"t={t0:.6g} (initial accelerations): the iteration matrix is singular; typical "
@@ -316,7 +305,7 @@ class GeneralizedAlpha:
 
     # -----------------------------------------------------------------------------------------
     def step(self, s: System, st: State, h: float, solver: LinearSolver | None = None,
-             ) -> tuple[State, StepInfo]:
+             ws=None) -> tuple[State, StepInfo]:
         """Advance one step of size h; raises :class:`NewtonError` when Newton fails.
 
         The Newton iterations run in the compiled engine (``se3dyn/_core/newton.hpp``, one
@@ -325,7 +314,8 @@ class GeneralizedAlpha:
         Velocities and accelerations follow the part ``m = n - B_n^T xi`` of the increment:
         ``dv = gamma' dm``, ``dvd = beta' dm``. Rows: dynamics / beta' (Eq. (39)), constraints
         (Eq. (40)) and, for index 2, velocity constraints / gamma'; all O(1) whatever h.
-        ``solver`` is accepted for compatibility and not used.
+        ``solver`` is accepted for compatibility and not used; ``ws`` is the
+        :class:`~se3dyn.system.Workspace` of the run (the system's default one otherwise).
         """
         am, af, g, b = self.params
         t1 = st.t + h
@@ -339,7 +329,7 @@ class GeneralizedAlpha:
         a_n = st.a
         if st.h_last > 0 and h != st.h_last:
             a_n = st.vd + (h / st.h_last) * (st.a - st.vd)
-        stp = _stepper(s, self.index2, st.dropped)
+        stp = _stepper(s, self.index2, st.dropped, ws)
         F = s.M + s.m
         Hall = np.ascontiguousarray(np.concatenate([st.H, st.HJ]).reshape(F, 4, 4))
         Hout = np.empty_like(Hall)
@@ -355,7 +345,7 @@ class GeneralizedAlpha:
         if status != 0:
             stab = dict(cv=b * h / g) if (self.index2 and nm) else None
             ev = evaluate(s, st.H, st.HJ, st.alpha, n, v, vd, lam, inputs, full_alpha=False,
-                          velocity=stab is not None)
+                          velocity=stab is not None, ws=ws)
             why = {1: "the iterate became non-finite",
                    2: f"no convergence within max_iter={self.max_iter} iterations",
                    3: "Newton is diverging (try a smaller step or rho_inf < 1)",
@@ -371,7 +361,7 @@ class GeneralizedAlpha:
         err = (b - 1.0 / 6.0) * h * h * (a - a_n)
         new = State(t=t1, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
                     dropped=st.dropped, h_last=h)
-        e = energies(s, new, inputs)
+        e = energies(s, new, inputs, ws)
         p = e["power"]
         # trapezoidal accumulation of the powers (second order, like the integrator)
         new = dataclasses.replace(new, power=p,
@@ -405,7 +395,8 @@ class GeneralizedAlpha:
                           constraint_norm=float(np.nanmax(phi, initial=0.0)), item=item)
 
 
-def interpolate(s: System, st0: State, st1: State, n: np.ndarray, theta: float) -> State:
+def interpolate(s: System, st0: State, st1: State, n: np.ndarray, theta: float,
+                ws=None) -> State:
     """State at ``t0 + theta h`` inside a converged step (dense output), ``0 <= theta <= 1``.
 
     Positions: a cubic Hermite curve in the increment space of each node and joint,
@@ -456,7 +447,7 @@ def interpolate(s: System, st0: State, st1: State, n: np.ndarray, theta: float) 
     # coordinates at n = 0 from the interpolated frames; abelian ones are kept)
     z = np.zeros(s.nq)
     alpha = evaluate(s, H, HJ, alpha, z, z, z, np.zeros(s.nm), dict(u=np.zeros(s.inputs.nu)),
-                     full_alpha=True).alpha
+                     full_alpha=True, ws=ws).alpha
     v = h00 * st0.v + h10 * h * st0.vd + h01 * st1.v + h11 * h * st1.vd
     lin = lambda x0, x1: (1 - th) * x0 + th * x1  # noqa: E731
     return State(t=st0.t + th * h, H=H, HJ=HJ, v=v, vd=lin(st0.vd, st1.vd),

@@ -15,7 +15,7 @@ from se3dyn.errors import ModelError, NewtonError, SimulationError
 from se3dyn.integrator import GeneralizedAlpha, State, energies, interpolate, step_inputs
 from se3dyn.model import Model
 from se3dyn.results import Results
-from se3dyn.system import System, compile_model
+from se3dyn.system import System, Workspace, compile_model
 
 __all__ = ["simulate", "SCALARS"]
 
@@ -194,9 +194,10 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         capacity = max(1, math.ceil(span / step - 1e-9)) // output_every + 2
     rec = _Recorder(s, capacity, on_output)
     wall0 = time.perf_counter()
-    st = integ.init(s, t_start)
+    ws = Workspace(s)  # this run's engine and steppers, shared with no other run
+    st = integ.init(s, t_start, ws=ws)
     solver = integ.solver(s, st)
-    e = energies(s, st, step_inputs(s, t_start))
+    e = energies(s, st, step_inputs(s, t_start), ws)
     rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
     gi = 1  # next grid time to fill
     stats = dict(steps=0, rejected=0, newton_iterations=0, rho_inf=rho_inf, step=step,
@@ -213,7 +214,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     def fail(exc: SimulationError):
         stats.update(steps=i, failed=True, wall_time=time.perf_counter() - wall0)
         if grid is None and rec.n and rec.t[rec.n - 1] != st.t:
-            e = energies(s, st, step_inputs(s, st.t))
+            e = energies(s, st, step_inputs(s, st.t), ws)
             rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
         exc.result = rec.results(stats)
         raise exc
@@ -226,11 +227,11 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         # GeneralizedAlpha.step, which raises the error naming time, norms and item
         times = np.array([t_start + (k + 1) * step if k + 1 < nsteps else t_end
                           for k in range(nsteps)])
-        st, i, fac = _run_compiled(s, integ, st, times, output_every, rec, progress, stats)
+        st, i, fac = _run_compiled(s, integ, st, times, output_every, rec, progress, stats, ws)
         stats["factorizations"] = fac
         if i < nsteps:
             try:
-                integ.step(s, st, times[i] - st.t, solver)
+                integ.step(s, st, times[i] - st.t, solver, ws)
             except SimulationError as exc:
                 fail(exc)
             raise AssertionError("the compiled step failed but GeneralizedAlpha.step converged")
@@ -244,7 +245,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             if t_end - st.t - h < 1e-9 * h:
                 h = t_end - st.t
             try:
-                new, info = integ.step(s, st, h, solver)
+                new, info = integ.step(s, st, h, solver, ws)
             except SimulationError as exc:
                 if not isinstance(exc, NewtonError):
                     fail(exc)
@@ -273,7 +274,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             t1 = t_start + (i + 1) * step if i + 1 < nsteps else t_end
             h = t1 - st.t
             try:
-                new, info = integ.step(s, st, h, solver)
+                new, info = integ.step(s, st, h, solver, ws)
             except SimulationError as exc:
                 fail(exc)
         new = dataclasses.replace(new, t=t1)  # exact times, no drift
@@ -288,8 +289,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                     out = new
                 else:
                     out = dataclasses.replace(
-                        interpolate(s, st, new, info.increment, (tg - st.t) / h), t=tg)
-                ei = energies(s, out, step_inputs(s, tg))
+                        interpolate(s, st, new, info.increment, (tg - st.t) / h, ws), t=tg)
+                ei = energies(s, out, step_inputs(s, tg), ws)
                 out = dataclasses.replace(out, power=ei["power"])
                 rec.add(out, ei["kinetic"], ei["potential"], ei["spring"], info.iterations,
                         info.residual, info.constraint)
@@ -308,7 +309,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
 
 
 def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times: np.ndarray,
-                  output_every: int, rec: _Recorder, progress, stats: dict):
+                  output_every: int, rec: _Recorder, progress, stats: dict, ws: Workspace):
     """Fixed steps to ``times`` in the compiled loop (``Stepper.run``); returns the state
     reached, the number of steps done (less than ``len(times)`` when a step failed) and the
     factorisations. Progress is reported and stored rows are streamed between chunks of
@@ -318,7 +319,7 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times: np.ndarr
 
     nsteps = len(times)
     U, n_ok = input_table(s, times)
-    stp = _stepper(s, integ.index2, st.dropped)
+    stp = _stepper(s, integ.index2, st.dropped, ws)
     F = s.M + s.m
     H = np.ascontiguousarray(np.concatenate([st.H, st.HJ]).reshape(F, 4, 4), dtype=float)
     c = lambda x: np.array(x, dtype=float)  # noqa: E731

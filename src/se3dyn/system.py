@@ -23,6 +23,7 @@ whose entries are O(1) whatever the step, so Newton converges alike for h = 1e-1
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -111,11 +112,16 @@ class LayoutCounts:
         return len(self.joint_names)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class System(LayoutCounts):
     """Frozen arrays describing a compiled model (see the module docstring for the numbering).
 
     Shapes: M nodes, m joints, nq unknowns, nm = 6 m multipliers, N = nq + nm.
+
+    ``pattern`` caches data derived from the system once and never changed after (the
+    :class:`se3dyn.assembly.Layout`, the CSC patterns, the redundant equations of the initial
+    configuration); scratch of a run lives in a :class:`Workspace`, apart. Systems compare and
+    hash by identity.
     """
 
     model: Model
@@ -473,17 +479,69 @@ def _core():
     return _CORE
 
 
-def _engine(s: System):
-    """The compiled engine of a system and its :class:`se3dyn.assembly.Layout` (built once)."""
-    if "engine" not in s.pattern:
+def layout_of(s: System):
+    """The :class:`se3dyn.assembly.Layout` of a system (built once, then only read)."""
+    lay = s.pattern.get("layout")
+    if lay is None:
         from se3dyn.assembly import layout
 
-        _engine = _core()
+        lay = s.pattern["layout"] = layout(s)
+    return lay
 
-        lay = layout(s)
-        s.pattern["layout"] = lay
-        s.pattern["engine"] = _engine.Engine(lay.tables)
-    return s.pattern["engine"], s.pattern["layout"]
+
+class Workspace:
+    """The scratch of a run: the compiled engine of a system (its element batches with their
+    work arrays) and the Newton steppers (sparse LU factors) by formulation and set of dropped
+    equations. One per run (:func:`se3dyn.simulate` makes its own), so runs of one system never
+    share work arrays; :func:`workspace` gives a default one for one-off evaluations.
+
+    Parameters
+    ----------
+    s : System
+    """
+
+    def __init__(self, s: System) -> None:
+        self.s = s
+        self.layout = layout_of(s)
+        self.engine = _core().Engine(self.layout.tables)
+        self._steppers: dict = {}
+
+    def stepper(self, index2: bool, dropped: np.ndarray):
+        """The compiled Newton stepper for one formulation and one set of dropped (redundant)
+        equations, its sparse LU analysed on first use."""
+        key = (bool(index2), np.asarray(dropped, np.int64).tobytes())
+        stp = self._steppers.get(key)
+        if stp is None:
+            s = self.s
+            p = pattern(s, index2)
+            drop = np.zeros(s.nm, np.int64)
+            drop[np.asarray(dropped, np.int64)] = 1
+            lay = self.layout
+            groups = lay.groups2 if index2 else lay.groups3
+            stp = _core().Stepper(self.engine, bool(index2), int(p["N"]),
+                                  p["indptr"].astype(np.int64), p["indices"].astype(np.int64),
+                                  p["inv"].astype(np.int64),
+                                  np.ascontiguousarray(groups, np.int64), drop)
+            self._steppers[key] = stp
+        return stp
+
+
+_DEFAULT_WS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def workspace(s: System) -> Workspace:
+    """The default :class:`Workspace` of a system, for evaluations outside a run (statics,
+    kinematics, analysis, tests); not for concurrent use (give each run its own)."""
+    ws = _DEFAULT_WS.get(s)
+    if ws is None:
+        ws = _DEFAULT_WS[s] = Workspace(s)
+    return ws
+
+
+def _engine(s: System, ws: Workspace | None = None):
+    """The compiled engine of a workspace (the system's default one) and the layout."""
+    ws = ws or workspace(s)
+    return ws.engine, ws.layout
 
 
 def _pattern(s: System, index2: bool = False) -> dict:
@@ -503,7 +561,7 @@ def _pattern(s: System, index2: bool = False) -> dict:
 
 def pattern_entries(s: System, index2: bool = False) -> tuple:
     """(N, rows, cols): the matrix size and the row and column (nvals,) of every value."""
-    _, lay = _engine(s)
+    lay = layout_of(s)
     N = s.nq + (2 * s.nm if index2 else s.nm)
     if index2:
         return N, lay.rows2, lay.cols2
@@ -552,7 +610,7 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
              v: np.ndarray, vd: np.ndarray, lam: np.ndarray, inputs: dict,
              coef: tuple[float, float, float] | None = None, *,
              full_alpha: bool = True, velocity: bool = False, stab: dict | None = None,
-             accel: bool = False) -> Evaluation:
+             accel: bool = False, ws: Workspace | None = None) -> Evaluation:
     """Evaluate the residual, the constraints and (if ``coef``) the scaled iteration matrix by
     the element kernels of the compiled engine (one implementation, :mod:`se3dyn.assembly`).
 
@@ -583,12 +641,14 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
     accel : bool
         Also evaluate the right-hand side ``arhs`` (nm,) of the acceleration-level constraints
         ``Phi_q vd = arhs`` (the time derivative of ``Phi_q v = 0``).
+    ws : Workspace, optional
+        The workspace whose engine evaluates (the system's default one otherwise).
 
     Returns
     -------
     Evaluation
     """
-    eng, lay = _engine(s)
+    eng, lay = _engine(s, ws)
     F = s.M + s.m
     Hall = np.ascontiguousarray(np.concatenate([Hn, HJn]).reshape(F, 4, 4), dtype=float)
     Hout = np.empty_like(Hall)
