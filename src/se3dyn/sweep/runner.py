@@ -181,8 +181,12 @@ def _check_definition(out: Path, definition: dict, resume: bool) -> dict | None:
     diff = [k for k in keys if old.get(k) != definition.get(k)]
     if diff:
         k = diff[0]
-        what = {"model_sha256": "the model file (with the run-time overrides)"}.get(k, k)
-        raise SweepSpecError(f"--resume --out {out}", k, f"the same {what} as the stored sweep "
+        if k == "model_sha256":
+            raise SweepSpecError(f"--resume --out {out}", "model", "the model file and run-time "
+                                 "overrides of the stored sweep (sha256 "
+                                 f"{str(old.get(k))[:12]}...)",
+                                 f"sha256 {definition[k][:12]}...")
+        raise SweepSpecError(f"--resume --out {out}", k, f"the same {k} as the stored sweep "
                              f"({old.get(k)!r})", definition.get(k))
     return old
 
@@ -248,7 +252,7 @@ def _client(scheduler: str | None, workers: int | None):
     if not (isinstance(n, int) and n >= 1):
         raise SweepSpecError("--workers", "workers", "a positive number of worker processes", n)
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           dashboard_address=None, host="127.0.0.1",
+                           dashboard_address=":0", host="127.0.0.1",
                            silence_logs=logging.ERROR)
     return Client(cluster), cluster, f"LocalCluster of {n} worker processes"
 

@@ -161,7 +161,8 @@ def parse_spec(text: str, item: str = "--vary") -> ValueSpec:
         vals = tuple(_scalar(t) for t in toks)
     except ValueError:
         raise SweepSpecError(item, "spec", _SPEC_HELP, text) from None
-    if any(isinstance(v, float) and not math.isfinite(v) for v in vals):
+    if any((isinstance(v, float) and not math.isfinite(v)) or (isinstance(v, str) and v.lower()
+           in ("nan", "inf", "infinity")) for v in vals):
         raise SweepSpecError(item, "spec", "finite numbers", text)
     return ValueSpec("list", vals, (), text)
 
