@@ -432,8 +432,8 @@ def execute_plan(plan: SweepPlan, *, workers: int | None = None, scheduler: str 
     if interrupted:
         raise SweepInterrupted(done, total, out_p)
     failed = sum(1 for r in rows.values() if r.get("status") != "ok")
-    say(f"  {total} runs: {total - failed} ok, {failed} failed; {len(todo)} run now in "
-        f"{wall:.1f} s")
+    say(f"  {total} runs: {total - failed} ok, {failed} failed ({len(todo)} executed in "
+        f"{wall:.1f} s)")
     return to_table([rows[i] for i in sorted(rows)], plan.cols, as_frame)
 
 
