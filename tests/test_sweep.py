@@ -191,6 +191,28 @@ def test_metrics_parse_and_time_averages():
     assert parse_metric("a=final(time)").evaluate(res) == 2.0
 
 
+def test_worker_model_cache_serves_simulation_only_variants():
+    """Runs that differ only in simulation settings reuse the worker's compiled model; their
+    settings are still validated by the model-file rules."""
+    from collections import OrderedDict
+
+    from se3dyn.sweep.execute import RunContext, execute_run
+    from se3dyn.sweep.metrics import parse_metric
+
+    ctx = RunContext(data=parse_model_data(PENDULUM), metrics=[parse_metric("e=final(time)")])
+    cache: OrderedDict = OrderedDict()
+    rows = [execute_run(ctx, i, {"joints.hinge.damping": 0.1, "simulation.step": h,
+                                 "simulation.t_end": 0.2}, cache)
+            for i, h in enumerate((0.01, 0.005, -0.01))]
+    assert len(cache) == 1
+    assert [r["status"] for r in rows] == ["ok", "ok", "failed"]
+    assert [r["steps"] for r in rows[:2]] == [20, 40] and rows[1]["e"] == 0.2
+    assert "simulation: field 'step': expected a finite number > 0, got -0.01" in \
+        rows[2]["message"]
+    other = execute_run(ctx, 3, {"joints.hinge.damping": -1.0, "simulation.step": 0.01}, cache)
+    assert other["status"] == "failed" and "field 'damping'" in other["message"]
+
+
 def test_core_never_imports_the_sweep_layer_and_se3dyn_sweep_is_callable():
     code = ("import sys, se3dyn, se3dyn.cli, se3dyn.h5; "
             "print(any(m.startswith(('se3dyn.sweep', 'distributed', 'dask')) "
@@ -215,7 +237,8 @@ def test_grid_sweep_damper_dampens_and_files_hold_each_runs_model(client, pendul
                                   "w=rms(joint/hinge/velocity/0)"],
                          out=out, client=client, as_frame=False)
     assert [r["run"] for r in table] == list(range(6))
-    assert all(r["status"] == "ok" and r["message"] == "" for r in table), table
+    assert all(r["status"] == "ok" and r["message"] == "" for r in table), \
+        [r["message"] for r in table]
     for h in (0.01, 0.005):
         rows = [r for r in table if r["simulation.step"] == h]
         assert [r["joints.hinge.damping"] for r in rows] == list(damping)

@@ -113,7 +113,7 @@ def _validated_settings(sim: dict, label: str) -> dict:
     """The simulation settings as ``loads_model`` returns them (validated by its rules)."""
     from se3dyn.modelfile import format_model_data, loads_model
 
-    doc = {"se3dyn": 1, "nodes": {"n": {}}, "simulation": sim}
+    doc = {"se3dyn": 1, "nodes": {"n": {"fixed": True}}, "simulation": sim}
     return loads_model(format_model_data(doc), filename=label)[1]
 
 

@@ -60,7 +60,11 @@ def _load_base(model) -> tuple[dict, str]:
     if isinstance(model, Model):
         return parse_model_data(save_model(model), filename=model.name), model.name
     if isinstance(model, Mapping):
-        data = json.loads(json.dumps(model))  # a plain deep copy; refuses non-data values
+        try:
+            data = json.loads(json.dumps(model))  # a plain deep copy; refuses non-data values
+        except (TypeError, ValueError) as exc:
+            raise SweepSpecError("model", "mapping", "plain model-file data (dicts, lists, "
+                                 "numbers, strings)", str(exc)) from None
         return parse_model_data(format_model_data(data), filename="<mapping>"), "<mapping>"
     if isinstance(model, bytes) or (isinstance(model, str) and "\n" in model):
         return parse_model_data(model, filename="<string>"), "<string>"
@@ -440,13 +444,12 @@ def execute_plan(plan: SweepPlan, *, workers: int | None = None, scheduler: str 
 def _collect(fut, i: int, plan: SweepPlan) -> dict:
     """The row of a finished future; a task that dask gave up on (e.g. its workers kept dying:
     KilledWorker) becomes a failed row."""
-    if fut.status == "finished":
-        try:
-            return fut.result()
-        except Exception as exc:  # noqa: BLE001 - lost between finish and fetch
-            err: Any = exc
-    else:
-        err = fut.exception()
+    try:
+        return fut.result()
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except BaseException as exc:  # noqa: BLE001 - KilledWorker, cancelled, lost: a failed row
+        err: Any = exc
     row: dict[str, Any] = {"run": i, **plan.runs[i], "status": "failed",
                            "message": " ".join(f"{type(err).__name__}: {err}".split()),
                            "wall_time": math.nan, "steps": 0, "newton_iterations": 0}

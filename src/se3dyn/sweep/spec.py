@@ -350,6 +350,8 @@ class Variable:
             return cls(str(path), parse_spec(spec, f"--vary {path}"))
         if isinstance(spec, (list, tuple, np.ndarray)):
             return cls(str(path), _spec_from_values(list(spec), f"vary[{path!r}]"))
+        if isinstance(spec, (int, float, np.integer, np.floating)):
+            return cls(str(path), _spec_from_values([spec], f"vary[{path!r}]"))
         raise SweepSpecError(f"vary[{path!r}]", "spec", "a spec text or a list of values", spec)
 
 
