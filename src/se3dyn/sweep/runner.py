@@ -354,7 +354,11 @@ def execute_plan(plan: SweepPlan, *, workers: int | None = None, scheduler: str 
     if out_p is not None:
         if out_p.exists() and not out_p.is_dir():
             raise SweepSpecError("--out", "out", "a folder", str(out_p))
-        _check_definition(out_p, plan.definition, resume)
+        stored = _check_definition(out_p, plan.definition, resume)
+        if resume and stored is None:
+            say(f"  nothing to resume in {out_p}: a new sweep")
+        if stored is None and (out_p / JOURNAL).exists():
+            (out_p / JOURNAL).unlink()  # rows of no known sweep
         try:
             (out_p / "runs").mkdir(parents=True, exist_ok=True)
         except OSError as exc:
