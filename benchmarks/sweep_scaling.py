@@ -168,6 +168,10 @@ def main(argv=None) -> int:
         "in_worker_seconds": inside,
         "dask_and_bookkeeping_1_worker": {
             h5: r[f"sweep_1_{h5}"] / inside[f"sweep_1_{h5}"] - 1 for h5 in ("shared", "none")},
+        # time in runs / wall time of the 2-worker sweeps: how many runs dask kept going at once
+        # (2 = both workers always busy; a speed-up below it is CPU taken by other processes)
+        "concurrency_2_workers": {
+            h5: inside[f"sweep_2_{h5}"] / r[f"sweep_2_{h5}"] for h5 in ("shared", "none")},
         "created": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
     pr = out["per_run_ms"]
@@ -187,6 +191,9 @@ def main(argv=None) -> int:
     print(f"  1 worker: dask + bookkeeping over the time spent in the runs: "
           f"{100 * out['dask_and_bookkeeping_1_worker']['shared']:+.1f} % (files), "
           f"{100 * out['dask_and_bookkeeping_1_worker']['none']:+.1f} % (no files)")
+    print(f"  2 workers: runs in progress at once (time in runs / wall time): "
+          f"{out['concurrency_2_workers']['shared']:.2f} (files), "
+          f"{out['concurrency_2_workers']['none']:.2f} (no files)")
     print(f"  cluster start-up (not counted): 1 worker {r['cluster_1_start']:.1f} s, "
           f"2 workers {r['cluster_2_start']:.1f} s")
     folder = Path(args.out)

@@ -312,7 +312,7 @@ def test_random_sweep_without_files_returns_the_table(client, pendulum):
     assert [{k: r[k] for k in plan[0]} for r in table] == plan
 
 
-def test_failing_variants_fail_alone_cli_with_own_cluster(pendulum, tmp_path, capsys):
+def test_failing_variants_fail_alone_cli_with_own_cluster(pendulum, tmp_path, capsys, client):
     out = tmp_path / "fail"
     rc = cli_main(["sweep", str(pendulum), "--vary", "joints.hinge.damping=0.1,-1",
                    "--vary", "simulation.step=0.01,0.5", "--metric", "e=final(energy/total)",
@@ -335,6 +335,17 @@ def test_failing_variants_fail_alone_cli_with_own_cluster(pendulum, tmp_path, ca
         assert "joint 'hinge': field 'damping': expected a finite number >= 0, got -1" in \
             bad["message"]
     assert all("\n" not in (r["message"] or "") for r in rows.values())
+    # failed runs count as finished for --resume; --retry-failed runs them (and only them) again
+    lines: list[str] = []
+    kw = dict(metrics=["e=final(energy/total)"], overrides={"t_end": 1.5}, out=out, resume=True,
+              client=client, as_frame=False, log=lines.append)
+    vary = ["joints.hinge.damping=0.1,-1", "simulation.step=0.01,0.5"]
+    se3dyn.sweep(pendulum, vary, **kw)
+    assert "  4 of 4 runs already done; 0 to run" in lines
+    again = se3dyn.sweep(pendulum, vary, retry_failed=True, **kw)
+    assert "  1 of 4 runs already done; 3 to run" in lines
+    assert [r["status"] for r in again] == ["ok", "failed", "failed", "failed"]
+    assert again[0]["wall_time"] == pytest.approx(good["wall_time"], rel=1e-12)
 
 
 def test_worker_killed_mid_sweep_summary_complete_without_duplicates(client, pendulum,

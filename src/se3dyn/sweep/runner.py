@@ -410,9 +410,9 @@ def execute_plan(plan: SweepPlan, *, workers: int | None = None, scheduler: str 
                         except OSError as exc:
                             row.update(status="failed", message=f"results file: {exc}",
                                        results="")
-                    rows[i] = row
                     if journal is not None:
-                        journal.append(row)
+                        journal.append(row)  # the marker first: a row in the summary is done
+                    rows[i] = row
                     prog.update(row["status"] != "ok")
                     fut.release()
             except KeyboardInterrupt:
