@@ -37,8 +37,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="model file (YAML)")
     p.add_argument("--vary", action="append", required=True, metavar="PATH=SPEC",
                    help="a model-file field and its values: V1,V2,... | START:STOP:N | "
-                        "uniform(A,B) | loguniform(A,B) | normal(MEAN,SD); repeat for more "
-                        "(e.g. joints.8.damping.0=0.5,1,2 simulation.step=1e-2,5e-3)")
+                        "uniform(A,B) | loguniform(A,B) | normal(MEAN,SD), e.g. "
+                        "joints.8.damping.0=0.5,1,2; repeat --vary for more paths (grid: "
+                        "every combination)")
     p.add_argument("--method", choices=("grid", "random", "lhs"), default="grid",
                    help="full grid of the lists/ranges (default), or --samples random or "
                         "Latin-hypercube points")
