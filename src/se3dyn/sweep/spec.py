@@ -40,7 +40,7 @@ import numpy as np
 from se3dyn.errors import ModelError
 
 __all__ = ["SweepSpecError", "ValueSpec", "parse_spec", "Variable", "check_path", "set_path",
-           "get_path", "plan_runs", "METHODS"]
+           "get_path", "plan_runs", "apply_values", "METHODS"]
 
 METHODS = ("grid", "random", "lhs")
 
