@@ -220,6 +220,12 @@ def test_core_never_imports_the_sweep_layer_and_se3dyn_sweep_is_callable():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "False"
+    code = ("import sys; from se3dyn.cli import build_parser; build_parser(); "
+            "print(sorted(m for m in sys.modules "
+            "if m.startswith(('se3dyn.sweep', 'distributed'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "['se3dyn.sweep', 'se3dyn.sweep.cli']"  # options only, no machinery
     import se3dyn.sweep as mod  # the package import keeps the function callable
 
     assert callable(se3dyn.sweep) and se3dyn.sweep is mod

@@ -26,16 +26,29 @@ otherwise a list of dicts, one per run, in column order; pandas is never require
 
 from __future__ import annotations
 
+import importlib
 import sys
 import types
 
-from se3dyn.sweep.metrics import Metric, parse_metric
-from se3dyn.sweep.runner import SweepInterrupted, prepare, run_sweep
-from se3dyn.sweep.spec import SweepSpecError, Variable, parse_spec, plan_runs
-from se3dyn.sweep.table import read_summary_csv
+__all__ = ["run_sweep", "prepare", "execute_plan", "SweepSpecError", "SweepInterrupted",
+           "Variable", "parse_spec", "plan_runs", "Metric", "parse_metric", "read_summary_csv"]
 
-__all__ = ["run_sweep", "prepare", "SweepSpecError", "SweepInterrupted", "Variable",
-           "parse_spec", "plan_runs", "Metric", "parse_metric", "read_summary_csv"]
+# names -> submodule: imported on first use (PEP 562), so that `se3dyn --help` or `se3dyn run`,
+# which declare the sweep's options through se3dyn.sweep.cli, load none of the sweep machinery
+_WHERE = {"run_sweep": "runner", "prepare": "runner", "execute_plan": "runner",
+          "SweepInterrupted": "runner", "SweepSpecError": "spec", "Variable": "spec",
+          "parse_spec": "spec", "plan_runs": "spec", "Metric": "metrics",
+          "parse_metric": "metrics", "read_summary_csv": "table"}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        return getattr(importlib.import_module(f"se3dyn.sweep.{_WHERE[name]}"), name)
+    raise AttributeError(f"module 'se3dyn.sweep' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
 
 
 class _CallableModule(types.ModuleType):
@@ -43,6 +56,8 @@ class _CallableModule(types.ModuleType):
     supported by Python since 3.5)."""
 
     def __call__(self, *args, **kwargs):
+        from se3dyn.sweep.runner import run_sweep
+
         return run_sweep(*args, **kwargs)
 
 
