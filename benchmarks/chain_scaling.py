@@ -10,8 +10,8 @@ ms per step, Newton iterations and factorisations per step and the exponent of a
 fit of log(ms per step) vs log N (measured in this one run), and writes
 benchmarks/results/chain_scaling.json. ``--memory N`` instead runs the N-link chain in this
 process (``--t-end`` model time, every 10th step stored) and prints the peak resident set size
-(``resource.getrusage(...).ru_maxrss``) as one JSON line; ``compare_exudyn.py`` runs it in its
-own subprocess.
+as one JSON line (VmHWM of /proc/self/status; ``ru_maxrss`` beside it, which a child started by
+vfork inherits from a bigger parent); ``compare_exudyn.py`` runs it in its own subprocess.
 
 Run:  python benchmarks/chain_scaling.py [N ...] [--formulations index2 [index3]]
       python benchmarks/chain_scaling.py --memory 10000 --t-end 0.1
@@ -108,26 +108,47 @@ def per_step(system, formulation: str = "index2", h: float = 1e-3, long: float =
 def peak_memory(n_links: int, t_end: float = 1.0, output_every: int = 10,
                 formulation: str = "index2") -> dict:
     """Run the chain in this process (se3dyn defaults) and report the peak resident set size,
-    also as it was after importing and after building + compiling the model."""
+    also as it was after importing, after building + compiling the model and after the one-time
+    set-up of the first ``simulate`` (a one-step run).
+
+    The peak is read as VmHWM from /proc/self/status (the high-water mark of this process's own
+    address space). ``resource.getrusage(RUSAGE_SELF).ru_maxrss`` is reported too, but it is not
+    trusted: a child started by vfork (Python's subprocess does) inherits its parent's peak
+    through execve, so a big parent makes it report the parent's peak."""
     import resource
+
+    def hwm_mb() -> float:
+        try:
+            with open("/proc/self/status") as f:
+                for line in f:
+                    if line.startswith("VmHWM:"):
+                        return int(line.split()[1]) / 1024.0  # kB -> MB
+        except OSError:
+            pass
+        return float("nan")
 
     def maxrss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB -> MB (Linux)
 
-    rss_import = maxrss_mb()
+    rss_import = hwm_mb()
     t0 = time.perf_counter()
     system = sd.compile_model(chain(n_links))
     build = time.perf_counter() - t0
-    rss_compiled = maxrss_mb()
+    rss_compiled = hwm_mb()
+    t0 = time.perf_counter()
+    sd.simulate(system, t_end=1e-3, step=1e-3, rho_inf=0.9, formulation=formulation)
+    setup = time.perf_counter() - t0
+    rss_setup = hwm_mb()
     t0 = time.perf_counter()
     res = sd.simulate(system, t_end=t_end, step=1e-3, rho_inf=0.9, output_every=output_every,
                       formulation=formulation)
     wall = time.perf_counter() - t0
     return {"N": n_links, "t_end": t_end, "output_every": output_every,
             "formulation": formulation, "stored_rows": len(res.t),
-            "peak_rss_MB": maxrss_mb(), "peak_rss_after_import_MB": rss_import,
+            "peak_rss_MB": hwm_mb(), "peak_rss_after_import_MB": rss_import,
             "peak_rss_after_build_compile_MB": rss_compiled,
-            "build_compile_s": build, "simulate_s": wall,
+            "peak_rss_after_setup_MB": rss_setup, "ru_maxrss_MB": maxrss_mb(),
+            "build_compile_s": build, "setup_s": setup, "simulate_s": wall,
             "tip_final": tip(res, n_links)[-1].tolist()}
 
 

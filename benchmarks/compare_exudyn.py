@@ -60,7 +60,10 @@ Timings and the targets of issue 12 (PASS/MISS printed beside each):
 4. Cost per step vs N = 100 ... 10^4 links (``chain_scaling.scaling_row``: set-up excluded,
    (wall(0.1 s) - wall(0.02 s)) / 80 steps, se3dyn defaults): fitted exponent <= 1.1; peak RSS
    of the N = 10^4 chain (0.1 s, every 10th step stored) in its own subprocess
-   (``chain_scaling.py --memory``, ``resource.getrusage`` maxrss) <= 600 MB.
+   (``chain_scaling.py --memory``) <= 600 MB. The peak is VmHWM of /proc/self/status in that
+   process: ``resource.getrusage`` maxrss of a child started by vfork (as ``subprocess`` does)
+   inherits its parent's peak through execve, so after the big runs of this script it would
+   report this script's own peak; it is printed beside, for the record.
 
 The machine is shared (2 cores, other jobs running): the load average is recorded with every
 section; se3dyn and EXUDYN runs are interleaved so that both see the same load.
@@ -535,6 +538,7 @@ def environment(repo) -> dict:
     import os
     import platform
     import subprocess
+    from pathlib import Path
 
     import exudyn
     import scipy
@@ -550,6 +554,9 @@ def environment(repo) -> dict:
             return "?"
 
     so = eng.__file__
+    code = hashlib.sha256(open(so, "rb").read())
+    for f in sorted(Path(se3dyn.__file__).parent.rglob("*.py")):
+        code.update(f.read_bytes())
     cpu = "?"
     try:
         for line in open("/proc/cpuinfo"):
@@ -568,7 +575,8 @@ def environment(repo) -> dict:
         "git": {"head": git("rev-parse", "HEAD"),
                 "dirty": git("status", "--porcelain", "--untracked-files=no").splitlines()},
         "se3dyn_engine": {"file": so, "mtime": os.path.getmtime(so),
-                          "sha256": hashlib.sha256(open(so, "rb").read()).hexdigest()[:16]},
+                          "sha256": hashlib.sha256(open(so, "rb").read()).hexdigest()[:16],
+                          "code_sha256": code.hexdigest()[:16]},
     }
 
 
@@ -922,9 +930,11 @@ def section_scaling(a, report) -> None:
         mem["load_average"] = load()
         res["memory"] = mem
         print(f"  peak RSS, N = {a.memory_n} chain, {a.t_memory:g} s, every 10th step stored, own "
-              f"process: {mem['peak_rss_MB']:.0f} MB (after import "
-              f"{mem['peak_rss_after_import_MB']:.0f} MB, "
-              f"after build + compile {mem['peak_rss_after_build_compile_MB']:.0f} MB; target <= "
+              f"process (VmHWM): {mem['peak_rss_MB']:.0f} MB (after import "
+              f"{mem['peak_rss_after_import_MB']:.0f} MB, after build + compile "
+              f"{mem['peak_rss_after_build_compile_MB']:.0f} MB, after the first simulate's "
+              f"set-up {mem['peak_rss_after_setup_MB']:.0f} MB; ru_maxrss "
+              f"{mem['ru_maxrss_MB']:.0f} MB, inherits the parent's peak); target <= "
               f"{TARGETS['rss_MB']:g} MB: {verdict(mem['peak_rss_MB'], TARGETS['rss_MB'])}) "
               f"[{mem['load_average'][0]}]")
     report["scaling"] = res
@@ -966,10 +976,13 @@ def summary(report) -> list[dict]:
         add("README job process, warm", pr["ratio_warm"], TARGETS["readme_warm"])
     scl = report.get("scaling")
     if scl:
-        add("per-step exponent N = 100..10^4", scl["exponent"], TARGETS["exponent"], unit="")
+        ns = [r["N"] for r in scl["rows"]]
+        add(f"per-step exponent N = {min(ns)}..{max(ns)}", scl["exponent"], TARGETS["exponent"],
+            unit="")
         mem = scl.get("memory", {})
         if "peak_rss_MB" in mem:
-            add("peak RSS N = 10^4", mem["peak_rss_MB"], TARGETS["rss_MB"], unit="MB")
+            add(f"peak RSS N = {mem['N']}, {mem['t_end']:g} s (VmHWM)", mem["peak_rss_MB"],
+                TARGETS["rss_MB"], unit="MB")
     return rows
 
 
@@ -1020,7 +1033,8 @@ def main(argv) -> int:
         print("versions: " + ", ".join(f"{k} {v}" for k, v in env["versions"].items())
               + f"; git {env['git']['head'][:10]}"
               + (f" + {len(env['git']['dirty'])} modified files" if env["git"]["dirty"] else "")
-              + f"; _engine sha256 {env['se3dyn_engine']['sha256']}")
+              + f"; _engine sha256 {env['se3dyn_engine']['sha256']}, engine + sources "
+              f"{env['se3dyn_engine']['code_sha256']}")
         print("EXUDYN defaults as read from exu.SimulationSettings():")
         for k, v in defaults.items():
             print(f"  {k} = {v}")
@@ -1042,6 +1056,11 @@ def main(argv) -> int:
         if not a.no_scaling:
             section_scaling(a, report)
             save(a, report)
+        env_end = environment(a.repo)
+        report["git_end"], report["se3dyn_engine_end"] = env_end["git"], env_end["se3dyn_engine"]
+        changed = (env_end["se3dyn_engine"]["code_sha256"]
+                   != env["se3dyn_engine"]["code_sha256"])
+        report["tree_changed_during_run"] = changed
         rows = summary(report)
         report["summary"] = rows
         report["load_average_end"] = load()
@@ -1051,6 +1070,12 @@ def main(argv) -> int:
         for r in rows:
             print(f"  {r['target']:54s} {r['value']:9.3f} {r['unit']:9s} <= {r['limit']:<6g} "
                   f"{r['verdict']}  {r['note']}")
+        if changed:
+            print("  WARNING: se3dyn's code (engine + Python sources) changed during this run "
+                  "(subprocesses started after the change used the new code): "
+                  f"{env['se3dyn_engine']['code_sha256']} -> "
+                  f"{env_end['se3dyn_engine']['code_sha256']}, git {env['git']['head'][:10]} -> "
+                  f"{env_end['git']['head'][:10]}")
         save(a, report)
         print(f"\nwrote {a.out} and {a.out.with_suffix('.txt')}")
     finally:

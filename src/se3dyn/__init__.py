@@ -9,6 +9,8 @@ generalized-alpha integrator. Conventions are written once in :mod:`se3dyn.lie`.
 
 Beyond dynamics: :func:`static_equilibrium` (load stepping), :func:`assemble` (inconsistent
 initial configurations), :func:`kinematics` (driven mechanisms, inverse dynamics).
+Parameter studies on dask.distributed: ``se3dyn.sweep(...)`` (:mod:`se3dyn.sweep`, imported on
+first use; the core never imports it).
 """
 
 from se3dyn import examples, lie
@@ -33,3 +35,12 @@ __all__ = [
     "static_equilibrium", "StaticResult", "assemble", "Assembly", "AssemblyError",
     "kinematics", "KinematicsResult",
 ]
+
+
+def __getattr__(name: str):
+    # se3dyn.sweep: the opt-in sweep layer, imported on first use only (PEP 562)
+    if name == "sweep":
+        import importlib
+
+        return importlib.import_module("se3dyn.sweep")
+    raise AttributeError(f"module 'se3dyn' has no attribute {name!r}")

@@ -6,6 +6,9 @@ file), 2 bad input or usage. Errors are one clear line on stderr, never a Python
     se3dyn check MODEL...
     se3dyn run MODEL [--t-end T] [--step H] [--rho-inf R] [--formulation F]
                   [--tol TOL] [--output-step DT] [--out DIR] [--quiet]
+    se3dyn sweep MODEL --vary PATH=SPEC... [--method M --samples N --seed S]
+                  [--metric NAME=FUNC(EXPR)...] [--scheduler ADDR | --workers N] [--resume]
+                  [run-time overrides as for run] --out DIR        (docs/sweep.md)
     se3dyn channels RESULTS
     se3dyn plot RESULTS CHANNEL... [-o PNG]
     se3dyn export RESULTS --csv FILE [CHANNEL...]
@@ -137,11 +140,7 @@ def cmd_run(args) -> int:
 
     model, settings = _load(args.model)
     cfg = dict(settings)
-    for key, val in (("t_end", args.t_end), ("step", args.step), ("rho_inf", args.rho_inf),
-                     ("formulation", args.formulation), ("tol", args.tol),
-                     ("output_step", args.output_step)):
-        if val is not None:
-            cfg[key] = val
+    cfg.update(_overrides(args))
     for key in ("t_end", "step"):
         if key not in cfg:
             raise _Usage(f"{args.model}: no '{key}' in the file's simulation settings; give "
@@ -199,6 +198,17 @@ def cmd_run(args) -> int:
           f"{res.constraint.max():.2e}")
     print(f"  results: {path}")
     return 0
+
+
+def cmd_sweep(args) -> int:
+    """Parameter study on dask.distributed (the opt-in layer se3dyn.sweep, docs/sweep.md)."""
+    from se3dyn.errors import ModelError
+    from se3dyn.sweep.cli import main as sweep_main
+
+    try:
+        return sweep_main(args, _overrides(args))
+    except (ModelError, ImportError) as exc:
+        raise _Usage(str(exc)) from None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -367,6 +377,27 @@ def _positive(kind):
     return conv
 
 
+_OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step")
+
+
+def _add_overrides(p: argparse.ArgumentParser) -> None:
+    """The run-time overrides of the file's simulation settings (run and sweep)."""
+    p.add_argument("--t-end", type=_positive("pos"), help="final time (s)")
+    p.add_argument("--step", type=_positive("pos"), help="time step (s)")
+    p.add_argument("--rho-inf", type=_positive("rho"), help="spectral radius in [0, 1]")
+    p.add_argument("--formulation", choices=("index2", "index3"),
+                   help="stabilized index-2 (default) or the paper's index-3 form")
+    p.add_argument("--tol", type=_positive("pos"),
+                   help="adaptive steps: position error tolerance over the run (m, rad)")
+    p.add_argument("--output-step", type=_positive("pos"),
+                   help="store results every OUTPUT_STEP seconds (dense output)")
+
+
+def _overrides(args) -> dict:
+    """The overrides given on the command line, as simulation settings."""
+    return {k: getattr(args, k) for k in _OVERRIDES if getattr(args, k) is not None}
+
+
 def build_parser() -> argparse.ArgumentParser:
     from se3dyn import __version__
 
@@ -380,18 +411,16 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_check)
     r = sub.add_parser("run", help="simulate a model file and write the results file")
     r.add_argument("model")
-    r.add_argument("--t-end", type=_positive("pos"), help="final time (s)")
-    r.add_argument("--step", type=_positive("pos"), help="time step (s)")
-    r.add_argument("--rho-inf", type=_positive("rho"), help="spectral radius in [0, 1]")
-    r.add_argument("--formulation", choices=("index2", "index3"),
-                   help="stabilized index-2 (default) or the paper's index-3 form")
-    r.add_argument("--tol", type=_positive("pos"),
-                   help="adaptive steps: position error tolerance over the run (m, rad)")
-    r.add_argument("--output-step", type=_positive("pos"),
-                   help="store results every OUTPUT_STEP seconds (dense output)")
+    _add_overrides(r)
     r.add_argument("--out", default="out", help="folder of the results file (default: out)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=cmd_run)
+    sw = sub.add_parser("sweep", help="parameter study: many runs on dask.distributed")
+    from se3dyn.sweep.cli import add_arguments  # argument declarations only (no dask)
+
+    add_arguments(sw)
+    _add_overrides(sw)
+    sw.set_defaults(func=cmd_sweep)
     ch = sub.add_parser("channels", help="list the channels of a results file")
     ch.add_argument("results")
     ch.set_defaults(func=cmd_channels)

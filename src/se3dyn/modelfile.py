@@ -52,7 +52,7 @@ from se3dyn.visuals import SHAPES, visual_to_dict
 
 __all__ = [
     "FORMAT_VERSION", "FIELDS", "ModelFileError", "load_model", "loads_model", "save_model",
-    "json_schema", "markdown_reference", "write_schema",
+    "json_schema", "markdown_reference", "write_schema", "parse_model_data", "format_model_data",
 ]
 
 #: The format version written by :func:`save_model` and the only one :func:`loads_model` reads.
@@ -1031,6 +1031,35 @@ def _build(ctx: _Ctx, top: _Obj) -> tuple[Model, dict]:
         _rethrow(ctx, e, None, items)
     sim = v.get("simulation")
     return model, (dict(sim.values) if sim is not None else {})
+
+
+def parse_model_data(text: str | bytes, filename: str = "<string>") -> dict:
+    """The document of a valid model file as plain data (dicts, lists, numbers, strings).
+
+    The text is validated first by :func:`loads_model` (same errors, same safety limits) and
+    read with the same scalar rules (``1e-4`` is a float). Edit the data and load it back with
+    ``loads_model(format_model_data(data))``; used by parameter sweeps (:mod:`se3dyn.sweep`).
+
+    Raises
+    ------
+    ModelFileError
+        For any invalid model file, as :func:`loads_model`.
+    """
+    loads_model(text, filename)
+    if isinstance(text, bytes):
+        text = text.decode("utf-8-sig")
+    loader = _Loader(text)
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
+
+
+def format_model_data(data: dict) -> str:
+    """YAML text of model-file data (plain dicts, lists, numbers, strings, in order), the
+    inverse of :func:`parse_model_data`; load it with :func:`loads_model`."""
+    return yaml.dump(data, Dumper=_Dumper, sort_keys=False, default_flow_style=None,
+                     width=10_000, allow_unicode=True)
 
 
 # =================================================================================================

@@ -458,10 +458,12 @@ class SparseLU {
     // factor: leave the entries of A that are zero in the values given to factor out of the
     // L/U patterns (an iteration matrix whose pattern holds many entries that are zero in a
     // given configuration, or always). "Zero": |a_ij| <= drop_tol * max_i |a_ij| (drop_tol = 0:
-    // exact zeros only; 1e-15 also drops round-off residues like 1e-40 next to O(1) entries, at
-    // the price of a backward error of that order). refactor checks that the entries left out
-    // still are "zero" in this sense and fails (kPatternChanged) otherwise. With values given
-    // to analyze, the ordering also ignores them.
+    // exact zeros only; a positive drop_tol also drops round-off residues like 1e-40 next to
+    // O(1) entries, at the price of a backward error of that order, but an entry that is tiny
+    // at factor time only because the motion has just started grows later and makes refactor
+    // fail). refactor checks that the entries left out still are "zero" in this sense and
+    // fails (kPatternChanged) otherwise. With values given to analyze, the ordering also
+    // ignores them.
     bool drop_zeros = false;
     double drop_tol = 0.0;
     // analyze without values: the ordering is computed by the first factor, with its values
@@ -472,7 +474,7 @@ class SparseLU {
   // Status of the last factor / refactor.
   enum Status : int {
     kOk = 0,
-    kNotAnalyzed = 1,       // analyze not called (or failed), or refactor before any factor
+    kNotAnalyzed = 1,       // analyze not called (or failed); refactor without a successful factor
     kStructurallyZero = 2,  // no candidate pivot row in a column: structurally singular
     kNumericallyZero = 3,   // all candidate pivots exactly zero
     kNotFinite = 4,         // a value of the factors is Inf or NaN
