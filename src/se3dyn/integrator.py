@@ -34,11 +34,11 @@ __all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "input_table"
 KMAX = 8.0
 
 
-def _stepper(s: System, index2: bool, dropped: np.ndarray, ws=None):
+def _stepper(s: System, index2: bool, dropped: np.ndarray, ws=None, keep: bool = True):
     """The compiled Newton stepper of a workspace (the system's default one)."""
     from se3dyn.system import workspace
 
-    return (ws or workspace(s)).stepper(index2, dropped)
+    return (ws or workspace(s)).stepper(index2, dropped, keep)
 
 
 @dataclass(frozen=True)
@@ -258,7 +258,8 @@ class GeneralizedAlpha:
         # Phi_q vd = arhs (the time derivative of Phi_q v = 0), by the compiled sparse LU
         rhs = np.concatenate([-ev.r, ev.arhs])
         rhs[nq + dropped] = 0.0
-        code = _stepper(s, False, dropped, ws).solve_values(ev.values, rhs)
+        # the index-3 layout; kept only when the steps use it too
+        code = _stepper(s, False, dropped, ws, keep=not self.index2).solve_values(ev.values, rhs)
         if code != 0 or not np.all(np.isfinite(rhs)):
             raise SimulationError(
                 f"t={t0:.6g} (initial accelerations): the iteration matrix is singular; typical "

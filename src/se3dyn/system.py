@@ -506,9 +506,10 @@ class Workspace:
         self.engine = _core().Engine(self.layout.tables)
         self._steppers: dict = {}
 
-    def stepper(self, index2: bool, dropped: np.ndarray):
+    def stepper(self, index2: bool, dropped: np.ndarray, keep: bool = True):
         """The compiled Newton stepper for one formulation and one set of dropped (redundant)
-        equations, its sparse LU analysed on first use."""
+        equations, its sparse LU analysed on first use; ``keep=False``: not kept for later
+        calls (a one-off solve, e.g. the initial accelerations of an index-2 run)."""
         key = (bool(index2), np.asarray(dropped, np.int64).tobytes())
         stp = self._steppers.get(key)
         if stp is None:
@@ -522,7 +523,8 @@ class Workspace:
                                   p["indptr"].astype(np.int64), p["indices"].astype(np.int64),
                                   p["inv"].astype(np.int64),
                                   np.ascontiguousarray(groups, np.int64), drop)
-            self._steppers[key] = stp
+            if keep:
+                self._steppers[key] = stp
         return stp
 
 

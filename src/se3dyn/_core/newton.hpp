@@ -31,7 +31,7 @@ struct Stepper {
   bool index2;
   int N = 0;                         // size of the linear system
   std::vector<long> perm;            // value index -> CSC position
-  std::vector<double> mask, one;     // (nnz,) dropped equations: identity rows/cols
+  std::vector<long> zero_at, one_at; // CSC positions of dropped equations: zero, or 1 (diagonal)
   std::vector<char> dropm;           // (nm,) dropped multiplier equations
   SparseLU lu;
   bool analysed = false;
@@ -44,8 +44,6 @@ struct Stepper {
     N = n_sys;
     perm.assign(perm_, perm_ + nv);
     long nnz = colptr[N];
-    mask.assign(nnz, 1.0);
-    one.assign(nnz, 0.0);
     dropm.assign(drop, drop + E->nm);
     std::vector<char> dropped(N, 0);
     for (int i = 0; i < E->nm; ++i)
@@ -56,10 +54,7 @@ struct Stepper {
     for (int c = 0; c < N; ++c)
       for (int p = colptr[c]; p < colptr[c + 1]; ++p) {
         int rw = rowind[p];
-        if (dropped[rw] || dropped[c]) {
-          mask[p] = 0.0;
-          if (rw == c) one[p] = 1.0;
-        }
+        if (dropped[rw] || dropped[c]) (rw == c ? one_at : zero_at).push_back(p);
       }
     lu.analyze(N, colptr, rowind, group);
     vals.assign(nv, 0.0);
@@ -72,7 +67,8 @@ struct Stepper {
 
   int factor() {
     for (size_t i = 0; i < vals.size(); ++i) csc[perm[i]] = vals[i];
-    for (size_t p = 0; p < csc.size(); ++p) csc[p] = csc[p] * mask[p] + one[p];
+    for (long p : zero_at) csc[p] = 0.0;  // dropped (redundant) equations: identity rows/cols
+    for (long p : one_at) csc[p] = 1.0;
     int code = analysed ? lu.refactor(csc.data()) : 1;
     if (code != 0) {
       code = lu.factor(csc.data());
