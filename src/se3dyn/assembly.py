@@ -133,10 +133,26 @@ class Layout:
         cols = np.concatenate(cols) if cols else np.zeros(0, np.int64)
         self.rows2, self.cols2 = rows, cols
         self.rows3, self.cols3 = rows[:self.nvals], cols[:self.nvals]
+        # ordering hint for the sparse LU: each constraint element's rows (multipliers, xi) go in
+        # one group with the frames it couples that no earlier constraint took (for a tree or a
+        # chain: a joint with its own coordinates and its child node), so the ordering sees the
+        # pivots that make its zero diagonal blocks nonsingular together
+        owner = {g_: i for g_, i in gid.items()}
+        taken: set = set()
+        for c, frames in self._con:
+            target = owner.get(self.mult_group(c))
+            if target is None:
+                continue
+            for f in frames[1:]:
+                fgr = self.frame_group(f)
+                if fgr is not None and fgr not in taken:
+                    owner[fgr] = target
+                    taken.add(fgr)
+            owner[self.xi_group(c)] = target
         groups = np.zeros(nq + 2 * nm, np.int64)
-        for g_, i in gid.items():
+        for g_ in gid:
             r0, nr = self._size(g_)
-            groups[r0:r0 + nr] = i
+            groups[r0:r0 + nr] = owner[g_]
         self.groups2, self.groups3 = groups, groups[:nq + nm]
 
     # --- what element modules call -----------------------------------------------------------
