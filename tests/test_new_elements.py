@@ -187,3 +187,25 @@ def test_inertial_torque_on_a_turning_body_keeps_its_direction():
     res = sd.simulate(mb.build(), t_end=2.0, step=1e-2, rho_inf=0.9)
     th = res.joint_coordinates("h")[:, 0]
     assert np.abs(th - T * res.t ** 2 / (2 * J)).max() < 1e-9
+
+
+def test_pd_law_tracks_a_moving_target_using_its_rate():
+    """A hinge with inertia J under tau = -kp (theta - A sin wt) - kd (theta' - A w cos wt),
+    starting at rest: the tracking error e obeys J e'' + kd e' + kp e = J A w^2 sin wt with
+    e(0) = 0, e'(0) = -A w, solved independently here (scipy, tight tolerances)."""
+    from scipy.integrate import solve_ivp
+
+    J, kp, kd, A, f = 0.5, 40.0, 3.0, 0.4, 1.5
+    w = 2 * math.pi * f
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("b", mass=1.0, inertia=(J, J, J))
+    mb.joint("h", "hinge", "g", "b", axis=(0, 0, 1),
+             control=sd.PD(kp=kp, kd=kd, target=sd.Sine(A, f)))
+    res = sd.simulate(mb.build(), t_end=2.0, step=1e-3, rho_inf=0.9)
+    def rhs(t, y):
+        return [y[1], (J * A * w * w * math.sin(w * t) - kd * y[1] - kp * y[0]) / J]
+
+    sol = solve_ivp(rhs, (0.0, 2.0), [0.0, -A * w], t_eval=res.t, rtol=1e-11, atol=1e-13)
+    theta_ref = sol.y[0] + A * np.sin(w * res.t)
+    assert np.abs(res.joint_coordinates("h")[:, 0] - theta_ref).max() < 2e-5
