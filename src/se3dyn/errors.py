@@ -39,6 +39,13 @@ class ModelError(Se3dynError, ValueError):
         super().__init__(msg)
 
 
+class UnknownNameError(Se3dynError, KeyError):
+    """A node, joint or channel name that does not exist; the message lists the valid ones."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else "unknown name"
+
+
 class SimulationError(Se3dynError, RuntimeError):
     """A simulation that could not proceed; ``result`` holds everything computed so far."""
 

@@ -180,8 +180,10 @@ class GeneralizedAlpha:
             v = getattr(self, fld)
             if not (isinstance(v, int | float) and 0 < v < 1):
                 raise ModelError("integrator", fld, "a positive tolerance below 1", v)
-        if not (isinstance(self.max_iter, int) and self.max_iter >= 1):
-            raise ModelError("integrator", "max_iter", "a positive integer", self.max_iter)
+        if not (isinstance(self.max_iter, int) and not isinstance(self.max_iter, bool)
+                and 1 <= self.max_iter <= 10**6):
+            raise ModelError("integrator", "max_iter", "a positive integer (at most 1e6)",
+                             self.max_iter)
         if self.formulation not in ("index2", "index3"):
             raise ModelError("integrator", "formulation", "'index2' or 'index3'",
                              self.formulation)

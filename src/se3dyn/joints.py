@@ -131,11 +131,14 @@ def _cylindrical(item: str, axis: Any = None) -> np.ndarray:
 def _screw(item: str, axis: Any = None, pitch: Any = None) -> np.ndarray:
     a = unit_vector(axis, item, "axis")
     try:
+        if isinstance(pitch, bool | str):
+            raise TypeError(pitch)
         p = float(pitch)
     except (TypeError, ValueError):
         raise ModelError(item, "pitch", "a finite number (m/rad)", pitch) from None
-    if not np.isfinite(p):
-        raise ModelError(item, "pitch", "a finite number (m/rad)", pitch)
+    if not np.isfinite(p) or abs(p) > 1e15:
+        raise ModelError(item, "pitch", "a finite number (m/rad) of magnitude at most 1e15",
+                         pitch, "larger values overflow in the computation")
     return _z(_col(p * a, a))
 
 

@@ -872,7 +872,12 @@ def load_model(path_or_text: str | os.PathLike | bytes) -> tuple[Model, dict]:
     if isinstance(path_or_text, bytes) or (isinstance(path_or_text, str)
                                            and "\n" in path_or_text):
         return loads_model(path_or_text)
+    if not isinstance(path_or_text, str | os.PathLike):
+        raise ModelFileError("<argument>", None, "file", "path", "a file name (str or path) or "
+                             "YAML text", _Got(type(path_or_text).__name__))
     name = os.fspath(path_or_text)
+    if not isinstance(name, str):
+        name = os.fsdecode(name)
     try:
         size = os.path.getsize(name)
         if size > MAX_FILE_BYTES:
@@ -880,9 +885,10 @@ def load_model(path_or_text: str | os.PathLike | bytes) -> tuple[Model, dict]:
                                  _Got(f"{size} bytes"))
         with open(name, "rb") as fh:
             data = fh.read(MAX_FILE_BYTES + 1)
-    except OSError as e:
+    except (OSError, ValueError) as e:  # ValueError: a NUL character in the name
         raise ModelFileError(name, None, "file", "path", "a readable model file",
-                             _Got(f"{type(e).__name__}: {e.strerror or e}")) from None
+                             _Got(f"{type(e).__name__}: {getattr(e, 'strerror', None) or e}")
+                             ) from None
     return loads_model(data, filename=name)
 
 
@@ -1227,7 +1233,12 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
                         width=10_000, allow_unicode=True))
     # the dumped text must load back: never write a file we could not read
     if path is not None:
-        Path(path).write_text(text, encoding="utf-8")
+        try:
+            Path(path).write_text(text, encoding="utf-8")
+        except (OSError, TypeError, ValueError) as e:
+            raise ModelError("save_model", "path", "a writable file name", path,
+                             f"{type(e).__name__}: {getattr(e, 'strerror', None) or e}"
+                             ) from None
     return text
 
 
