@@ -88,11 +88,17 @@ def _short_repr(x: Any, limit: int = 120) -> str:
     try:
         import numpy as np
 
+        if isinstance(x, np.generic):
+            x = x.item()  # 0.707, not np.float64(0.707)
         if isinstance(x, np.ndarray):
             s = np.array2string(x, threshold=12, precision=6)
             s = f"array of shape {x.shape}: {s}"
         else:
-            s = repr(x)
+            try:  # numpy >= 2: scalars inside tuples and lists shown as plain numbers
+                with np.printoptions(legacy="1.25"):
+                    s = repr(x)
+            except ValueError:  # numpy < 2: already plain
+                s = repr(x)
     except Exception:  # pragma: no cover - repr of exotic objects
         s = object.__repr__(x)
     return s if len(s) <= limit else s[: limit - 3] + "..."

@@ -69,6 +69,8 @@ def unit_vector(v: Any, item: str, fld: str) -> np.ndarray:
         raise ModelError(item, fld, "a unit 3-vector", v) from None
     if a.shape != (3,) or not np.all(np.isfinite(a)):
         raise ModelError(item, fld, "a unit 3-vector of 3 finite numbers", v)
+    if np.any(np.abs(a) > 1e15):
+        raise ModelError(item, fld, "a unit 3-vector", v, "normalise it")
     nrm = float(np.linalg.norm(a))
     if nrm == 0.0:
         raise ModelError(item, fld, "a unit 3-vector", v, "the axis has zero length")

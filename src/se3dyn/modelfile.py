@@ -139,6 +139,11 @@ class _Loader(yaml.SafeLoader):
             raise _Reject(ev.start_mark, self._where(), "plain values (no YAML anchors)",
                           f"anchor &{ev.anchor}", "anchors (&name) and aliases (*name) are not "
                           "supported in se3dyn model files; write the values out")
+        tag = getattr(ev, "tag", None)
+        if tag is not None:
+            raise _Reject(ev.start_mark, self._where(), "plain values (no YAML tags)",
+                          f"the tag {tag}"[:80], "tags (!name, !!type) are not supported in "
+                          "se3dyn model files; write the plain value")
         self._count += 1
         if self._count > MAX_NODES:
             raise _Reject(ev.start_mark, self._where(), f"at most {MAX_NODES} YAML values",

@@ -83,7 +83,8 @@ class Results:
         except ValueError:
             close = difflib.get_close_matches(str(name), names, n=1)
             hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise UnknownNameError(f"unknown node {name!r}{hint} (valid: {', '.join(names)})") from None
+            raise UnknownNameError(
+                f"unknown node {name!r}{hint} (valid: {', '.join(names)})") from None
 
     def _joints(self, name: str) -> list[int]:
         s = self.system
