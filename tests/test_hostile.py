@@ -247,7 +247,7 @@ def _assert_clean(code, err, what):
     assert len(errs) <= 1, f"{what}:\n{err}"
 
 
-N_FILES = 900
+N_FILES = 1200
 
 
 @pytest.fixture(scope="module")
@@ -414,7 +414,7 @@ def _jb(t, na, nb, kw):
     return mb.build()
 
 
-N_CALLS = 400
+N_CALLS = 600
 
 
 def test_api_calls_raise_only_se3dyn_errors():
