@@ -23,8 +23,8 @@ description. The loader validates against it, :func:`json_schema` turns it into 
 field-by-field reference of ``docs/model-file.md``.
 
 Safety: files are parsed with a :class:`yaml.SafeLoader` subclass (nothing is ever evaluated as
-code); anchors and aliases are rejected (no "billion laughs"), and file size, nesting depth,
-collection lengths and node counts are bounded. Every invalid file raises
+code); YAML tags, anchors and aliases are rejected (no "billion laughs"), and file size, nesting
+depth, collection lengths and node counts are bounded. Every invalid file raises
 :class:`ModelFileError` naming the file, the line, the item, the field, what was expected and what
 came. Regenerate the schema with ``python -m se3dyn.modelfile schema docs/model-file.schema.json``.
 """

@@ -100,7 +100,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     step : float
         Time step h (s); the initial step when ``tol`` is given. With a fixed step, when
         ``(t_end - t_start)/step`` is not an integer the last step is shortened to land on
-        ``t_end``.
+        ``t_end``. More than ``MAX_STEPS`` (1e8) fixed steps, or stored rows that would not fit
+        in the available memory, are refused with a ModelError before the run starts.
     rho_inf : float
         Spectral radius at infinite frequency (Eq. (44)).
     tol_residual, tol_constraint, max_iter :
