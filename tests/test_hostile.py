@@ -457,7 +457,7 @@ def test_huge_step_counts_are_refused_before_allocating(t_end, step):
 def test_stored_rows_beyond_memory_are_refused(monkeypatch):
     simmod = importlib.import_module("se3dyn.simulate")
 
-    monkeypatch.setattr(simmod, "_available_memory", lambda: 1e8)
+    monkeypatch.setattr(simmod, "_available_memory", lambda: 3e7)
     with pytest.raises(sd.ModelError, match="output_every or output_step"):
         sd.simulate(_pendulum(), t_end=10.0, step=1e-4)
     with pytest.raises(sd.ModelError, match="fit in memory"):
@@ -688,3 +688,20 @@ def test_sigint_during_start_up_prints_one_line_and_exits_130(tmp_path):
     assert "Traceback" not in err, err
     assert p.returncode == 130, (p.returncode, err)
     assert err.strip() == "se3dyn: error: interrupted", err
+
+
+def test_storage_grows_as_the_run_goes_up_to_the_rows_expected(monkeypatch):
+    simmod = importlib.import_module("se3dyn.simulate")
+    sizes = []
+    real = simmod._Recorder.results
+
+    def spy(self, stats):
+        sizes.append((self.n, len(self.t)))
+        return real(self, stats)
+
+    monkeypatch.setattr(simmod._Recorder, "results", spy)
+    monkeypatch.setattr(simmod, "_INITIAL_ROWS", 16)
+    r = sd.simulate(_pendulum(), t_end=1.0, step=0.01)
+    assert len(r.t) == 101 and sizes[-1] == (101, 102)  # 16, 32, 64, then the 102 expected
+    r = sd.simulate(_pendulum(), t_end=1.0, step=0.01, tol=1e-3, output_step=0.02)
+    assert len(r.t) == 51 and sizes[-1] == (51, 51)

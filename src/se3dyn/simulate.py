@@ -34,9 +34,10 @@ SCALARS = ("kinetic", "potential", "spring", "work_actuators", "work_loads", "di
 
 
 class _Recorder:
-    def __init__(self, s: System, capacity: int, sink=None):
+    def __init__(self, s: System, capacity: int, sink=None, limit: int | None = None):
         self.s = s
         self.sink = sink
+        self.limit = limit  # rows expected in all (fixed steps): growth stops there
         self.n = 0
         self.t = np.zeros(capacity)
         self.H = np.zeros((capacity, s.M, 4, 4))
@@ -47,9 +48,11 @@ class _Recorder:
         self.scal = np.zeros((capacity, 9))
 
     def _grow(self):
+        n = len(self.t)
+        extra = n if self.limit is None or self.limit <= n else min(n, self.limit - n)
         for name in ("t", "H", "v", "vd", "lam", "alpha", "scal"):
             arr = getattr(self, name)
-            setattr(self, name, np.concatenate([arr, np.zeros_like(arr)]))
+            setattr(self, name, np.concatenate([arr, np.zeros((extra,) + arr.shape[1:])]))
 
     def add(self, st: State, kin: float, pot: float, spring: float, iters: int, res: float,
             con: float):
@@ -207,7 +210,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         capacity = 1024
     else:
         capacity = max(1, math.ceil(span / step - 1e-9)) // output_every + 2
-    rec = _Recorder(s, min(capacity, _INITIAL_ROWS), on_output)  # grows as the run goes
+    # storage grows as the run goes (doubling, up to the rows expected)
+    rec = _Recorder(s, min(capacity, _INITIAL_ROWS), on_output,
+                    None if adaptive and grid is None else capacity)
     wall0 = time.perf_counter()
     ws = Workspace(s)  # this run's engine and steppers, shared with no other run
     st = integ.init(s, t_start, ws=ws)
@@ -344,12 +349,12 @@ def _check_size(s: System, span: float, step: float, output_every: int,
                          "output_every", f"at most {MAX_STEPS:.0e} stored rows", rows,
                          "store fewer rows: a larger output_step or output_every")
     per_row = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
-    need = 2 * rows * per_row  # the recorder and the copy returned in Results
+    need = rows * per_row  # (the copy returned in Results doubles it at the end)
     avail = _available_memory()
-    if avail is not None and need > 0.8 * avail:
+    if avail is not None and need > avail:
         raise ModelError(
             "simulate", "output_step" if output_step is not None else "step",
-            "results that fit in memory", f"{rows:.3g} stored rows of {per_row} bytes (twice) = "
+            "results that fit in memory", f"{rows:.3g} stored rows of {per_row} bytes = "
             f"{need / 2**30:.1f} GiB", f"{avail / 2**30:.1f} GiB available; store fewer rows "
             "with output_every or output_step (CLI: --output-step), or use a larger step")
 
