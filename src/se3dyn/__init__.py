@@ -13,6 +13,34 @@ Parameter studies on dask.distributed: ``se3dyn.sweep(...)`` (:mod:`se3dyn.sweep
 first use; the core never imports it).
 """
 
+# ruff: noqa: E402  (the interrupt guard goes before the imports that take time)
+
+
+def _quiet_startup_interrupt() -> None:
+    """The ``se3dyn`` command: Ctrl-C while the package loads prints one line and exits with
+    130, no traceback (``se3dyn.cli.main`` restores the default handler once it runs)."""
+    import os
+    import signal
+    import sys
+    import threading
+
+    if (os.path.basename(sys.argv[0] if sys.argv else "") not in ("se3dyn", "se3dyn.exe")
+            or threading.current_thread() is not threading.main_thread()):
+        return
+
+    def interrupted(signum, frame):
+        os.write(2, b"se3dyn: error: interrupted\n")
+        os._exit(130)
+
+    try:
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            signal.signal(signal.SIGINT, interrupted)
+    except (ValueError, OSError):  # pragma: no cover - no signals here
+        pass
+
+
+_quiet_startup_interrupt()
+
 from se3dyn import examples, lie
 from se3dyn.errors import ModelError, NewtonError, Se3dynError, SimulationError
 from se3dyn.integrator import GeneralizedAlpha, State

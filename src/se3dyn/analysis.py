@@ -57,6 +57,8 @@ def constraint_jacobian(s: System, H: np.ndarray | None = None,
                         HJ: np.ndarray | None = None) -> np.ndarray:
     """Dense constraint Jacobian ``Phi_q`` (6 m, nq) (Eq. (58)) at the configuration (H, HJ),
     by default the initial one."""
+    if s.nq == 0 or s.nm == 0:  # nothing to solve, or nothing constrained
+        return np.zeros((s.nm, s.nq))
     return _jacobian(s, H, HJ).toarray()
 
 

@@ -82,7 +82,8 @@ def _check_one(path: str, rank_max: int) -> None:
     kinds: dict[str, int] = {}
     for j in model.joints:
         kinds[j.type] = kinds.get(j.type, 0) + 1
-    print("  joints by type: " + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items())))
+    print("  joints by type: " + (", ".join(f"{k} {v}" for k, v in sorted(kinds.items()))
+                                  or "none"))
     print(f"  unknowns {s.nq} (nodal {6 * n_free}, relative {s.nq - 6 * n_free}), "
           f"multipliers {s.nm}, iteration matrix {s.N} x {s.N}")
     if s.nq > rank_max:
@@ -170,8 +171,10 @@ def cmd_run(args) -> int:
         except SimulationError as exc:
             failed = exc
             res = exc.result
-        except ModelError as exc:
+        except ModelError as exc:  # refused before any step: no results file is left
             prog.done()
+            writer.close(stats={"failed": True, "message": str(exc)})
+            path.unlink(missing_ok=True)
             raise _Usage(f"{args.model}: simulation settings: {exc}") from None
         except KeyboardInterrupt:
             prog.done()
@@ -310,7 +313,7 @@ def cmd_export(args) -> int:
         path = _viewer("export_gltf", res, args.gltf)
         print(f"wrote {path}: {len(res.t)} times, t = {res.t[0]:g} ... {res.t[-1]:g} s")
         return 0
-    names = args.channels or list_channels(res)
+    names = args.channels or [n for n in list_channels(res) if n != "time"]  # time: column 1
     data = _channels(res, names)
     cols = np.column_stack([res.t] + [y for _, y in data])
     header = ",".join(["time"] + [n.replace(",", "%2C") for n, _ in data])
@@ -453,15 +456,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``se3dyn`` console script; returns the exit code."""
-    parser = build_parser()
-    args, extra = parser.parse_known_args(argv)
-    if extra:
-        # `export RESULTS --csv FILE CHANNEL...`: channels after the option are still channels
-        if args.command == "export" and not any(e.startswith("-") for e in extra):
-            args.channels = list(args.channels) + extra
-        else:
-            parser.error("unrecognized arguments: " + " ".join(extra))
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        # se3dyn/__init__.py made Ctrl-C during start-up quiet; from here on it raises
+        # KeyboardInterrupt, handled below and by `run` (results file closed)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
+        parser = build_parser()
+        args, extra = parser.parse_known_args(argv)
+        if extra:
+            # `export RESULTS --csv FILE CHANNEL...`: channels after the option are channels
+            if args.command == "export" and not any(e.startswith("-") for e in extra):
+                args.channels = list(args.channels) + extra
+            else:
+                parser.error("unrecognized arguments: " + " ".join(extra))
         return int(args.func(args))
     except _Usage as exc:
         _err(str(exc))
@@ -469,6 +479,14 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         _err("interrupted")
         return 130
+    except BrokenPipeError:  # output piped into a command that stopped reading (e.g. head)
+        import os
+
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 1
 
 
 if __name__ == "__main__":

@@ -39,6 +39,13 @@ class ModelError(Se3dynError, ValueError):
         super().__init__(msg)
 
 
+class UnknownNameError(Se3dynError, KeyError):
+    """A node, joint or channel name that does not exist; the message lists the valid ones."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else "unknown name"
+
+
 class SimulationError(Se3dynError, RuntimeError):
     """A simulation that could not proceed; ``result`` holds everything computed so far."""
 
@@ -81,11 +88,17 @@ def _short_repr(x: Any, limit: int = 120) -> str:
     try:
         import numpy as np
 
+        if isinstance(x, np.generic):
+            x = x.item()  # 0.707, not np.float64(0.707)
         if isinstance(x, np.ndarray):
             s = np.array2string(x, threshold=12, precision=6)
             s = f"array of shape {x.shape}: {s}"
         else:
-            s = repr(x)
+            try:  # numpy >= 2: scalars inside tuples and lists shown as plain numbers
+                with np.printoptions(legacy="1.25"):
+                    s = repr(x)
+            except ValueError:  # numpy < 2: already plain
+                s = repr(x)
     except Exception:  # pragma: no cover - repr of exotic objects
         s = object.__repr__(x)
     return s if len(s) <= limit else s[: limit - 3] + "..."

@@ -180,8 +180,10 @@ class GeneralizedAlpha:
             v = getattr(self, fld)
             if not (isinstance(v, int | float) and 0 < v < 1):
                 raise ModelError("integrator", fld, "a positive tolerance below 1", v)
-        if not (isinstance(self.max_iter, int) and self.max_iter >= 1):
-            raise ModelError("integrator", "max_iter", "a positive integer", self.max_iter)
+        if not (isinstance(self.max_iter, int) and not isinstance(self.max_iter, bool)
+                and 1 <= self.max_iter <= 10**6):
+            raise ModelError("integrator", "max_iter", "a positive integer (at most 1e6)",
+                             self.max_iter)
         if self.formulation not in ("index2", "index3"):
             raise ModelError("integrator", "formulation", "'index2' or 'index3'",
                              self.formulation)
@@ -372,28 +374,34 @@ class GeneralizedAlpha:
         return new, StepInfo(int(it), float(er), float(ep), e, n, err)
 
     def _fail(self, s: System, t: float, h: float, it: int, ev, why: str):
-        r = np.abs(ev.r)
-        phi = np.abs(ev.phi)
-        rs = r / max(ev.f_scale, 1e-300)
-        if phi.size and phi.max() / (self.tol_constraint * s.length_scale) > (
-                rs.max(initial=0.0) / self.tol_residual):
-            i = int(np.nanargmax(phi))
-            where = s.labels[s.nq + i]
-            item = s.items[s.nq + i]
-        elif r.size:
-            i = int(np.nanargmax(rs))
-            where = s.labels[i]
-            item = s.items[i]
-        else:  # pragma: no cover
-            where = item = "?"
+        # non-finite entries (an overflow) count as the largest: never a crash here
+        with np.errstate(all="ignore"):
+            big = dict(nan=np.inf, posinf=np.inf)
+            r = np.nan_to_num(np.abs(np.asarray(ev.r, dtype=float)), **big)
+            phi = np.nan_to_num(np.abs(np.asarray(ev.phi, dtype=float)), **big)
+            scale = float(ev.f_scale) if np.isfinite(ev.f_scale) else 1.0
+            rs = r / max(scale, 1e-300)
+            rmax = float(rs.max(initial=0.0))
+            pmax = float(phi.max(initial=0.0))
+            ptol = self.tol_constraint * s.length_scale
+            if phi.size and (pmax / ptol > rmax / self.tol_residual
+                             or (np.isinf(pmax) and not np.isinf(rmax))):
+                i = int(np.argmax(phi))
+                where = s.labels[s.nq + i]
+                item = s.items[s.nq + i]
+            elif r.size:
+                i = int(np.argmax(rs))
+                where = s.labels[i]
+                item = s.items[i]
+            else:  # pragma: no cover
+                where = item = "?"
+        if not (np.isfinite(rmax) and np.isfinite(pmax)):
+            why += " (non-finite values: an overflow; check the magnitudes of the model's numbers)"
         msg = (f"Newton failed at t={t:.9g} (step h={h:.3g}) after {it} iterations: {why}; "
-               f"residual {float(np.nanmax(rs, initial=0.0)):.3e} (relative, tol "
-               f"{self.tol_residual:.1e}), constraint violation "
-               f"{float(np.nanmax(phi, initial=0.0)):.3e} (tol "
-               f"{self.tol_constraint * s.length_scale:.1e}); worst: {where}")
-        raise NewtonError(msg, t=t, h=h, iterations=it,
-                          residual_norm=float(np.nanmax(rs, initial=0.0)),
-                          constraint_norm=float(np.nanmax(phi, initial=0.0)), item=item)
+               f"residual {rmax:.3e} (relative, tol {self.tol_residual:.1e}), constraint "
+               f"violation {pmax:.3e} (tol {ptol:.1e}); worst: {where}")
+        raise NewtonError(msg, t=t, h=h, iterations=it, residual_norm=rmax,
+                          constraint_norm=pmax, item=item)
 
 
 def interpolate(s: System, st0: State, st1: State, n: np.ndarray, theta: float,

@@ -69,6 +69,8 @@ def unit_vector(v: Any, item: str, fld: str) -> np.ndarray:
         raise ModelError(item, fld, "a unit 3-vector", v) from None
     if a.shape != (3,) or not np.all(np.isfinite(a)):
         raise ModelError(item, fld, "a unit 3-vector of 3 finite numbers", v)
+    if np.any(np.abs(a) > 1e15):
+        raise ModelError(item, fld, "a unit 3-vector", v, "normalise it")
     nrm = float(np.linalg.norm(a))
     if nrm == 0.0:
         raise ModelError(item, fld, "a unit 3-vector", v, "the axis has zero length")
@@ -131,11 +133,14 @@ def _cylindrical(item: str, axis: Any = None) -> np.ndarray:
 def _screw(item: str, axis: Any = None, pitch: Any = None) -> np.ndarray:
     a = unit_vector(axis, item, "axis")
     try:
+        if isinstance(pitch, bool | str):
+            raise TypeError(pitch)
         p = float(pitch)
     except (TypeError, ValueError):
         raise ModelError(item, "pitch", "a finite number (m/rad)", pitch) from None
-    if not np.isfinite(p):
-        raise ModelError(item, "pitch", "a finite number (m/rad)", pitch)
+    if not np.isfinite(p) or abs(p) > 1e15:
+        raise ModelError(item, "pitch", "a finite number (m/rad) of magnitude at most 1e15",
+                         pitch, "larger values overflow in the computation")
     return _z(_col(p * a, a))
 
 

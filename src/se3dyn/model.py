@@ -222,6 +222,31 @@ class Model:
         return [j.name for j in self.joints]
 
 
+#: Largest magnitude accepted for a number of a model (positions, lengths, masses, stiffnesses,
+#: pitches, reference values, velocities): beyond it products and squares overflow.
+MAX_ABS = 1e15
+#: Longest accepted name (nodes, joints, loads, springs, visuals, the model).
+MAX_NAME = 200
+
+
+def _check_name(kind: str, name: Any) -> str:
+    """A name must be printable text (stored in HDF5 and YAML files): no control characters,
+    no lone surrogates, at most MAX_NAME characters."""
+    if not isinstance(name, str) or not name:
+        raise ModelError(kind, "name", "a non-empty string", name)
+    if not name.isprintable() or len(name) > MAX_NAME:
+        raise ModelError(kind, "name", f"printable text of at most {MAX_NAME} characters (no "
+                         "control characters, no lone surrogates)", name)
+    return name
+
+
+def _bounded(a: np.ndarray, item: str, fld: str, v: Any) -> np.ndarray:
+    if np.any(np.abs(a) > MAX_ABS):
+        raise ModelError(item, fld, f"values of magnitude at most {MAX_ABS:g}", v,
+                         "larger values overflow in the computation")
+    return a
+
+
 def _unknown(kind: str, name: str, valid: list[str]) -> str:
     close = difflib.get_close_matches(str(name), valid, n=1)
     hint = f"; did you mean '{close[0]}'?" if close else ""
@@ -240,7 +265,7 @@ def _vec(v: Any, n: int, item: str, fld: str, *, allow_none: bool = False) -> np
         raise ModelError(item, fld, f"{n} numbers", v)
     if not np.all(np.isfinite(a)):
         raise ModelError(item, fld, f"{n} finite numbers", v)
-    return a
+    return _bounded(a, item, fld, v)
 
 
 def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.ndarray:
@@ -256,7 +281,7 @@ def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.nd
         raise ModelError(item, fld, "finite numbers", v)
     if nonneg and np.any(a < 0):
         raise ModelError(item, fld, "non-negative values", v)
-    return a
+    return _bounded(a, item, fld, v)
 
 
 def _rotation(v: Any, item: str, fld: str) -> np.ndarray:
@@ -292,7 +317,7 @@ class ModelBuilder:
 
     def __init__(self, gravity: Any = (0.0, 0.0, 0.0), name: str = "model"):
         self._gravity = _vec(gravity, 3, "model", "gravity")
-        self._name = str(name)
+        self._name = _check_name("model", name)
         self._nodes: dict[str, NodeSpec] = {}
         self._joints: dict[str, JointSpec] = {}
         self._loads: dict[str, LoadSpec] = {}
@@ -335,19 +360,23 @@ class ModelBuilder:
             material mass matrix about the node and its gyroscopic terms generalise Eqs.
             (47)-(53).
         """
+        _check_name("node", name)
         item = f"node {name!r}"
-        if not isinstance(name, str) or not name:
-            raise ModelError("node", "name", "a non-empty string", name)
         if name in self._nodes:
             raise ModelError(item, "name", "a unique node name", name, "defined twice")
         x = _vec(position, 3, item, "position")
         R0 = np.eye(3) if orientation is None else _rotation(orientation, item, "orientation")
         try:
+            if isinstance(mass, bool | str):
+                raise TypeError(mass)
             m = float(mass)
         except (TypeError, ValueError):
             raise ModelError(item, "mass", "a non-negative number (kg)", mass) from None
-        if not math.isfinite(m) or m < 0:
-            raise ModelError(item, "mass", "a non-negative finite number (kg)", mass)
+        if not math.isfinite(m) or m < 0 or m > MAX_ABS:
+            raise ModelError(item, "mass", f"a non-negative finite number (kg) <= {MAX_ABS:g}",
+                             mass)
+        if not isinstance(fixed, bool | np.bool_):
+            raise ModelError(item, "fixed", "True or False", fixed)
         J = self._inertia(item, m, inertia, principal_axes)
         if fixed and (m > 0 or np.any(J != 0)):
             raise ModelError(item, "mass", "no mass or inertia on a fixed node", m,
@@ -384,6 +413,7 @@ class ModelBuilder:
                              inertia) from None
         if not np.all(np.isfinite(Jin)):
             raise ModelError(item, "inertia", "finite values", inertia)
+        _bounded(Jin, item, "inertia", inertia)
         if Jin.shape == (3,):
             Rp = np.eye(3) if axes is None else _rotation(axes, item, "principal_axes")
             J = Rp @ np.diag(Jin) @ Rp.T
@@ -462,15 +492,14 @@ class ModelBuilder:
             universal joint puts both hinges and its cross at ``at``.
         """
         jt_keys = sorted(list(JOINT_TYPES) + ["universal"])
-        item = f"joint {name!r} ({type})"
-        if not isinstance(name, str) or not name:
-            raise ModelError("joint", "name", "a non-empty string", name)
-        if name in self._joints or name in self._composites:
-            raise ModelError(item, "name", "a unique joint name", name, "defined twice")
-        if type not in jt_keys:
+        _check_name("joint", name)
+        if not isinstance(type, str) or type not in jt_keys:
             close = difflib.get_close_matches(str(type), jt_keys, n=1)
             raise ModelError(f"joint {name!r}", "type", "one of " + ", ".join(jt_keys), type,
                              f"did you mean '{close[0]}'?" if close else "")
+        item = f"joint {name!r} ({type})"
+        if name in self._joints or name in self._composites:
+            raise ModelError(item, "name", "a unique joint name", name, "defined twice")
         for fld, nd in (("node_a", node_a), ("node_b", node_b)):
             if not isinstance(nd, str) or nd not in self._nodes:
                 raise ModelError(item, fld, "the name of a node defined before the joint", nd,
@@ -610,7 +639,10 @@ class ModelBuilder:
             Frames of the force and of the torque: ``"inertial"`` keeps its direction in
             space, ``"body"`` turns with the body (a follower load).
         """
+        _check_name("load", name)
         item = f"load {name!r}"
+        if not isinstance(node, str):
+            raise ModelError(item, "node", "the name of a defined node", node)
         if name in self._loads:
             raise ModelError(item, "name", "a unique load name", name, "defined twice")
         if node not in self._nodes:
@@ -654,9 +686,8 @@ class ModelBuilder:
         length : float, optional
             Absolute free length (m); the initial distance of the points by default.
         """
+        _check_name("spring_damper", name)
         item = f"spring_damper {name!r}"
-        if not isinstance(name, str) or not name:
-            raise ModelError("spring_damper", "name", "a non-empty string", name)
         if name in self._springs:
             raise ModelError(item, "name", "a unique spring-damper name", name, "defined twice")
         for fld, nd in (("node_a", node_a), ("node_b", node_b)):
@@ -677,8 +708,8 @@ class ModelBuilder:
                 x = float(val)
             except (TypeError, ValueError):
                 raise ModelError(item, fld, "a non-negative number", val) from None
-            if isinstance(val, bool) or not math.isfinite(x) or x < 0:
-                raise ModelError(item, fld, "a non-negative finite number", val)
+            if isinstance(val, bool) or not math.isfinite(x) or x < 0 or x > MAX_ABS:
+                raise ModelError(item, fld, f"a non-negative finite number <= {MAX_ABS:g}", val)
             vals[fld] = x
         L0 = float(np.linalg.norm(pb - pa))
         if L0 == 0:
@@ -689,8 +720,9 @@ class ModelBuilder:
                 L = float(length)
             except (TypeError, ValueError):
                 raise ModelError(item, "length", "a non-negative length (m)", length) from None
-            if isinstance(length, bool) or not math.isfinite(L) or L < 0:
-                raise ModelError(item, "length", "a non-negative finite length (m)", length)
+            if isinstance(length, bool) or not math.isfinite(L) or L < 0 or L > MAX_ABS:
+                raise ModelError(item, "length", f"a non-negative finite length (m) <= "
+                                 f"{MAX_ABS:g}", length)
             L0 = L
         self._springs[name] = SpringDamperSpec(name, node_a, node_b, pa, pb,
                                                vals["stiffness"], vals["damping"], L0)
@@ -724,6 +756,9 @@ class ModelBuilder:
             Mesh file (STL, OBJ, glTF/GLB) for ``shape="mesh"``; a relative path is looked up
             next to the model file when viewed.
         """
+        _check_name("visual", name)
+        if not isinstance(node, str):
+            raise ModelError(f"visual {name!r}", "node", "the name of a defined node", node)
         v = make_visual(name, node, shape, size=size, color=color, offset=offset,
                         orientation=orientation, axis=axis, file=file)
         if name in self._visuals:

@@ -23,8 +23,8 @@ description. The loader validates against it, :func:`json_schema` turns it into 
 field-by-field reference of ``docs/model-file.md``.
 
 Safety: files are parsed with a :class:`yaml.SafeLoader` subclass (nothing is ever evaluated as
-code); anchors and aliases are rejected (no "billion laughs"), and file size, nesting depth,
-collection lengths and node counts are bounded. Every invalid file raises
+code); YAML tags, anchors and aliases are rejected (no "billion laughs"), and file size, nesting
+depth, collection lengths and node counts are bounded. Every invalid file raises
 :class:`ModelFileError` naming the file, the line, the item, the field, what was expected and what
 came. Regenerate the schema with ``python -m se3dyn.modelfile schema docs/model-file.schema.json``.
 """
@@ -124,6 +124,7 @@ class _Loader(yaml.SafeLoader):
         self._depth = 0
         self._count = 0
         self._path: list[str] = []
+        self.tagged: list[tuple[Node, str]] = []  # nodes with an explicit tag, where
 
     def _where(self) -> str:
         return ".".join(self._path) or "(document)"
@@ -139,6 +140,9 @@ class _Loader(yaml.SafeLoader):
             raise _Reject(ev.start_mark, self._where(), "plain values (no YAML anchors)",
                           f"anchor &{ev.anchor}", "anchors (&name) and aliases (*name) are not "
                           "supported in se3dyn model files; write the values out")
+        tag = getattr(ev, "tag", None)  # explicit tags only (!name, !!type): all refused,
+        # naming the item and field where the tagged value sits (_section), or at worst where
+        # it is in the document (_load_root)
         self._count += 1
         if self._count > MAX_NODES:
             raise _Reject(ev.start_mark, self._where(), f"at most {MAX_NODES} YAML values",
@@ -148,9 +152,13 @@ class _Loader(yaml.SafeLoader):
                           "deeper nesting")
         self._depth += 1
         try:
-            return super().compose_node(parent, index)
+            node = super().compose_node(parent, index)
         finally:
             self._depth -= 1
+        if tag is not None:
+            node.explicit_tag = tag
+            self.tagged.append((node, self._where()))
+        return node
 
     def compose_sequence_node(self, anchor):
         start = self.get_event()
@@ -814,6 +822,28 @@ def _plain(text: str) -> str:
     return text.replace("\\|", "|").replace("`", "")
 
 
+_NO_TAGS = "tags (!name, !!type) are not supported in se3dyn model files; write the plain value"
+
+
+def _tagged(node: Node, deep: bool) -> Node | None:
+    """The first node with an explicit YAML tag: ``node`` itself, or with ``deep`` any node
+    inside it."""
+    if getattr(node, "explicit_tag", None) is not None:
+        return node
+    if deep and isinstance(node, SequenceNode | MappingNode):
+        for sub in (node.value if isinstance(node, SequenceNode)
+                    else [x for kv in node.value for x in kv]):
+            hit = _tagged(sub, True)
+            if hit is not None:
+                return hit
+    return None
+
+
+def _tag_fail(ctx: _Ctx, node: Node, item: str, fld: str):
+    ctx.fail(node, item, fld, "a plain value (no YAML tags)",
+             _Got(f"a value tagged {node.explicit_tag}"[:100]), _NO_TAGS)
+
+
 def _section(ctx: _Ctx, node: Node, sec: str, item: str, prefix: str) -> _Obj:
     fields = {f.name: f for f in FIELDS[sec]}
     where = prefix.rstrip(".") or "(fields)"
@@ -836,6 +866,9 @@ def _section(ctx: _Ctx, node: Node, sec: str, item: str, prefix: str) -> _Obj:
             ctx.fail(k, item, prefix + key, f"a {sec} field: " + ", ".join(fields),
                      _Got(f"unknown field {key!r}"),
                      f"did you mean '{close[0]}'?" if close else "")
+        hit = _tagged(k, False) or _tagged(v, not isinstance(f.type, Section | Named))
+        if hit is not None:
+            _tag_fail(ctx, hit, item, prefix + key)
         if isinstance(v, ScalarNode) and v.tag == "tag:yaml.org,2002:null" and not f.required:
             continue  # null = not given
         obj.values[key] = f.type.convert(ctx, v, item, prefix + key)
@@ -872,7 +905,12 @@ def load_model(path_or_text: str | os.PathLike | bytes) -> tuple[Model, dict]:
     if isinstance(path_or_text, bytes) or (isinstance(path_or_text, str)
                                            and "\n" in path_or_text):
         return loads_model(path_or_text)
+    if not isinstance(path_or_text, str | os.PathLike):
+        raise ModelFileError("<argument>", None, "file", "path", "a file name (str or path) or "
+                             "YAML text", _Got(type(path_or_text).__name__))
     name = os.fspath(path_or_text)
+    if not isinstance(name, str):
+        name = os.fsdecode(name)
     try:
         size = os.path.getsize(name)
         if size > MAX_FILE_BYTES:
@@ -880,9 +918,10 @@ def load_model(path_or_text: str | os.PathLike | bytes) -> tuple[Model, dict]:
                                  _Got(f"{size} bytes"))
         with open(name, "rb") as fh:
             data = fh.read(MAX_FILE_BYTES + 1)
-    except OSError as e:
+    except (OSError, ValueError) as e:  # ValueError: a NUL character in the name
         raise ModelFileError(name, None, "file", "path", "a readable model file",
-                             _Got(f"{type(e).__name__}: {e.strerror or e}")) from None
+                             _Got(f"{type(e).__name__}: {getattr(e, 'strerror', None) or e}")
+                             ) from None
     return loads_model(data, filename=name)
 
 
@@ -954,8 +993,13 @@ def _load_root(ctx: _Ctx, root: Node | None) -> tuple[Model, dict]:
         ctx.fail(root, item, "se3dyn", f"the format version 'se3dyn: {FORMAT_VERSION}' at the "
                  "top", _Got("no 'se3dyn' field"), "every se3dyn model file starts with "
                  f"'se3dyn: {FORMAT_VERSION}'")
+    if _tagged(root, False) is not None:
+        _tag_fail(ctx, root, item, "(document)")
     Version().convert(ctx, ver[0], item, "se3dyn")
     top = _section(ctx, root, "model", item, "")
+    if ctx.loader.tagged:  # a tag where no field looked (e.g. on an item name)
+        node, where = ctx.loader.tagged[0]
+        _tag_fail(ctx, node, "document", where)
     return _build(ctx, top)
 
 
@@ -1256,7 +1300,12 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
                         width=10_000, allow_unicode=True))
     # the dumped text must load back: never write a file we could not read
     if path is not None:
-        Path(path).write_text(text, encoding="utf-8")
+        try:
+            Path(path).write_text(text, encoding="utf-8")
+        except (OSError, TypeError, ValueError) as e:
+            raise ModelError("save_model", "path", "a writable file name", path,
+                             f"{type(e).__name__}: {getattr(e, 'strerror', None) or e}"
+                             ) from None
     return text
 
 

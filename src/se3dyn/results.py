@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from se3dyn.errors import ModelError, UnknownNameError
 from se3dyn.system import System  # noqa: F401  (type of the usual layout)
 
 __all__ = ["Results"]
@@ -20,7 +21,7 @@ def node_dofs(s, H: np.ndarray, arr: np.ndarray, i: int, frame: str) -> np.ndarr
     "inertial"`` rotates both parts by the node rotation of ``H`` (n, M, 4, 4) (Eq. (4));
     zeros for a clamped node."""
     if frame not in ("material", "inertial"):
-        raise ValueError(f"frame: expected 'material' or 'inertial', got {frame!r}")
+        raise ModelError("results", "frame", "'material' or 'inertial'", frame)
     if s.node_fixed[i]:
         return np.zeros((len(arr), 6))
     d = s.node_dofadr[i]
@@ -76,16 +77,21 @@ class Results:
     def _node(self, name: str) -> int:
         names = self.system.node_names
         try:
+            if not isinstance(name, str):
+                raise ValueError(name)
             return names.index(name)
         except ValueError:
             close = difflib.get_close_matches(str(name), names, n=1)
             hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise KeyError(f"unknown node {name!r}{hint} (valid: {', '.join(names)})") from None
+            raise UnknownNameError(
+                f"unknown node {name!r}{hint} (valid: {', '.join(names)})") from None
 
     def _joints(self, name: str) -> list[int]:
         s = self.system
         comp = s.composites
         names = list(s.joint_names)
+        if not isinstance(name, str):
+            name = repr(name)  # never a valid name: reported below with the valid ones
         if name in comp:
             return [names.index(n) for n in comp[name]]
         if name in names:
@@ -93,7 +99,7 @@ class Results:
         valid = [n for n in names if ":" not in n] + list(comp)
         close = difflib.get_close_matches(str(name), valid, n=1)
         hint = f"; did you mean '{close[0]}'?" if close else ""
-        raise KeyError(f"unknown joint {name!r}{hint} (valid: {', '.join(valid)})")
+        raise UnknownNameError(f"unknown joint {name!r}{hint} (valid: {', '.join(valid)})")
 
     def node_position(self, name: str) -> np.ndarray:
         """Position of a node in the inertial frame, shape (n, 3)."""

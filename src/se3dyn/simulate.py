@@ -20,15 +20,24 @@ from se3dyn.system import System, Workspace, compile_model
 __all__ = ["simulate", "SCALARS"]
 
 
+#: Most steps of one fixed-step run (the compiled loop counts steps in 32-bit integers), and
+#: most stored rows of one run; more is refused before anything is allocated.
+MAX_STEPS = 10**8
+#: Rows allocated at the start; the recorder grows (doubling) as the run goes.
+_INITIAL_ROWS = 4096
+#: Steps whose times and inputs are tabulated at once by the compiled fixed-step loop.
+_BLOCK = 65536
+
 #: Names of the scalar columns of a stored row, in order (see ``on_output`` of :func:`simulate`).
 SCALARS = ("kinetic", "potential", "spring", "work_actuators", "work_loads", "dissipation",
            "iterations", "residual", "constraint")
 
 
 class _Recorder:
-    def __init__(self, s: System, capacity: int, sink=None):
+    def __init__(self, s: System, capacity: int, sink=None, limit: int | None = None):
         self.s = s
         self.sink = sink
+        self.limit = limit  # rows expected in all (fixed steps): growth stops there
         self.n = 0
         self.t = np.zeros(capacity)
         self.H = np.zeros((capacity, s.M, 4, 4))
@@ -39,9 +48,11 @@ class _Recorder:
         self.scal = np.zeros((capacity, 9))
 
     def _grow(self):
+        n = len(self.t)
+        extra = n if self.limit is None or self.limit <= n else min(n, self.limit - n)
         for name in ("t", "H", "v", "vd", "lam", "alpha", "scal"):
             arr = getattr(self, name)
-            setattr(self, name, np.concatenate([arr, np.zeros_like(arr)]))
+            setattr(self, name, np.concatenate([arr, np.zeros((extra,) + arr.shape[1:])]))
 
     def add(self, st: State, kin: float, pot: float, spring: float, iters: int, res: float,
             con: float):
@@ -92,7 +103,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     step : float
         Time step h (s); the initial step when ``tol`` is given. With a fixed step, when
         ``(t_end - t_start)/step`` is not an integer the last step is shortened to land on
-        ``t_end``.
+        ``t_end``. More than ``MAX_STEPS`` (1e8) fixed steps, or stored rows that would not fit
+        in the available memory, are refused with a ModelError before the run starts.
     rho_inf : float
         Spectral radius at infinite frequency (Eq. (44)).
     tol_residual, tol_constraint, max_iter :
@@ -173,8 +185,14 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                 or not (math.isfinite(float(val)) and float(val) > 0)):
             raise ModelError("simulate", fld, "a positive number", val)
         opt[fld] = float(val)
+    if opt["tol"] is not None and opt["tol"] < 1e-15:
+        raise ModelError("simulate", "tol", "a tolerance of at least 1e-15 (m, rad)", opt["tol"])
     if opt["h_min"] > opt["h_max"]:
         raise ModelError("simulate", "h_min", f"at most h_max={opt['h_max']:g}", opt["h_min"])
+    for fld, val in (("progress", progress), ("on_output", on_output)):
+        if val is not None and not callable(val):
+            raise ModelError("simulate", fld, "a callable or None", val)
+    _check_size(s, span, step, output_every, opt["output_step"], opt["tol"] is not None)
     if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool):
         rho_inf = float(rho_inf)
     integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,
@@ -192,7 +210,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         capacity = 1024
     else:
         capacity = max(1, math.ceil(span / step - 1e-9)) // output_every + 2
-    rec = _Recorder(s, capacity, on_output)
+    # storage grows as the run goes (doubling, up to the rows expected)
+    rec = _Recorder(s, min(capacity, _INITIAL_ROWS), on_output,
+                    None if adaptive and grid is None else capacity)
     wall0 = time.perf_counter()
     ws = Workspace(s)  # this run's engine and steppers, shared with no other run
     st = integ.init(s, t_start, ws=ws)
@@ -207,7 +227,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                  redundant=[equation_name(s, r) for r in st.dropped],
                  linear_solver="dense LU" if solver.dense else "sparse LU (SuperLU)",
                  adaptive=adaptive, tol=opt["tol"], h_min_used=math.inf, h_max_used=0.0)
-    nsteps = max(1, math.ceil(span / step - 1e-9))
+    nsteps = 0 if adaptive else max(1, math.ceil(span / step - 1e-9))
     h = min(step, opt["h_max"]) if adaptive else step
     i = 0
 
@@ -225,20 +245,23 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         # the whole fixed-step loop in the compiled engine, in chunks between which progress
         # and streamed rows are reported; a failing step is repeated by
         # GeneralizedAlpha.step, which raises the error naming time, norms and item
-        times = np.array([t_start + (k + 1) * step if k + 1 < nsteps else t_end
-                          for k in range(nsteps)])
-        st, i, fac = _run_compiled(s, integ, st, times, output_every, rec, progress, stats, ws)
+        def times(k0: int, k1: int) -> np.ndarray:  # the times of steps k0 <= k < k1
+            out = t_start + np.arange(k0 + 1, k1 + 1, dtype=np.int64).astype(float) * step
+            if k1 == nsteps:
+                out[-1] = t_end
+            return out
+
+        st, i, fac, hs = _run_compiled(s, integ, st, times, nsteps, output_every, rec, progress,
+                                       stats, ws)
         stats["factorizations"] = fac
         if i < nsteps:
             try:
-                integ.step(s, st, times[i] - st.t, solver, ws)
+                integ.step(s, st, float(times(i, i + 1)[0]) - st.t, solver, ws)
             except SimulationError as exc:
                 fail(exc)
             raise AssertionError("the compiled step failed but GeneralizedAlpha.step converged")
         if nsteps:
-            hs = np.diff(np.concatenate([[t_start], times]))
-            stats["h_min_used"] = float(hs.min())
-            stats["h_max_used"] = float(hs.max())
+            stats["h_min_used"], stats["h_max_used"] = hs
     while st.t < t_end and (adaptive or i < nsteps):
         if adaptive:
             h = min(h, t_end - st.t)
@@ -255,7 +278,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                 stats["rejected"] += 1
                 h /= 4
                 continue
-            tol_h = opt["tol"] * h / span
+            tol_h = max(opt["tol"] * h / span, 1e-300)
             err = float(np.abs(info.error).max(initial=0.0)) / tol_h
             if err > 1.0:
                 if h <= opt["h_min"] * (1 + 1e-9):
@@ -308,17 +331,58 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     return rec.results(stats)
 
 
-def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times: np.ndarray,
+def _check_size(s: System, span: float, step: float, output_every: int,
+                output_step: float | None, adaptive: bool) -> None:
+    """Refuse, before anything is allocated, a run of more than MAX_STEPS fixed steps or more
+    than MAX_STEPS stored rows, or whose stored rows would not fit in the available memory."""
+    what = f"(t_end - t_start) / step = {span:g} / {step:g}"
+    n = span / step  # may be inf
+    if not adaptive and not n <= MAX_STEPS:
+        raise ModelError("simulate", "step", f"at most {MAX_STEPS:.0e} steps", step,
+                         f"{what} = {n:.3g} steps; use a larger step")
+    rows = span / output_step + 1 if output_step is not None else (
+        None if adaptive else n / output_every + 2)
+    if rows is None:
+        return
+    if not rows <= MAX_STEPS:
+        raise ModelError("simulate", "output_step" if output_step is not None else
+                         "output_every", f"at most {MAX_STEPS:.0e} stored rows", rows,
+                         "store fewer rows: a larger output_step or output_every")
+    per_row = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
+    need = rows * per_row  # (the copy returned in Results doubles it at the end)
+    avail = _available_memory()
+    if avail is not None and need > avail:
+        raise ModelError(
+            "simulate", "output_step" if output_step is not None else "step",
+            "results that fit in memory", f"{rows:.3g} stored rows of {per_row} bytes = "
+            f"{need / 2**30:.1f} GiB", f"{avail / 2**30:.1f} GiB available; store fewer rows "
+            "with output_every or output_step (CLI: --output-step), or use a larger step")
+
+
+def _available_memory() -> float | None:
+    """Available memory in bytes (Linux: MemAvailable), None when unknown."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, nsteps: int,
                   output_every: int, rec: _Recorder, progress, stats: dict, ws: Workspace):
-    """Fixed steps to ``times`` in the compiled loop (``Stepper.run``); returns the state
-    reached, the number of steps done (less than ``len(times)`` when a step failed) and the
-    factorisations. Progress is reported and stored rows are streamed between chunks of
-    steps that last about 0.1 s each."""
+    """Fixed steps to the times ``times(k0, k1)`` of steps ``k0 <= k < k1 < nsteps`` in the
+    compiled loop (``Stepper.run``); returns the state reached, the number of steps done (less
+    than ``nsteps`` when a step failed), the factorisations and the smallest and largest step.
+    Times and inputs are tabulated in blocks of about _BLOCK steps (a multiple of
+    ``output_every``, so the stored rows are those of one table). Progress is reported and
+    stored rows are streamed between chunks of steps that last about 0.1 s each."""
     from se3dyn.integrator import KMAX, _stepper
     from se3dyn.system import input_table
 
-    nsteps = len(times)
-    U, n_ok = input_table(s, times)
+    block = output_every * max(1, _BLOCK // output_every)
     stp = _stepper(s, integ.index2, st.dropped, ws)
     F = s.M + s.m
     H = np.ascontiguousarray(np.concatenate([st.H, st.HJ]).reshape(F, 4, 4), dtype=float)
@@ -329,32 +393,47 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times: np.ndarr
     i = 0
     fac = 0
     chunk = 16
+    n_ok = nsteps
+    b0 = b1 = 0
+    tb = U = None
+    h_lo, h_hi, t_prev = math.inf, 0.0, st.t
     while i < n_ok:
-        i1 = min(n_ok, i + chunk)
+        if i >= b1:  # the next block of times and inputs
+            b0, b1 = i, min(nsteps, i + block)
+            tb = times(b0, b1)
+            U, ok = input_table(s, tb)
+            if ok < len(tb):
+                n_ok = b0 + ok
+            hs = np.diff(np.concatenate([[t_prev], tb]))
+            h_lo, h_hi = min(h_lo, float(hs.min())), max(h_hi, float(hs.max()))
+            t_prev = float(tb[-1])
+            if i >= n_ok:
+                break
+        i1 = min(n_ok, b1, i + chunk)
         rows_needed = (i1 // output_every - i // output_every) + 1
         while len(rec.t) - rec.n < rows_needed:
             rec._grow()
         n0 = rec.n
         tic = time.perf_counter()
         status, done, its, nf, count, res, con = stp.run(
-            times, i, i1, nsteps - 1, U, output_every, am, af, g, b, integ.tol_residual,
-            integ.tol_constraint * s.length_scale, float(s.length_scale), integ.max_iter,
-            integ.newton == "modified", KMAX, H, alpha, v, vd, a, lam, acc, rec.t,
-            rec.H.reshape(-1), rec.v.reshape(-1), rec.vd.reshape(-1), rec.lam.reshape(-1),
-            rec.alpha.reshape(-1), rec.scal.reshape(-1), rec.n)
+            tb, i - b0, i1 - b0, nsteps - 1 - b0, U, output_every, am, af, g, b,
+            integ.tol_residual, integ.tol_constraint * s.length_scale, float(s.length_scale),
+            integ.max_iter, integ.newton == "modified", KMAX, H, alpha, v, vd, a, lam, acc,
+            rec.t, rec.H.reshape(-1), rec.v.reshape(-1), rec.vd.reshape(-1),
+            rec.lam.reshape(-1), rec.alpha.reshape(-1), rec.scal.reshape(-1), rec.n)
         dt = time.perf_counter() - tic
         rec.n = count
         stats["newton_iterations"] += its
         fac += nf
-        i = done
+        i = b0 + done
         if rec.sink is not None:
             for r in range(n0, count):
                 row = State(t=float(rec.t[r]), H=rec.H[r], HJ=np.zeros((0, 4, 4)), v=rec.v[r],
                             vd=rec.vd[r], a=rec.vd[r], lam=rec.lam[r], alpha=rec.alpha[r])
                 # (read-only views of the recorder's rows)
                 rec.sink(row, dict(zip(SCALARS, rec.scal[r].tolist(), strict=True)))
-        if progress is not None and done > 0:
-            progress(float(times[done - 1]), done)
+        if progress is not None and i > 0:
+            progress(float(tb[i - 1 - b0]), i)
         if status != 0:
             break
         chunk = max(1, min(4 * chunk, int(chunk * 0.1 / max(dt, 1e-6))))
@@ -362,7 +441,7 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times: np.ndarr
                a=a.copy(), lam=lam.copy(), alpha=alpha.copy(), work_act=float(acc[3]),
                work_ext=float(acc[4]), dissipated=float(acc[5]), power=acc[:3].copy(),
                dropped=st.dropped, h_last=float(acc[6]))
-    return st, i, fac
+    return st, i, fac, (h_lo, h_hi)
 
 
 def _err_kwargs(exc) -> dict:

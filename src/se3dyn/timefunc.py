@@ -10,6 +10,7 @@ difference).
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable as _CallableABC
 from dataclasses import dataclass, field
 from typing import Any
@@ -56,7 +57,12 @@ def _where(on: np.ndarray, v: Any) -> np.ndarray:
 
 
 def _value(v: Any, item: str, fld: str) -> np.ndarray | float:
-    a = np.asarray(v, dtype=float) if not isinstance(v, int | float) else float(v)
+    try:
+        if isinstance(v, bool | str | bytes):
+            raise TypeError(v)
+        a = np.asarray(v, dtype=float) if not isinstance(v, int | float) else float(v)
+    except (TypeError, ValueError, OverflowError):
+        raise ModelError(item, fld, "a number or a 1-D array of numbers", v) from None
     if isinstance(a, np.ndarray):
         if a.ndim > 1:
             raise ModelError(item, fld, "a number or a 1-D array", v)
@@ -67,6 +73,20 @@ def _value(v: Any, item: str, fld: str) -> np.ndarray | float:
     elif not math.isfinite(a):
         raise ModelError(item, fld, "a finite number", v)
     return a
+
+
+def _scalar(obj: Any, name: str, item: str, inf_ok: bool = False) -> None:
+    """Validate the scalar parameter ``name`` of ``obj`` (a real number; +-inf when
+    ``inf_ok``) and store it as a float."""
+    v = getattr(obj, name)
+    ok = isinstance(v, numbers.Real) and not isinstance(v, bool)
+    if ok:
+        v = float(v)
+        ok = math.isfinite(v) or (inf_ok and not math.isnan(v))
+    if not ok:
+        raise ModelError(item, name, "a finite number" + (" (or infinity)" if inf_ok else ""),
+                         v)
+    object.__setattr__(obj, name, v)
 
 
 @dataclass(frozen=True)
@@ -103,6 +123,8 @@ class Step(TimeFunction):
 
     def __post_init__(self):
         object.__setattr__(self, "value", _value(self.value, "time function 'step'", "value"))
+        _scalar(self, "start", "time function 'step'", inf_ok=True)
+        _scalar(self, "stop", "time function 'step'", inf_ok=True)
         if not (self.stop > self.start):
             raise ModelError("time function 'step'", "stop", f"a time after start={self.start}",
                              self.stop)
@@ -133,6 +155,8 @@ class Ramp(TimeFunction):
 
     def __post_init__(self):
         object.__setattr__(self, "value", _value(self.value, "time function 'ramp'", "value"))
+        _scalar(self, "start", "time function 'ramp'")
+        _scalar(self, "duration", "time function 'ramp'")
         if not (self.duration > 0):
             raise ModelError("time function 'ramp'", "duration", "a positive time", self.duration)
 
@@ -170,8 +194,14 @@ class Table(TimeFunction):
 
     def __post_init__(self):
         item = "time function 'table'"
-        t = np.asarray(self.times, dtype=float)
-        y = np.asarray(self.values, dtype=float)
+        try:
+            t = np.asarray(self.times, dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            raise ModelError(item, "times", "a list of numbers", self.times) from None
+        try:
+            y = np.asarray(self.values, dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            raise ModelError(item, "values", "a list of numbers", self.values) from None
         if t.ndim != 1 or t.size < 2:
             raise ModelError(item, "times", "at least two times in a 1-D list", self.times)
         if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
@@ -217,6 +247,8 @@ class Sine(TimeFunction):
         item = "time function 'sine'"
         object.__setattr__(self, "amplitude", _value(self.amplitude, item, "amplitude"))
         object.__setattr__(self, "offset", _value(self.offset, item, "offset"))
+        _scalar(self, "frequency", item)
+        _scalar(self, "phase", item)
         if not (math.isfinite(self.frequency) and self.frequency >= 0):
             raise ModelError(item, "frequency", "a non-negative frequency in Hz", self.frequency)
 

@@ -1,0 +1,707 @@
+"""No traceback, ever: a generated corpus of hostile model files and Python calls.
+
+A deterministic generator mutates valid model files (fields deleted, duplicated and retyped,
+extreme numbers, wrong nesting, bad names, YAML tags, unicode, huge lists, broken text) and
+draws hostile arguments for the Python API. Asserted: ``se3dyn check`` and ``se3dyn run``
+exit with 0, 1 or 2, a single-line message and no traceback; the Python API raises only
+subclasses of :class:`se3dyn.Se3dynError`. The CLI runs in-process (``se3dyn.cli.main``) for
+speed, a few cases in real subprocesses. Plus one test per class of crash found by fuzzing
+(huge step counts, nothing to solve, overflowing numbers, unstorable names, tags, API types).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import io
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+import se3dyn as sd
+from se3dyn.cli import main
+from se3dyn.errors import Se3dynError
+from se3dyn.modelfile import load_model, loads_model, save_model
+
+ROOT = Path(__file__).resolve().parents[1]
+SEED = 20261122
+
+# a small model using every section: hinge with spring, screw, spherical, universal, loads,
+# spring-damper, visuals, simulation settings
+SMALL = """\
+se3dyn: 1
+name: small
+gravity: [0.0, 0.0, -9.81]
+nodes:
+  g: {position: [0.0, 0.0, 0.0], fixed: true}
+  a: {position: [0.5, 0.0, 0.0], mass: 1.0, inertia: [0.01, 0.02, 0.02]}
+  b: {position: [1.0, 0.0, 0.0], mass: 0.5, inertia: [0.01, 0.01, 0.01], velocity: [0, 0.1, 0]}
+  c: {position: [1.0, 0.5, 0.0], mass: 0.2, inertia: [0.01, 0.01, 0.01]}
+joints:
+  h: {type: hinge, a: g, b: a, at: [0.0, 0.0, 0.0], axis: [0.0, 1.0, 0.0], stiffness: 1.0,
+      reference: 0.1, damping: 0.01, torque: {step: {value: 0.2, start: 0.0, stop: 1.0}}}
+  s: {type: screw, a: a, b: b, at: [0.75, 0.0, 0.0], axis: [1.0, 0.0, 0.0], pitch: 0.01}
+  u: {type: universal, a: b, b: c, at: [1.0, 0.25, 0.0], axes: [[1, 0, 0], [0, 0, 1]]}
+loads:
+  push: {node: c, force: [0.0, 1.0, 0.0], at: [1.0, 0.5, 0.0]}
+springs:
+  sp: {a: g, b: c, at_a: [0.0, 0.5, 0.0], at_b: [1.0, 0.5, 0.0], stiffness: 2.0, damping: 0.1}
+visuals:
+  rod: {node: a, shape: cylinder, size: [0.01, 0.5], axis: [1, 0, 0]}
+simulation: {t_end: 1.0, step: 0.01, rho_inf: 0.9}
+"""
+
+BASES = [("small", SMALL)] + [
+    (p.stem, p.read_text(encoding="utf-8"))
+    for p in (ROOT / "examples" / "a01_simple_pendulum.yaml",
+              ROOT / "examples" / "slider_crank_bodies.yaml",
+              ROOT / "examples" / "slider_crank.yaml")]
+
+HOSTILE_VALUES = [
+    None, True, False, 0, -1, 1, 2**70, -(2**70), 1e300, -1e300, 1e-300, 5e-324, 1e15, 1e16,
+    float("nan"), float("inf"), -float("inf"), "", "x", "a\0b", "\u00e9t\u00e9", "\U0001F600",
+    "revolute", [], {}, [1, 2], [1, 2, 3, 4], [[1, 2, 3]], [1e300, 0, 0], [0, 0, 0],
+    ["a", "b", "c"], {"a": 1}, {"step": {"value": "x"}}, {"sine": {}}, [None] * 3,
+    list(range(200)), "1e-4", "0x10", "yes", "~",
+]
+
+# YAML fragments inserted as text (tags, control characters, surrogates, broken syntax)
+TEXT_SNIPPETS = [
+    "!!python/tuple [1, 2, 3]", "!custom 1.0", "!!str 1.0", "!!binary aGVsbG8=",
+    "!!python/object/apply:os.system ['true']", "! 1.0", "!<tag:example.com,2000:x> 1",
+    '"a\\0b"', '"\\ud800"', '"x\\x07y"', '"\\u202e"', "&anchor 1", "*alias", "[1, 2",
+    "{a: 1", "'unterminated", "@", "`", "%YAML 1.1", "---", "...", "1e999", "-.inf", ".nan",
+    "0o777", "2001-12-14t21:59:43.10-05:00", "? complex key", "|\n  block", "[" * 60,
+    '"' + "\u00ff" * 300 + '"',
+]
+
+
+# ---------------------------------------------------------------------------------------------
+def _paths(doc, prefix=()):
+    """Every (path, value) in a nested dict/list document."""
+    out = [(prefix, doc)]
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            out += _paths(v, prefix + (k,))
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc):
+            out += _paths(v, prefix + (i,))
+    return out
+
+
+def _get(doc, path):
+    for k in path:
+        doc = doc[k]
+    return doc
+
+
+def _set(doc, path, value):
+    _get(doc, path[:-1])[path[-1]] = value
+
+
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+
+def _dump(doc) -> str:
+    return yaml.dump(doc, Dumper=_DUMPER, sort_keys=False, allow_unicode=True, width=10_000)
+
+
+def _mutate(rng: random.Random, text: str) -> tuple[str, str]:
+    """One hostile variant of a valid model file: (kind of mutation, text)."""
+    doc = yaml.load(text, Loader=_LOADER)
+    paths = [p for p, _ in _paths(doc) if p]
+    kind = rng.choice(["delete", "retype", "retype", "extreme", "nest", "rename", "duplicate",
+                       "tag", "unicode", "biglist", "jointtype", "badref", "sim", "text",
+                       "truncate", "multi", "nothing"])
+    if kind == "delete":
+        p = rng.choice(paths)
+        parent = _get(doc, p[:-1])
+        del parent[p[-1]]
+    elif kind == "retype":
+        _set(doc, rng.choice(paths), rng.choice(HOSTILE_VALUES))
+    elif kind == "extreme":
+        nums = [p for p, v in _paths(doc) if p and isinstance(v, int | float)
+                and not isinstance(v, bool)]
+        for p in rng.sample(nums, min(len(nums), rng.randint(1, 3))):
+            _set(doc, p, rng.choice([1e300, -1e300, 1e308, 5e-324, 1e-300, 1e16, -1e16, 1e15,
+                                     0.0, -0.0, 2**64, 1e-12, 1e12]))
+    elif kind == "nest":
+        p = rng.choice(paths)
+        v = _get(doc, p)
+        _set(doc, p, rng.choice([[v], {"x": v}, [[v]], {"value": v}]))
+    elif kind == "rename":
+        sec = rng.choice([k for k in ("nodes", "joints", "loads", "springs", "visuals")
+                          if isinstance(doc.get(k), dict) and doc[k]])
+        old = rng.choice(list(doc[sec]))
+        new = rng.choice(["a\0b", "x\ty", "\x07", "line\nbreak", "", " ", "\u202e", "n" * 500,
+                          "\u00e9", "cross:1", "a:cross", "1", "g", "\x1b[31m", "é\x7f"])
+        doc[sec] = {(new if k == old else k): v for k, v in doc[sec].items()}
+        if sec == "nodes":  # references follow half of the time
+            if rng.random() < 0.5:
+                for sec2 in ("joints", "loads", "springs", "visuals"):
+                    for item in (doc.get(sec2) or {}).values():
+                        if isinstance(item, dict):
+                            for f in ("a", "b", "node"):
+                                if item.get(f) == old:
+                                    item[f] = new
+    elif kind == "duplicate":
+        lines = text.splitlines()
+        i = rng.randrange(len(lines))
+        lines.insert(i, lines[i])
+        return kind, "\n".join(lines) + "\n"
+    elif kind == "tag":
+        p = rng.choice(paths)
+        _set(doc, p, "@@SNIP@@")
+        snip = rng.choice(TEXT_SNIPPETS[:7])
+        return kind, _dump(doc).replace("'@@SNIP@@'", snip).replace("@@SNIP@@", snip)
+    elif kind == "unicode":
+        p = rng.choice(paths)
+        s = "".join(chr(rng.choice([rng.randint(0x20, 0x7e), rng.randint(0xa0, 0x2fff),
+                                    rng.randint(0x1f300, 0x1f6ff)])) for _ in range(8))
+        _set(doc, p, s)
+    elif kind == "biglist":
+        p = rng.choice(paths)
+        n = rng.choice([100, 1000, 10_001])
+        _set(doc, p, "@@BIG@@")
+        big = "[" + ", ".join(rng.choice(["1", "0.5", "x", "[]"]) for _ in range(n)) + "]"
+        return kind, _dump(doc).replace("@@BIG@@", big)
+    elif kind == "jointtype":
+        j = doc.get("joints") or {}
+        if j:
+            name = rng.choice(list(j))
+            if isinstance(j[name], dict):
+                j[name]["type"] = rng.choice(["hinge", "prismatic", "cylindrical", "spherical",
+                                              "planar", "screw", "general", "universal",
+                                              "rigid", "revolute", "HINGE", ["hinge"], 1])
+    elif kind == "badref":
+        j = doc.get("joints") or {}
+        if j:
+            item = j[rng.choice(list(j))]
+            if isinstance(item, dict):
+                item[rng.choice(["a", "b"])] = rng.choice(["nope", ["g"], 1, None, "", "a\0"])
+    elif kind == "sim":
+        sim = doc.setdefault("simulation", {})
+        if isinstance(sim, dict):
+            sim[rng.choice(["t_end", "step", "rho_inf", "tol", "output_step", "h_min",
+                            "h_max", "formulation", "output_every", "t_start", "max_iter",
+                            "bogus"])] = rng.choice(
+                [1e-300, 5e-324, 1e-9, -1.0, 0.0, 1e300, 2.0, "index3", "x", 10**20, 0, 3,
+                 None, [1], float("nan")])
+    elif kind == "text":
+        lines = _dump(doc).splitlines()
+        i = rng.randrange(len(lines))
+        snip = rng.choice(TEXT_SNIPPETS)
+        if ": " in lines[i] and rng.random() < 0.7:
+            head = lines[i].split(": ", 1)[0]
+            lines[i] = f"{head}: {snip}"
+        else:
+            lines.insert(i, snip)
+        return kind, "\n".join(lines) + "\n"
+    elif kind == "truncate":
+        return kind, text[: rng.randrange(len(text))]
+    elif kind == "multi":
+        for _ in range(rng.randint(2, 5)):
+            paths = [p for p, _ in _paths(doc) if p]
+            if not paths:
+                break
+            _set(doc, rng.choice(paths), rng.choice(HOSTILE_VALUES))
+    return kind, _dump(doc)
+
+
+def corpus(n: int) -> list[tuple[str, str, str]]:
+    rng = random.Random(SEED)
+    out = []
+    for k in range(n):
+        base, text = BASES[k % len(BASES)]
+        kind, mutated = _mutate(rng, text)
+        out.append((f"{k:04d}-{base}-{kind}", kind, mutated))
+    return out
+
+
+def _cli(argv) -> tuple[int, str, str]:
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+        try:
+            code = main([str(a) for a in argv])
+        except SystemExit as exc:
+            code = exc.code
+    return code, out.getvalue(), err.getvalue()
+
+
+def _assert_clean(code, err, what):
+    assert code in (0, 1, 2), f"{what}: exit {code}\n{err}"
+    assert "Traceback" not in err, f"{what}:\n{err}"
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    errs = [ln for ln in lines if ln.startswith("se3dyn: error:")]
+    if code != 0:
+        assert len(errs) == 1, f"{what}: expected one error line, got\n{err}"
+    assert len(errs) <= 1, f"{what}:\n{err}"
+
+
+N_FILES = 1200
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """The corpus written to files, each with its model when it loads (else None)."""
+    d = tmp_path_factory.mktemp("hostile")
+    out = []
+    for name, kind, text in corpus(N_FILES):
+        p = d / f"{name}.yaml"
+        p.write_bytes(text.encode("utf-8", "surrogatepass"))
+        try:
+            model = load_model(p)[0]
+        except Se3dynError:
+            model = None
+        out.append((p, kind, model))
+    return d, out
+
+
+def test_corpus_is_hostile_enough(files):
+    _, fs = files
+    assert len(fs) == N_FILES
+    assert len({k for _, k, _ in fs}) >= 15
+    # most mutations are refused; some still load (e.g. a changed number)
+    bad = sum(m is None for _, _, m in fs)
+    assert N_FILES * 0.4 < bad < N_FILES
+
+
+def test_corpus_check_and_run_in_process(files):
+    d, fs = files
+    t0 = time.perf_counter()
+    codes = {0: 0, 1: 0, 2: 0}
+    for p, kind, _ in fs:
+        code, _, err = _cli(["check", p])
+        _assert_clean(code, err, f"check {p.name} ({kind})")
+        codes[code] += 1
+        if code == 0:
+            code, _, err = _cli(["run", p, "--t-end", "0.02", "--step", "0.01", "--quiet",
+                                 "--out", d / "out"])
+            _assert_clean(code, err, f"run {p.name} ({kind})")
+            codes[code] += 1
+    assert codes[2] > 0 and codes[0] > 0
+    assert time.perf_counter() - t0 < 120
+
+
+def test_corpus_api_save_and_simulate(files):
+    """The Python API raises only se3dyn errors on the models of the corpus that load: they
+    save, load back and simulate (or fail with a SimulationError)."""
+    _, fs = files
+    for _, _, model in fs:
+        if model is None:
+            continue
+        loads_model(save_model(model))
+        try:
+            sd.simulate(model, t_end=0.02, step=0.01)
+        except Se3dynError:
+            pass
+
+
+def test_corpus_subprocess_sample(files):
+    """A few real processes: the console script, its exit codes and stderr."""
+    d, fs = files
+    rng = random.Random(SEED)
+    sample = rng.sample(fs, 6)
+    for p, kind, _ in sample:
+        for args in (["check", p], ["run", p, "--t-end", "0.02", "--step", "0.01", "--out",
+                                    d / "sub"]):
+            r = subprocess.run([sys.executable, "-m", "se3dyn.cli", *map(str, args)],
+                               capture_output=True, text=True, timeout=120)
+            _assert_clean(r.returncode, r.stderr, f"{args[0]} {p.name} ({kind})")
+
+
+# ---------------------------------------------------------------------------------------------
+# Hostile Python calls
+# ---------------------------------------------------------------------------------------------
+API_VALUES = HOSTILE_VALUES + [np.array([1.0, 2.0]), np.array(["hinge"]), np.nan, object(),
+                               lambda t: "x", lambda t: 1 / 0, b"bytes", 1j, (1, 2, 3),
+                               np.zeros((3, 3)), np.eye(3), set()]
+
+
+def _builder():
+    mb = sd.ModelBuilder(gravity=(0, 0, -9.81))
+    mb.node("g", fixed=True)
+    mb.node("a", position=(0.5, 0, 0), mass=1.0, inertia=(0.01, 0.02, 0.02))
+    mb.node("b", position=(1, 0, 0), mass=1.0, inertia=(0.01, 0.01, 0.01))
+    mb.joint("h", "hinge", "g", "a", axis=(0, 1, 0), at=(0, 0, 0))
+    return mb
+
+
+def _api_calls(n: int):
+    """n hostile calls, each a (description, zero-argument callable)."""
+    rng = random.Random(SEED + 1)
+    res = sd.simulate(_builder().build(), t_end=0.02, step=0.01)
+    calls = []
+
+    def pick():
+        return rng.choice(API_VALUES)
+
+    node_kw = ["position", "orientation", "mass", "inertia", "principal_axes", "fixed",
+               "velocity", "angular_velocity", "velocity_frame", "com"]
+    joint_kw = ["axis", "axes", "normal", "pitch", "A", "stiffness", "reference", "damping",
+                "actuator", "torque", "force", "control", "at"]
+    types = ["hinge", "prismatic", "cylindrical", "spherical", "planar", "screw", "general",
+             "universal", "rigid"]
+    for k in range(n):
+        which = k % 10
+        if which == 0:
+            kw = {rng.choice(node_kw): pick() for _ in range(rng.randint(1, 3))}
+            name = pick() if rng.random() < 0.3 else "n"
+            calls.append((f"node({name!r}, **{kw!r})",
+                          lambda name=name, kw=kw: _builder().node(name, **kw)))
+        elif which in (1, 2):
+            kw = {rng.choice(joint_kw): pick() for _ in range(rng.randint(1, 3))}
+            t = pick() if rng.random() < 0.2 else rng.choice(types)
+            na, nb = (pick(), "b") if rng.random() < 0.2 else ("a", "b")
+            calls.append((f"joint({t!r}, {na!r}, **{kw!r})",
+                          lambda t=t, na=na, nb=nb, kw=kw: _jb(t, na, nb, kw)))
+        elif which == 3:
+            kw = {rng.choice(["force", "torque", "at", "force_frame", "torque_frame"]): pick()
+                  for _ in range(rng.randint(1, 2))}
+            node = pick() if rng.random() < 0.3 else "b"
+            calls.append((f"load({node!r}, **{kw!r})",
+                          lambda node=node, kw=kw: _builder().load("L", node, **kw)))
+        elif which == 4:
+            kw = {rng.choice(["at_a", "at_b", "stiffness", "damping", "length"]): pick()
+                  for _ in range(rng.randint(1, 2))}
+            kw.setdefault("stiffness", 1.0)
+            calls.append((f"spring_damper(**{kw!r})",
+                          lambda kw=kw: _builder().spring_damper("s", "g", "b", **kw)))
+        elif which == 5:
+            kw = {rng.choice(["t_end", "step", "rho_inf", "t_start", "output_every", "tol",
+                              "h_min", "h_max", "output_step", "formulation", "engine",
+                              "newton", "progress", "redundant", "max_iter"]): pick()
+                  for _ in range(rng.randint(1, 2))}
+            kw.setdefault("t_end", 0.02)
+            kw.setdefault("step", 0.01)
+            calls.append((f"simulate(**{kw!r})",
+                          lambda kw=kw: sd.simulate(_builder().build(), **kw)))
+        elif which == 6:
+            f = rng.choice(["node_position", "node_velocity", "node_acceleration",
+                            "joint_coordinates", "joint_multipliers", "node_rotation"])
+            arg = pick() if rng.random() < 0.7 else "nope"
+            calls.append((f"Results.{f}({arg!r})",
+                          lambda f=f, arg=arg: getattr(res, f)(arg)
+                          if hasattr(res, f) else res.node_position(arg)))
+        elif which == 7:
+            cls, lo, hi = rng.choice([(sd.Step, 1, 3), (sd.Ramp, 1, 3), (sd.Sine, 2, 4),
+                                      (sd.Table, 2, 2), (sd.Constant, 1, 1)])
+            args = [pick() for _ in range(rng.randint(lo, hi))]
+            calls.append((f"{cls.__name__}(*{args!r})",
+                          lambda cls=cls, args=args: cls(*args)))
+        elif which == 8:
+            arg = pick()
+            calls.append((f"load_model({arg!r})",
+                          lambda arg=arg: load_model(arg)))
+        else:
+            kw = {rng.choice(["gravity", "name"]): pick()}
+            calls.append((f"ModelBuilder(**{kw!r})", lambda kw=kw: sd.ModelBuilder(**kw)))
+    return calls
+
+
+def _jb(t, na, nb, kw):
+    mb = _builder()
+    mb.joint("j", t, na, nb, **kw)
+    return mb.build()
+
+
+N_CALLS = 600
+
+
+def test_api_calls_raise_only_se3dyn_errors():
+    calls = _api_calls(N_CALLS)
+    assert len(calls) == N_CALLS
+    for what, call in calls:
+        try:
+            call()
+        except Se3dynError:
+            pass
+        except Exception as exc:  # noqa: BLE001
+            pytest.fail(f"{what}: {type(exc).__name__}: {exc}")
+
+
+def test_corpus_size():
+    assert N_FILES + N_CALLS >= 1000
+
+
+# ---------------------------------------------------------------------------------------------
+# One test per class of crash found by fuzzing (each failed before the fix)
+# ---------------------------------------------------------------------------------------------
+def _pendulum(**joint):
+    mb = sd.ModelBuilder(gravity=(0, 0, -9.81))
+    mb.node("g", fixed=True)
+    mb.node("a", position=(0.5, 0, 0), mass=1.0, inertia=(0.01, 0.02, 0.02))
+    mb.joint("h", "hinge", "g", "a", axis=(0, 1, 0), at=(0, 0, 0), **joint)
+    return mb.build()
+
+
+@pytest.mark.parametrize("t_end, step", [(1.0, 1e-300), (1.0, 5e-324), (1.0, 1e-9),
+                                         (1e6, 1e-6)])
+def test_huge_step_counts_are_refused_before_allocating(t_end, step):
+    t0 = time.perf_counter()
+    with pytest.raises(sd.ModelError, match=r"at most 1e\+08 steps.*larger step") as ei:
+        sd.simulate(_pendulum(), t_end=t_end, step=step)
+    assert ei.value.field == "step"
+    assert time.perf_counter() - t0 < 5
+
+
+def test_stored_rows_beyond_memory_are_refused(monkeypatch):
+    simmod = importlib.import_module("se3dyn.simulate")
+
+    monkeypatch.setattr(simmod, "_available_memory", lambda: 3e7)
+    with pytest.raises(sd.ModelError, match="output_every or output_step"):
+        sd.simulate(_pendulum(), t_end=10.0, step=1e-4)
+    with pytest.raises(sd.ModelError, match="fit in memory"):
+        sd.simulate(_pendulum(), t_end=10.0, step=1e-4, tol=1e-3, output_step=1e-5)
+    sd.simulate(_pendulum(), t_end=10.0, step=1e-2)  # small enough
+
+
+@pytest.mark.parametrize("text", ["simulation: {t_end: 1.0, step: 1.0e-300}",
+                                  "simulation: {t_end: 1.0, step: 5.0e-324}",
+                                  "simulation: {t_end: 1.0, step: 1.0e-9}"])
+def test_command_refuses_huge_step_counts_in_one_line_and_leaves_no_file(tmp_path, text):
+    src = SMALL.replace("simulation: {t_end: 1.0, step: 0.01, rho_inf: 0.9}", text)
+    (tmp_path / "m.yaml").write_text(src)
+    code, _, err = _cli(["run", tmp_path / "m.yaml", "--out", tmp_path / "o", "--quiet"])
+    _assert_clean(code, err, text)
+    assert code == 2 and "steps" in err
+    assert not (tmp_path / "o" / "m.h5").exists()
+    code, _, err = _cli(["run", tmp_path / "m.yaml", "--t-end", "1e6", "--step", "1e-6",
+                         "--out", tmp_path / "o"])
+    assert code == 2 and "1e+12 steps" in err, err
+
+
+def test_compiled_loop_in_blocks_equals_one_block(monkeypatch):
+    """Times and inputs are tabulated in blocks: the same rows, bit for bit, and the same
+    failure, whatever the block size and the initial capacity of the recorder."""
+    simmod = importlib.import_module("se3dyn.simulate")
+
+    def run():
+        m = _pendulum(torque=sd.Sine(0.3, 2.0), damping=0.01)
+        a = sd.simulate(m, t_end=0.5, step=0.01, output_every=3)
+        bad = _pendulum(torque=lambda t: 0.1 if t < 0.23 else float("nan"))
+        with pytest.raises(sd.SimulationError) as ei:
+            sd.simulate(bad, t_end=0.5, step=0.01, output_every=2)
+        return a, ei.value
+
+    a, ea = run()
+    monkeypatch.setattr(simmod, "_BLOCK", 7)
+    monkeypatch.setattr(simmod, "_INITIAL_ROWS", 2)
+    b, eb = run()
+    for f in ("t", "H", "v", "vd", "lam", "alpha", "kinetic", "work_actuators", "iterations"):
+        assert np.array_equal(getattr(a, f), getattr(b, f)), f
+    assert a.stats["h_min_used"] == b.stats["h_min_used"]
+    assert a.stats["h_max_used"] == b.stats["h_max_used"]
+    assert a.t[-1] == 0.5 and len(a.t) == 18
+    assert str(ea) == str(eb)
+    assert np.array_equal(ea.result.t, eb.result.t) and np.array_equal(ea.result.H, eb.result.H)
+
+
+NOTHING = "se3dyn: 1\nnodes: {g: {fixed: true}}\nsimulation: {t_end: 1.0, step: 0.1}\n"
+
+
+def test_check_and_run_a_model_with_nothing_to_solve(tmp_path):
+    (tmp_path / "m.yaml").write_text(NOTHING)
+    code, out, err = _cli(["check", tmp_path / "m.yaml"])
+    _assert_clean(code, err, "check")
+    assert code == 0 and "mobility) 0" in out and "joints by type: none" in out
+    code, out, err = _cli(["run", tmp_path / "m.yaml", "--out", tmp_path, "--quiet"])
+    _assert_clean(code, err, "run")
+    assert code == 0
+
+
+@pytest.mark.parametrize("change, item, fld", [
+    (dict(type="screw", axis=(0, 1, 0), pitch=1e300), "joint 'j' (screw)", "pitch"),
+    (dict(type="hinge", axis=(0, 1, 0), stiffness=1.0, reference=1e300), "joint 'j' (hinge)",
+     "reference"),
+    (dict(type="hinge", axis=(0, 1, 0), at=(1e300, 0, 0)), "joint 'j' (hinge)", "at"),
+])
+def test_overflowing_joint_numbers_are_refused(change, item, fld):
+    mb = _builder()
+    t = change.pop("type")
+    with pytest.raises(sd.ModelError) as ei:
+        mb.joint("j", t, "a", "b", **change)
+    assert ei.value.item == item and ei.value.field == fld
+
+
+@pytest.mark.parametrize("kw, fld", [(dict(position=(1e300, 0, 0)), "position"),
+                                     (dict(velocity=(0, 1e300, 0)), "velocity"),
+                                     (dict(mass=1e300, inertia=(1, 1, 1)), "mass"),
+                                     (dict(mass=1.0, inertia=(1e300, 1e300, 1e300)), "inertia")])
+def test_overflowing_node_numbers_are_refused(kw, fld):
+    with pytest.raises(sd.ModelError) as ei:
+        _builder().node("n", **kw)
+    assert ei.value.item == "node 'n'" and ei.value.field == fld
+
+
+@pytest.mark.parametrize("old, new, line", [
+    ("pitch: 0.01", "pitch: 1.0e+300", 12), ("reference: 0.1", "reference: 1.0e+300", 11),
+    ("position: [0.5, 0.0, 0.0]", "position: [1.0e+300, 0.0, 0.0]", 6),
+    ("stiffness: 2.0", "stiffness: 1.0e+300", 17)])
+def test_overflowing_numbers_in_files_name_file_line_item_and_field(tmp_path, old, new, line):
+    (tmp_path / "m.yaml").write_text(SMALL.replace(old, new))
+    code, _, err = _cli(["check", tmp_path / "m.yaml"])
+    _assert_clean(code, err, new)
+    assert code == 2 and f"m.yaml, line {line}:" in err and new.split(":")[0] in err, err
+
+
+def test_newton_failure_report_survives_non_finite_values():
+    from types import SimpleNamespace
+
+    s = sd.compile_model(_pendulum())
+    integ = sd.GeneralizedAlpha()
+    for fill in (np.nan, np.inf):
+        ev = SimpleNamespace(r=np.full(s.nq, fill), phi=np.full(s.nm, fill), f_scale=fill)
+        with pytest.raises(sd.NewtonError, match="non-finite") as ei:
+            integ._fail(s, 0.1, 0.01, 3, ev, "diverging")
+        assert ei.value.item
+
+
+@pytest.mark.parametrize("bad", ["a\0b", "a\ud800b", "x\ty", "\x1b[31m", "line\nbreak",
+                                 "\u202e", "", "n" * 201])
+def test_unstorable_names_are_refused_at_build_time(bad):
+    for call in (lambda: _builder().node(bad),
+                 lambda: _builder().joint(bad, "hinge", "a", "b", axis=(0, 0, 1)),
+                 lambda: _builder().load(bad, "b", force=(1, 0, 0)),
+                 lambda: _builder().spring_damper(bad, "g", "b", stiffness=1.0),
+                 lambda: sd.ModelBuilder(name=bad)):
+        with pytest.raises(sd.ModelError, match="name"):
+            call()
+
+
+@pytest.mark.parametrize("escaped", ["a\\0b", "a\\ud800b", "a\\x07b"])
+def test_unstorable_names_in_files_exit_2_in_one_line(tmp_path, escaped):
+    text = SMALL.replace("  c: {position", f'  "{escaped}": {{position').replace(
+        "b: c,", f'b: "{escaped}",').replace("node: c,", f'node: "{escaped}",').replace(
+        "b: c, at_a", f'b: "{escaped}", at_a')
+    (tmp_path / "m.yaml").write_text(text)
+    for cmd in (["check"], ["run", "--t-end", "0.02", "--out", tmp_path, "--quiet"]):
+        code, _, err = _cli([cmd[0], tmp_path / "m.yaml", *cmd[1:]])
+        _assert_clean(code, err, escaped)
+        assert code == 2 and "line 8" in err and "printable" in err, err
+
+
+@pytest.mark.parametrize("tag", ["!!python/tuple", "!custom", "!!str", "!!float", "!!seq",
+                                 "!", "!<tag:yaml.org,2002:str>"])
+def test_yaml_tags_are_refused_naming_file_and_line(tmp_path, tag):
+    value = "[0.5, 0.0, 0.0]" if tag in ("!!python/tuple", "!custom", "!!seq") else "0.5"
+    if value == "0.5":
+        text = SMALL.replace("mass: 1.0,", f"mass: {tag} 1.0,")
+    else:
+        text = SMALL.replace("position: [0.5, 0.0, 0.0]", f"position: {tag} {value}")
+    (tmp_path / "m.yaml").write_text(text)
+    with pytest.raises(sd.ModelError, match=r"m\.yaml, line 6: .*tag"):
+        load_model(tmp_path / "m.yaml")
+    code, _, err = _cli(["check", tmp_path / "m.yaml"])
+    _assert_clean(code, err, tag)
+    assert code == 2
+
+
+def test_api_errors_are_se3dyn_errors(tmp_path):
+    res = sd.simulate(_builder().build(), t_end=0.02, step=0.01)
+    with pytest.raises(Se3dynError, match=r"unknown node 'nope'.*valid: g, a, b") as ei:
+        res.node_position("nope")
+    assert isinstance(ei.value, KeyError)  # still a KeyError for older callers
+    for call in (lambda: res.node_position(["a"]), lambda: res.joint_coordinates(["h"]),
+                 lambda: res.joint_coordinates("nope"),
+                 lambda: res.node_velocity("a", frame="x"),
+                 lambda: load_model(None), lambda: load_model(tmp_path),
+                 lambda: load_model("a\0b"),
+                 lambda: save_model(_builder().build(), tmp_path),
+                 lambda: save_model(_builder().build(), "/tmp"),
+                 lambda: sd.simulate(_builder().build(), t_end=1.0, step=1e-300),
+                 lambda: sd.simulate(_builder().build(), t_end=0.1, step=0.01, progress=5),
+                 lambda: sd.simulate(_builder().build(), t_end=0.1, step=0.01, on_output="x"),
+                 lambda: sd.simulate(_builder().build(), t_end=0.1, step=0.01, tol=5e-324),
+                 lambda: sd.simulate(_builder().build(), t_end=0.1, step=0.01,
+                                     max_iter=10**20),
+                 lambda: sd.Step("x"), lambda: sd.Step(1.0, start="a"),
+                 lambda: sd.Ramp(1.0, duration=np.zeros(3)), lambda: sd.Table([0, 1], "ab"),
+                 lambda: sd.Sine(1.0, "x"),
+                 lambda: _builder().joint("j", np.array(["hinge"]), "a", "b", axis=(0, 0, 1)),
+                 lambda: _builder().joint("j", ["hinge"], "a", "b", axis=(0, 0, 1)),
+                 lambda: _builder().node(["n"]), lambda: _builder().load("L", ["b"],
+                                                                        force=(1, 0, 0)),
+                 lambda: _builder().load(["L"], "b", force=(1, 0, 0)),
+                 lambda: _builder().node("n", fixed="no"),
+                 lambda: _builder().node("n", fixed=1),
+                 lambda: _builder().node("n", mass=True, inertia=(1, 1, 1)),
+                 lambda: _builder().node("n", mass="1"),
+                 lambda: sd.ModelBuilder(name=None),
+                 lambda: _builder().joint("j", "screw", "a", "b", axis=(0, 0, 1), pitch=True)):
+        with pytest.raises(Se3dynError):
+            call()
+
+
+def test_error_messages_show_plain_numbers():
+    with pytest.raises(sd.ModelError) as ei:
+        _builder().node("n", mass=np.float64(-0.5))
+    assert "np.float64" not in str(ei.value) and "-0.5" in str(ei.value)
+    with pytest.raises(sd.ModelError) as ei:
+        _builder().node("n", fixed=True, velocity=(np.float64(1.0), 0, 0))
+    assert "np.float64" not in str(ei.value)
+
+
+def test_export_csv_without_channels_has_time_once(tmp_path):
+    (tmp_path / "m.yaml").write_text(SMALL)
+    code, _, err = _cli(["run", tmp_path / "m.yaml", "--t-end", "0.05", "--out", tmp_path,
+                         "--quiet"])
+    assert code == 0, err
+    code, _, err = _cli(["export", tmp_path / "m.h5", "--csv", tmp_path / "m.csv"])
+    assert code == 0, err
+    header = (tmp_path / "m.csv").read_text().splitlines()[0].split(",")
+    assert header.count("time") == 1 and header[0] == "time"
+
+
+def _console_script():
+    exe = Path(sys.executable).parent / "se3dyn"
+    return str(exe) if exe.exists() else shutil.which("se3dyn")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or not _console_script(),
+                    reason="needs /proc and the installed console script")
+def test_sigint_during_start_up_prints_one_line_and_exits_130(tmp_path):
+    """Ctrl-C while the package is still loading (numpy loaded, se3dyn not yet)."""
+    (tmp_path / "m.yaml").write_text(SMALL)
+    p = subprocess.Popen([_console_script(), "check", str(tmp_path / "m.yaml")],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    maps = Path(f"/proc/{p.pid}/maps")
+    deadline = time.time() + 60
+    while time.time() < deadline and p.poll() is None:
+        try:
+            if "_multiarray_umath" in maps.read_text():
+                break
+        except OSError:
+            pass
+        time.sleep(0.002)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    assert "Traceback" not in err, err
+    assert p.returncode == 130, (p.returncode, err)
+    assert err.strip() == "se3dyn: error: interrupted", err
+
+
+def test_storage_grows_as_the_run_goes_up_to_the_rows_expected(monkeypatch):
+    simmod = importlib.import_module("se3dyn.simulate")
+    sizes = []
+    real = simmod._Recorder.results
+
+    def spy(self, stats):
+        sizes.append((self.n, len(self.t)))
+        return real(self, stats)
+
+    monkeypatch.setattr(simmod._Recorder, "results", spy)
+    monkeypatch.setattr(simmod, "_INITIAL_ROWS", 16)
+    r = sd.simulate(_pendulum(), t_end=1.0, step=0.01)
+    assert len(r.t) == 101 and sizes[-1] == (101, 102)  # 16, 32, 64, then the 102 expected
+    r = sd.simulate(_pendulum(), t_end=1.0, step=0.01, tol=1e-3, output_step=0.02)
+    assert len(r.t) == 51 and sizes[-1] == (51, 51)
