@@ -52,7 +52,6 @@ class JointGroup:
     k : int
     ids : ndarray (nj,)        joint indices
     A : ndarray (nj, 6, k)     subalgebra bases in the material frame of node B (Eq. (9))
-    Apinv : ndarray (nj, k, 6) pseudo-inverses of A
     a, b : ndarray (nj,)       node indices of A and B
     dof_a, dof_b : ndarray (nj, 6)  unknown indices of nodes A and B (-1 when clamped)
     jdof : ndarray (nj, k)     unknown indices of the relative increments
@@ -60,19 +59,8 @@ class JointGroup:
     abelian : ndarray (nj,) bool
     H0 : ndarray (nj, 4, 4)    initial joint transformations H_J0 = H_A0^-1 H_B0 (Sec. 5.2);
                                the identity for joints with an attachment point
-    has_nonabelian_spring : bool
-    XA, XB : ndarray (nj, 4, 4)
-        Constant attachment frames of the joint on nodes A and B (the identity for joints
-        without ``at``): the joint imposes ``H_B X_B = H_A X_A H_J``, constraints
-        ``Phi = vect(G)``, ``G = (H_B X_B)^-1 (H_A X_A) H_J`` (Eq. (55) between the attachment
-        frames).
-    PA, PB : ndarray (nj, 6, 6)
-        ``Ad(X_A^-1)`` and ``Ad(X_B^-1)`` (Eq. (57)): they map node velocities and variations
-        (material frame of the node) to those of the attachment frames, ``v_XA = PA v_A``.
-    offset : bool
-        Some joint of the group has an attachment point (XA, XB not all the identity); when
-        False the products with the identity are skipped, so the computation is that of
-        Eqs. (55)-(59) exactly.
+    (The attachment frames of joints with ``at`` are ``System.joint_XA``/``joint_XB``; the
+    joint element module turns them into its kernel's tables.)
 
     The constraint gradient at ``Phi = 0`` (Eq. (58) between the attachment frames) is
     ``[Ad_{H_J^-1} PA, -PB, A]`` (node A, node B, joint coordinates).
@@ -81,7 +69,6 @@ class JointGroup:
     k: int
     ids: np.ndarray
     A: np.ndarray
-    Apinv: np.ndarray
     a: np.ndarray
     b: np.ndarray
     dof_a: np.ndarray
@@ -90,12 +77,6 @@ class JointGroup:
     mult: np.ndarray
     abelian: np.ndarray
     H0: np.ndarray
-    has_nonabelian_spring: bool
-    XA: np.ndarray
-    XB: np.ndarray
-    PA: np.ndarray
-    PB: np.ndarray
-    offset: bool = False
 
 
 class LayoutCounts:
@@ -156,9 +137,6 @@ class System(LayoutCounts):
     dof_kd: np.ndarray
     dof_is_joint: np.ndarray  # (nq,) bool
     gravity: np.ndarray  # (3,)
-    actuators: tuple  # ((dof indices (k,), TimeFunction, item name), ...)
-    controls: tuple  # ((dof indices, target, target_rate or None, item name), ...)
-    loads: tuple  # ((node index, force TF or None, torque TF or None, item name), ...)
     labels: tuple[str, ...]  # (N,) item and component of each unknown / constraint row
     items: tuple[str, ...]  # (N,) item name of each row
     length_scale: float
@@ -263,7 +241,6 @@ def compile_model(model: Model) -> System:
     dof_kp = np.zeros(nq)
     dof_kd = np.zeros(nq)
     dof_is_joint = np.zeros(nq, dtype=bool)
-    actuators, controls = [], []
     for jj, j in enumerate(joints):
         if not j.k:
             continue
@@ -272,13 +249,9 @@ def compile_model(model: Model) -> System:
         dof_K[d] = j.stiffness
         dof_ref[d] = j.reference
         dof_C[d] = j.damping
-        if j.actuator is not None:
-            actuators.append((d, j.actuator, f"joint '{j.name}' actuator"))
         if j.control is not None:
             dof_kp[d] = j.control.kp
             dof_kd[d] = j.control.kd
-            controls.append((d, j.control.target, j.control.target_rate,
-                             f"joint '{j.name}' control target"))
 
     groups = []
     for k in sorted(set(joint_k.tolist())):
@@ -289,17 +262,11 @@ def compile_model(model: Model) -> System:
         dof_b = np.where(node_fixed[jb[ids]][:, None], -1,
                          node_dofadr[jb[ids]][:, None] + np.arange(6))
         jdof = joint_dofadr[ids][:, None] + np.arange(k)
-        nonab_spring = bool(np.any([(not abelian[i]) and np.any(joints[i].stiffness != 0)
-                                    for i in ids]))
         groups.append(JointGroup(
-            k=k, ids=ids, A=A, Apinv=np.linalg.pinv(A) if k else np.zeros((len(ids), 0, 6)),
-            a=ja[ids], b=jb[ids], dof_a=dof_a, dof_b=dof_b, jdof=jdof.reshape(len(ids), k),
-            mult=joint_multadr[ids][:, None] + np.arange(6), abelian=abelian[ids],
-            H0=joint_H0[ids], has_nonabelian_spring=nonab_spring,
-            XA=joint_XA[ids], XB=joint_XB[ids], PA=lie.adjoint_inv(joint_XA[ids]),
-            PB=lie.adjoint_inv(joint_XB[ids]), offset=bool(np.any(has_at[ids]))))
+            k=k, ids=ids, A=A, a=ja[ids], b=jb[ids], dof_a=dof_a, dof_b=dof_b,
+            jdof=jdof.reshape(len(ids), k), mult=joint_multadr[ids][:, None] + np.arange(6),
+            abelian=abelian[ids], H0=joint_H0[ids]))
 
-    loads = tuple((nidx[ld.node], ld.force, ld.torque, f"load '{ld.name}'") for ld in model.loads)
     pos = H0[:, :3, 3]
     L = float(np.max(np.linalg.norm(pos - pos.mean(axis=0), axis=1))) if M else 1.0
     sysd = dict(
@@ -312,9 +279,9 @@ def compile_model(model: Model) -> System:
         joint_XA=joint_XA, joint_XB=joint_XB,
         joint_abelian=abelian, groups=tuple(groups), dof_stiffness=dof_K, dof_reference=dof_ref,
         dof_damping=dof_C, dof_kp=dof_kp, dof_kd=dof_kd, dof_is_joint=dof_is_joint,
-        gravity=model.gravity.copy(), actuators=tuple(actuators), controls=tuple(controls),
-        loads=loads, labels=tuple(labels), items=tuple(items), length_scale=max(L, 1.0),
-        pattern={}, node_com=_node_com(nodes, H0), springs=_springs(model, nidx, H0))
+        gravity=model.gravity.copy(), labels=tuple(labels), items=tuple(items),
+        length_scale=max(L, 1.0), pattern={}, node_com=_node_com(nodes, H0),
+        springs=_springs(model, nidx, H0))
     sysd["inputs"] = _Inputs(sysd, model)
     return System(**sysd)
 
