@@ -1033,42 +1033,28 @@ def _build(ctx: _Ctx, top: _Obj) -> tuple[Model, dict]:
         mb = ModelBuilder(gravity=v.get("gravity", (0.0, 0.0, 0.0)), name=v.get("name", "model"))
     except ModelError as e:
         _rethrow(ctx, e, top, items)
-    for obj in v["nodes"]:
-        items[f"node {obj.name!r}"] = obj.line
-        try:
-            mb.node(obj.name, **obj.values)
-        except ModelError as e:
-            _rethrow(ctx, e, obj, items)
-    for obj in v.get("joints", []):
-        items[f"joint {obj.name!r}"] = obj.line
-        kw = dict(obj.values)
+    def joint(name, kw):
         if "control" in kw:
             kw["control"] = PD(**kw["control"].values)
-        try:
-            mb.joint(obj.name, kw.pop("type"), kw.pop("a"), kw.pop("b"), **kw)
-        except ModelError as e:
-            _rethrow(ctx, e, obj, items)
-    for obj in v.get("loads", []):
-        items[f"load {obj.name!r}"] = obj.line
-        kw = dict(obj.values)
-        try:
-            mb.load(obj.name, kw.pop("node"), **kw)
-        except ModelError as e:
-            _rethrow(ctx, e, obj, items)
-    for obj in v.get("springs", []):
-        items[f"spring_damper {obj.name!r}"] = obj.line
-        kw = dict(obj.values)
-        try:
-            mb.spring_damper(obj.name, kw.pop("a"), kw.pop("b"), **kw)
-        except ModelError as e:
-            _rethrow(ctx, e, obj, items)
-    for obj in v.get("visuals", []):
-        items[f"visual {obj.name!r}"] = obj.line
-        kw = dict(obj.values)
-        try:
-            mb.visual(obj.name, kw.pop("node"), kw.pop("shape"), **kw)
-        except ModelError as e:
-            _rethrow(ctx, e, obj, items)
+        mb.joint(name, kw.pop("type"), kw.pop("a"), kw.pop("b"), **kw)
+
+    # section -> (item kind in error messages, builder call with the entry's name and fields)
+    sections = (
+        ("nodes", "node", lambda name, kw: mb.node(name, **kw)),
+        ("joints", "joint", joint),
+        ("loads", "load", lambda name, kw: mb.load(name, kw.pop("node"), **kw)),
+        ("springs", "spring_damper",
+         lambda name, kw: mb.spring_damper(name, kw.pop("a"), kw.pop("b"), **kw)),
+        ("visuals", "visual",
+         lambda name, kw: mb.visual(name, kw.pop("node"), kw.pop("shape"), **kw)),
+    )
+    for sec, kind, add in sections:
+        for obj in v.get(sec, []):
+            items[f"{kind} {obj.name!r}"] = obj.line
+            try:
+                add(obj.name, dict(obj.values))
+            except ModelError as e:
+                _rethrow(ctx, e, obj, items)
     try:
         model = mb.build()
     except ModelError as e:
