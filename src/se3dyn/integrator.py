@@ -26,19 +26,43 @@ from se3dyn import lie
 from se3dyn.errors import ModelError, NewtonError, SimulationError
 from se3dyn.system import LinearSolver, System, evaluate, input_table, step_inputs
 
-__all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "input_table", "energies",
-           "interpolate"]
+__all__ = ["State", "SolverMemory", "StepInfo", "GeneralizedAlpha", "step_inputs",
+           "input_table", "energies", "interpolate"]
 
 #: modified Newton: refactorise when more than KMAX further iterations are predicted (a
 #: factorisation costs about five iterations on the benchmark models; 5-12 perform alike)
 KMAX = 8.0
 
 
-def _stepper(s: System, index2: bool, dropped: np.ndarray, ws=None, keep: bool = True):
-    """The compiled Newton stepper of a workspace (the system's default one)."""
+@dataclass(frozen=True, eq=False)
+class SolverMemory:
+    """What the linear solver of the Newton iterations carries from a step to the next, so that
+    a restart from a :class:`State`, in this process or another, continues bit for bit
+    (``se3dyn/_core/newton.hpp``).
+
+    Attributes
+    ----------
+    ref : ndarray (nv,)
+        Values of the iteration matrix (in the engine's value order) of the last full sparse LU
+        factorisation, whose pivot sequence the refactorisations of the following steps reuse.
+    """
+
+    ref: np.ndarray
+
+    def __post_init__(self):
+        self.ref.flags.writeable = False
+
+
+def _ws(s: System, ws=None):
+    """The workspace ``ws`` or the system's default one."""
     from se3dyn.system import workspace
 
-    return (ws or workspace(s)).stepper(index2, dropped, keep)
+    return ws or workspace(s)
+
+
+def _stepper(s: System, index2: bool, dropped: np.ndarray, ws=None, keep: bool = True):
+    """The compiled Newton stepper of a workspace (the system's default one)."""
+    return _ws(s, ws).stepper(index2, dropped, keep)
 
 
 @dataclass(frozen=True)
@@ -60,6 +84,9 @@ class State:
     dropped : ndarray (nr,)    redundant constraint equations left out (multiplier indices);
                                their multipliers stay zero (see :func:`GeneralizedAlpha.init`)
     h_last : float             size of the step that produced this state (0 initially)
+    solver : SolverMemory or None
+        The linear solver's memory after the step that produced this state; None: none (the
+        next step factorises afresh)
     """
 
     t: float
@@ -76,6 +103,7 @@ class State:
     power: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
     dropped: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
     h_last: float = 0.0
+    solver: SolverMemory | None = None
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -261,7 +289,9 @@ class GeneralizedAlpha:
         rhs = np.concatenate([-ev.r, ev.arhs])
         rhs[nq + dropped] = 0.0
         # the index-3 layout; kept only when the steps use it too
-        code = _stepper(s, False, dropped, ws, keep=not self.index2).solve_values(ev.values, rhs)
+        keep = not self.index2
+        stp = _stepper(s, False, dropped, ws, keep=keep)
+        code = stp.solve_values(ev.values, rhs)
         if code != 0 or not np.all(np.isfinite(rhs)):
             raise SimulationError(
                 f"t={t0:.6g} (initial accelerations): the iteration matrix is singular; typical "
@@ -271,7 +301,7 @@ class GeneralizedAlpha:
         # powers at t0 (velocity-level: vd does not enter)
         return State(t=t0, H=H, HJ=HJ, v=v, vd=rhs[:nq].copy(), a=rhs[:nq].copy(),
                      lam=rhs[nq:].copy(), alpha=np.zeros(nq), power=ev.energy[3:6].copy(),
-                     dropped=dropped)
+                     dropped=dropped, solver=_ws(s, ws).memory(stp) if keep else None)
 
     @staticmethod
     def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,
@@ -333,6 +363,8 @@ class GeneralizedAlpha:
         if st.h_last > 0 and h != st.h_last:
             a_n = st.vd + (h / st.h_last) * (st.a - st.vd)
         stp = _stepper(s, self.index2, st.dropped, ws)
+        w = _ws(s, ws)
+        w.adopt(stp, st.solver)
         F = s.M + s.m
         Hall = np.ascontiguousarray(np.concatenate([st.H, st.HJ]).reshape(F, 4, 4))
         Hout = np.empty_like(Hall)
@@ -363,7 +395,7 @@ class GeneralizedAlpha:
         # (beta - 1/6) h^2 (a_{n+1} - a_n)
         err = (b - 1.0 / 6.0) * h * h * (a - a_n)
         new = State(t=t1, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
-                    dropped=st.dropped, h_last=h)
+                    dropped=st.dropped, h_last=h, solver=w.memory(stp))
         e = energies(s, new, inputs, ws)
         p = e["power"]
         # trapezoidal accumulation of the powers (second order, like the integrator)

@@ -384,6 +384,7 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, nsteps: 
 
     block = output_every * max(1, _BLOCK // output_every)
     stp = _stepper(s, integ.index2, st.dropped, ws)
+    ws.adopt(stp, st.solver)
     F = s.M + s.m
     H = np.ascontiguousarray(np.concatenate([st.H, st.HJ]).reshape(F, 4, 4), dtype=float)
     c = lambda x: np.array(x, dtype=float)  # noqa: E731
@@ -440,7 +441,7 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, nsteps: 
     st = State(t=float(acc[7]), H=H[:s.M].copy(), HJ=H[s.M:].copy(), v=v.copy(), vd=vd.copy(),
                a=a.copy(), lam=lam.copy(), alpha=alpha.copy(), work_act=float(acc[3]),
                work_ext=float(acc[4]), dissipated=float(acc[5]), power=acc[:3].copy(),
-               dropped=st.dropped, h_last=float(acc[6]))
+               dropped=st.dropped, h_last=float(acc[6]), solver=ws.memory(stp))
     return st, i, fac, (h_lo, h_hi)
 
 

@@ -472,6 +472,38 @@ class Workspace:
         self.layout = layout_of(s)
         self.engine = _core().Engine(self.layout.tables)
         self._steppers: dict = {}
+        self._memo: dict = {}  # id(stepper) -> (stepper, its serials, SolverMemory it holds)
+
+    def memory(self, stp):
+        """The solver memory a stepper holds now (:class:`se3dyn.integrator.SolverMemory`, or
+        None): a new object only when it changed since last asked."""
+        from se3dyn.integrator import SolverMemory
+
+        ser = stp.serials()
+        c = self._memo.get(id(stp))
+        if c is not None and c[0] is stp and c[1] == ser:
+            return c[2]
+        ref = stp.memory()
+        mem = None if ref is None else SolverMemory(ref=ref)
+        self._memo[id(stp)] = (stp, ser, mem)
+        return mem
+
+    def adopt(self, stp, mem) -> None:
+        """Make a stepper hold the solver memory ``mem`` of a State (None: none), refactorising
+        when it holds another one (a restart, a step repeated from an earlier state), so that
+        the steps from that State give the numbers of the run that produced it, bit for bit."""
+        ser = stp.serials()
+        c = self._memo.get(id(stp))
+        if c is not None and c[0] is stp and c[1] == ser and c[2] is mem:
+            return
+        ref = None if mem is None else mem.ref
+        if not stp.holds(ref):
+            code = stp.restore(ref)
+            if code != 0:
+                raise SimulationError("restoring the linear solver's factors of the state failed "
+                                      f"(LU status {code}): the state does not belong to this "
+                                      "model or was altered")
+        self._memo[id(stp)] = (stp, stp.serials(), mem)
 
     def stepper(self, index2: bool, dropped: np.ndarray, keep: bool = True):
         """The compiled Newton stepper for one formulation and one set of dropped (redundant)

@@ -1,6 +1,7 @@
 // Python bindings of the compiled engine (nanobind): the element tables arrive once from
 // se3dyn.assembly as a dict of numpy arrays; evaluations and steps work on numpy arrays in place.
 #include <nanobind/nanobind.h>
+#include <nanobind/stl/optional.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
@@ -264,6 +265,33 @@ NB_MODULE(_engine, m) {
             return nb::make_tuple(info.status, info.iterations, info.residual, info.constraint,
                                   info.factorisations);
           })
+      .def("lu_stats",
+           [](const Stepper& S) {
+             // (n, nnz(L), nnz(U), multiply-adds of a refactorisation) of the current factors
+             return nb::make_tuple(S.N, S.lu.nnz_L(), S.lu.nnz_U(), S.lu.refactor_flops());
+           })
+      .def("serials",
+           [](const Stepper& S) {
+             // (serial number of the solver memory, whether it holds one)
+             return nb::make_tuple(S.ref_serial, S.have_ref);
+           })
+      .def("memory",
+           [](const Stepper& S) -> nb::object {
+             // a copy of the solver memory (the values of the last full factorisation) or None
+             if (!S.have_ref) return nb::none();
+             double* d = new double[S.ref_vals.size()];
+             std::copy(S.ref_vals.begin(), S.ref_vals.end(), d);
+             nb::capsule owner(d, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+             return nb::cast(nb::ndarray<nb::numpy, double>(d, {S.ref_vals.size()}, owner));
+           })
+      .def("holds",
+           [](const Stepper& S, std::optional<CArr> ref) {
+             return S.holds(ref ? cptr(*ref, S.vals.size(), "ref") : nullptr);
+           }, nb::arg("ref").none())
+      .def("restore",
+           [](Stepper& S, std::optional<CArr> ref) {
+             return S.restore(ref ? cptr(*ref, S.vals.size(), "ref") : nullptr);
+           }, nb::arg("ref").none())
       .def(
           "solve_values",
           [](Stepper& S, CArr vals, DArr rhs) {
