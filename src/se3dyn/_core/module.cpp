@@ -262,8 +262,11 @@ NB_MODULE(_engine, m) {
                                    ptr(a, nq, "a"), ptr(lam, nm, "lam"), ptr(n, nq, "n"));
             double* Ho = ptr(H, 16 * F, "H");
             for (int f = 0; f < F; ++f) frame_to4(E.S.H[f], Ho + 16 * f);
+            // energies and powers of the converged iterate (the new state), see N_ENERGY
+            nb::tuple en = nb::make_tuple(S.energy[0], S.energy[1], S.energy[2], S.energy[3],
+                                          S.energy[4], S.energy[5]);
             return nb::make_tuple(info.status, info.iterations, info.residual, info.constraint,
-                                  info.factorisations);
+                                  info.factorisations, en);
           })
       .def("lu_stats",
            [](const Stepper& S) {

@@ -59,6 +59,7 @@ struct Stepper {
   std::vector<char> dropm;           // (nm,) dropped multiplier equations
   SparseLU lu;
   std::vector<double> vals, csc, rhs, r, phi, psi;
+  std::vector<double> energy = std::vector<double>(N_ENERGY);  // (N_ENERGY,) of the last iterate
   // solver memory (see the header): the matrix values of the last full factorisation, the
   // reference of the refactorisations' pivot sequence, and a serial number of it (Python side)
   std::vector<double> ref_vals;
@@ -84,9 +85,8 @@ struct Stepper {
         int rw = rowind[p];
         if (dropped[rw] || dropped[c]) (rw == c ? one_at : zero_at).push_back(p);
       }
-    // pattern entries that are zero at every step (a third to two thirds of the engine's) are
-    // left out of the factors; a refactorisation that meets one of them nonzero reports it and
-    // the step factorises afresh (factor())
+    // pattern entries that are zero in every state (a third to two thirds of the engine's) are
+    // left out of the factors: those zero in a generic matrix of the model (probe())
     SparseLU::Options opt;
     opt.drop_zeros = true;
     lu.set_options(opt);
@@ -215,7 +215,10 @@ struct Stepper {
         ep = (ps > ep || ps != ps) ? ps : ep;
       }
     };
-    Engine::Out o{r.data(), phi.data(), stab ? psi.data() : nullptr, alpha, nullptr, nullptr};
+    // every residual evaluation also gives the energies and powers of its iterate: those of
+    // the converged one are the new state's (no evaluation of its own)
+    Engine::Out o{r.data(), phi.data(), stab ? psi.data() : nullptr, alpha, nullptr,
+                  energy.data()};
     while (true) {
       bool with_matrix = refac || !P.reuse;  // the matrix is evaluated with the residual
       o.vals = with_matrix ? vals.data() : nullptr;
@@ -315,8 +318,7 @@ struct Stepper {
                 int output_every, Carry c, Rows& rows) {
     Engine& G = *E;
     int nq = G.nq, nm = G.nm, F = G.T.F, nu = G.nu;
-    std::vector<double> alpha(nq), v(nq), vd(nq), a(nq), lam(nm), n(nq), a_n(nq), zero(nq, 0.0);
-    std::vector<double> er(nq), ep(nm), ev(nm), en(N_ENERGY);
+    std::vector<double> alpha(nq), v(nq), vd(nq), a(nq), lam(nm), n(nq), a_n(nq);
     RunResult R;
     for (int i = i0; i < i1; ++i) {
       double t1 = times[i], h = t1 - c.acc[7], h_last = c.acc[6];
@@ -337,11 +339,7 @@ struct Stepper {
       R.residual = info.residual;
       R.constraint = info.constraint;
       for (int f = 0; f < F; ++f) frame_to4(G.S.H[f], c.H + 16 * f);
-      // energies and powers of the new state (its frames as the step start, n = 0)
-      G.load_frames(c.H);
-      Engine::Out o{er.data(), ep.data(), nullptr, alpha.data(), nullptr, en.data()};
-      G.evaluate(alpha.data(), zero.data(), v.data(), zero.data(), lam.data(), u, 0, 0, 0, false,
-                 0, false, o);
+      const std::vector<double>& en = energy;  // of the converged iterate: the new state's
       for (int k = 0; k < 3; ++k) {
         c.acc[3 + k] += 0.5 * h * (c.acc[k] + en[P_ACTUATOR + k]);
         c.acc[k] = en[P_ACTUATOR + k];
