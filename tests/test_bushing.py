@@ -275,3 +275,42 @@ def test_bad_bushing_nodes_are_model_errors():
     mb.bushing("x", "g", "b", stiffness=1.0)
     with pytest.raises(sd.ModelError, match="defined twice"):
         mb.bushing("x", "g", "b", stiffness=1.0)
+
+
+MOUNT = """\
+se3dyn: 1
+name: mount
+nodes:
+  ground: {fixed: true}
+  engine: {position: [0, 0, 0.3], mass: 120, inertia: [4, 5, 6]}
+bushings:
+  left: {a: ground, b: engine, at: [0.3, 0.2, 0], stiffness: [2e5, 2e5, 3e5, 1e3, 1e3, 1e3],
+         damping: 200}
+  right:
+    a: ground
+    b: engine
+    stiffness: [[2e5, 0, 0, 0, 1e3, 0], [0, 2e5, 0, 0, 0, 0], [0, 0, 3e5, 0, 0, 0],
+                [0, 0, 0, 1e3, 0, 0], [1e3, 0, 0, 0, 1e3, 0], [0, 0, 0, 0, 0, 1e3]]
+"""
+
+
+def test_model_file_bushings_give_the_builder_model_and_are_counted_by_check(tmp_path, capsys):
+    from se3dyn.cli import main
+    from se3dyn.modelfile import loads_model, save_model
+
+    model, _ = loads_model(MOUNT)
+    left, right = model.bushings
+    np.testing.assert_array_equal(left.at, [0.3, 0.2, 0.0])
+    np.testing.assert_array_equal(right.at, [0.0, 0.0, 0.3])  # default: the position of b
+    np.testing.assert_array_equal(left.stiffness, np.diag([2e5, 2e5, 3e5, 1e3, 1e3, 1e3]))
+    np.testing.assert_array_equal(left.damping, 200 * np.eye(6))
+    assert right.stiffness[4, 0] == right.stiffness[0, 4] == 1e3
+    np.testing.assert_array_equal(right.damping, np.zeros((6, 6)))
+    again, _ = loads_model(save_model(model))
+    for a, b in zip(model.bushings, again.bushings, strict=True):
+        for f in ("at", "stiffness", "damping"):
+            np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+    p = tmp_path / "mount.yaml"
+    p.write_text(MOUNT)
+    assert main(["check", str(p)]) == 0
+    assert "force elements: 2 bushings" in capsys.readouterr().out

@@ -90,3 +90,46 @@ def examples(rng):
                damping=(0.1, 0.2, 0.3, 0.05, 0.06, 0.07))
     mb.bushing("b3", "b", "g", at=(0.2, -0.4, 0.9), stiffness=_spd(rng, 2.0))
     return [mb.build()]
+
+
+def model_file(mf):
+    """The ``bushings:`` section of model files (:class:`se3dyn.modelfile.ElementSection`);
+    ``mf`` is :mod:`se3dyn.modelfile` (its field types)."""
+    F = mf.Field
+    kd = mf.OneOf((mf.Num(minimum=0), mf.Vec(6), mf.Mat(6, 6, 6)))
+    fields = (
+        F("a", mf.Str(ref="node"), None, "Node A (required).", True),
+        F("b", mf.Str(ref="node"), None, "Node B (required).", True),
+        F("at", mf.Vec(3), "position of b", "The bushing point in the inertial frame of the "
+          "initial configuration (m): the frames attached to `a` and `b` are there, with the "
+          "inertial orientation, at t0."),
+        F("stiffness", kd, None, "K on d = log(H_a'^-1 H_b') (translation first, in the "
+          "inertial axes at t0): 6 diagonal values (kx, ky, kz in N/m, krx, kry, krz in "
+          "N m/rad), one number for all six, or a symmetric positive semi-definite 6 x 6 "
+          "matrix (list of rows) (required).", True),
+        F("damping", kd, 0, "D on the rate of d (Eq. 27), same forms (N s/m, N m s/rad)."),
+    )
+
+    def six(K):
+        return mf.plain(np.diag(K)) if np.array_equal(K, np.diag(np.diag(K))) else mf.plain(K)
+
+    def save(model) -> dict:
+        out = {}
+        for b in model.bushings:
+            d = {"a": b.node_a, "b": b.node_b, "at": mf.plain(b.at),
+                 "stiffness": six(b.stiffness)}
+            if np.any(b.damping != 0):
+                d["damping"] = six(b.damping)
+            out[b.name] = d
+        return out
+
+    return mf.ElementSection(
+        key="bushings", kind="bushing",
+        doc="Bushings (6 x 6 stiffness and damping between two nodes) by name.",
+        entry_doc="An entry of `bushings:` (key: the name). Stiffness K and damping D on the "
+                  "relative motion d = log(H_a'^-1 H_b') (6 numbers, translation first) of two "
+                  "frames attached to nodes `a` and `b` at the point `at`: energy d^T K d / 2, "
+                  "forces T(d)^-T (K d + D d_dot) (Eqs. 26-27). The relative rotation must "
+                  "stay below pi.",
+        fields=fields,
+        add=lambda mb, name, kw: mb.bushing(name, kw.pop("a"), kw.pop("b"), **kw), save=save)
