@@ -25,14 +25,14 @@ KD = np.array([200.0, 300.0, 400.0, 5.0, 6.0, 7.0])  # kx, ky, kz (N/m), krx, kr
 
 
 def _body_on_bushing(stiffness=KD, damping=0.0, *, velocity=None, angular_velocity=None,
-                     orientation=None, at=None, gravity=(0.0, 0.0, 0.0)):
+                     node_orientation=None, at=None, gravity=(0.0, 0.0, 0.0), **bushing):
     """A rigid body (node at its centre of mass) on a bushing to the ground, principal axes of
     inertia along the inertial axes."""
     mb = sd.ModelBuilder(gravity=gravity)
     mb.node("g", position=(0.0, 0.0, 0.0), fixed=True)
-    mb.node("b", position=(0.3, -0.2, 0.5), mass=M, inertia=tuple(J), orientation=orientation,
-            velocity=velocity, angular_velocity=angular_velocity)
-    mb.bushing("bush", "g", "b", at=at, stiffness=stiffness, damping=damping)
+    mb.node("b", position=(0.3, -0.2, 0.5), mass=M, inertia=tuple(J),
+            orientation=node_orientation, velocity=velocity, angular_velocity=angular_velocity)
+    mb.bushing("bush", "g", "b", at=at, stiffness=stiffness, damping=damping, **bushing)
     return mb
 
 
@@ -48,7 +48,7 @@ def test_small_motion_natural_frequencies_are_sqrt_k_over_m_and_sqrt_krot_over_j
     eigenfrequencies are sqrt(k_i/m) (translations) and sqrt(k_rot,i/J_i) (rotations), also
     for a node turned away from the bushing axes."""
     R0 = sd.lie.exp_so3(np.array([0.4, -0.7, 1.1]))
-    s = compile_model(_body_on_bushing(orientation=R0).build())
+    s = compile_model(_body_on_bushing(node_orientation=R0).build())
     K = _matrix(s, (0.0, 0.0, 1.0))
     Mm = _matrix(s, (1.0, 0.0, 0.0))
     w = np.sort(np.sqrt(np.linalg.eigvals(np.linalg.solve(Mm, K)).real))
@@ -314,3 +314,82 @@ def test_model_file_bushings_give_the_builder_model_and_are_counted_by_check(tmp
     p.write_text(MOUNT)
     assert main(["check", str(p)]) == 0
     assert "force elements: 2 bushings" in capsys.readouterr().out
+
+
+def test_bushing_axes_turn_k_as_the_adjoint_of_the_rotation():
+    """Bushing axes R (``orientation``) with a diagonal K are the same element as the bushing
+    on the inertial axes with K' = diag(R, R) K diag(R, R)^T: d' = Ad(H(R, 0)^-1) d, so the
+    energies and dissipation functions agree; the motions coincide to round-off."""
+    R = sd.lie.exp_so3(np.array([0.3, -0.5, 0.8]))
+    B = np.zeros((6, 6))
+    B[:3, :3] = B[3:, 3:] = R
+    D = np.array([3.0, 2.0, 1.0, 0.05, 0.04, 0.03])
+    runs = []
+    for kw in (dict(stiffness=KD, damping=D, orientation=R),
+               dict(stiffness=B @ np.diag(KD) @ B.T, damping=B @ np.diag(D) @ B.T)):
+        mb = _body_on_bushing(velocity=(0.3, -0.2, 0.4), angular_velocity=(1.0, 2.0, -1.5),
+                              **dict(kw, at=(0.2, 0.1, 0.4)))
+        runs.append(sd.simulate(mb.build(), t_end=1.0, step=2e-3, rho_inf=0.9))
+    a, b = runs
+    assert np.abs(a.H - b.H).max() < 1e-11
+    np.testing.assert_allclose(a.spring, b.spring, rtol=0, atol=1e-11 * a.spring.max())
+
+
+def test_preloaded_bushing_relaxes_to_zero_deformation():
+    """A bushing starting deformed by d0 (``deformation``; turned axes, full K, damping) and
+    nothing else: its equilibrium is d = 0, H_b' = H_a', i.e. H_b = P exp(-d0) P^-1 H_b0 with
+    P = H(orientation, at): there the generalised forces and the energy vanish (to round-off),
+    and the damped motion from the preloaded state goes there, dissipating d0^T K d0 / 2."""
+    rng = np.random.default_rng(11)
+    Bm = rng.normal(size=(6, 6))
+    K = Bm @ Bm.T + np.diag([40.0, 40.0, 40.0, 1.0, 1.0, 1.0])
+    R = sd.lie.exp_so3(np.array([-0.4, 0.2, 0.9]))
+    at = np.array([0.5, 0.0, 0.2])
+    d0 = np.array([0.05, -0.1, 0.08, 0.6, -0.3, 0.9])
+    model = _body_on_bushing(K, 0.5 * K, at=tuple(at), orientation=R, deformation=d0).build()
+    P = sd.lie.make_frame(R, at)
+    ref = P @ sd.lie.exp_se3(-d0) @ np.linalg.inv(P) @ sd.lie.make_frame(None, (0.3, -0.2, 0.5))
+    s = compile_model(model)
+    z = np.zeros(s.nq)
+    ev0 = evaluate(s, s.node_H0, s.joint_H0, z, z, z, z, np.zeros(0), step_inputs(s, 0.0))
+    ev = evaluate(s, np.array([s.node_H0[0], ref]), s.joint_H0, z, z, z, z, np.zeros(0),
+                  step_inputs(s, 0.0))
+    E0 = 0.5 * d0 @ K @ d0
+    assert abs(ev0.energy[2] - E0) < 1e-12 * E0
+    assert np.abs(ev.r).max() < 1e-12 * np.abs(ev0.r).max() and ev.energy[2] < 1e-24 * E0
+    res = sd.simulate(model, t_end=10.0, step=1e-2, rho_inf=0.5)
+    err = np.abs(res.H[:, 1] - ref).max(axis=(1, 2))
+    assert err[-1] < 1e-3 * err[0]
+    E = res.kinetic + res.spring
+    assert abs(E[0] - E[-1] - res.dissipation[-1]) < 5e-3 * E0  # trapezoidal rule, O(h^2)
+
+
+def test_a_model_restarted_at_a_static_equilibrium_stays_at_rest():
+    """StaticResult.model keeps the bushings loaded (their attached frames and the deformation
+    reached), the points of spring-dampers and loads and the centres of mass on their bodies:
+    simulated from there under the same loads the bodies do not move."""
+    rng = np.random.default_rng(5)
+    Bm = rng.normal(size=(6, 6))
+    mb = _body_on_bushing(Bm @ Bm.T * 20 + np.diag(KD), at=(0.2, 0.0, 0.6),
+                          gravity=(0.0, 0.0, -9.81))
+    mb.spring_damper("s", "g", "b", at_a=(1.0, 0.0, 1.0), at_b=(0.4, -0.2, 0.6), stiffness=30.0,
+                     length=0.3)
+    mb.load("F", "b", force=(5.0, -3.0, 2.0), torque=(0.5, 0.2, -0.3), at=(0.35, -0.1, 0.5))
+    mb.node("c", position=(0.3, -0.2, 0.0), mass=1.0, inertia=(0.01, 0.02, 0.02),
+            com=(0.4, -0.1, -0.1))  # centre of mass off the node
+    mb.bushing("hang", "b", "c", stiffness=(300, 300, 300, 20, 20, 20))
+    st = static_equilibrium(mb.build(), load_steps=2)
+    x_eq = st.node_position("b")
+    assert np.linalg.norm(x_eq - (0.3, -0.2, 0.5)) > 0.05  # it moved and turned
+    assert np.linalg.norm(sd.lie.log_so3(st.H[1, :3, :3])) > 0.05
+    model = st.model
+    assert np.any(model.bushings[0].deformation != 0)
+    res = sd.simulate(model, t_end=0.5, step=1e-2, rho_inf=0.9)
+    assert np.abs(res.H - st.H).max() < 1e-9
+    # and the file form of the restarted model is the same model
+    from se3dyn.modelfile import loads_model, save_model
+
+    again, _ = loads_model(save_model(model))
+    for f in ("at", "orientation", "deformation", "stiffness"):
+        np.testing.assert_array_equal(getattr(again.bushings[0], f),
+                                      getattr(model.bushings[0], f))

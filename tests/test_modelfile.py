@@ -97,7 +97,7 @@ def assert_models_equal(m1: sd.Model, m2: sd.Model):
         for a, b in zip(getattr(m1, kind), getattr(m2, kind), strict=True):
             assert (a.node_a, a.node_b) == (b.node_a, b.node_b), f"{kind} {a.name}"
             fields = (("at_a", "at_b", "stiffness", "damping", "length") if kind == "springs"
-                      else ("at", "stiffness", "damping"))
+                      else ("at", "stiffness", "damping", "orientation", "deformation"))
             for f in fields:
                 _eq(getattr(a, f), getattr(b, f), f"{kind} {a.name} {f}")
 
@@ -165,7 +165,8 @@ def everything_model() -> sd.Model:
                   [0, 0, 0, 1.0, 0, 0], [0.1, 0, 0, 0, 1.5, 0], [0, 0, 0, 0, 0, 0.5]])
     mb.bushing("mount", "ground", "tensor", at=(-1.0, 0.4, 1.9), stiffness=K,
                damping=(0.1, 0.2, 0.3, 0.01, 0.02, 0.03))
-    mb.bushing("diag", "b5", "arm", stiffness=(1, 2, 3, 4, 5, 6))
+    mb.bushing("diag", "b5", "arm", stiffness=(1, 2, 3, 4, 5, 6), orientation=R,
+               deformation=(0.01, 0.0, -0.02, 0.1, 0.2, 0.0))
     return mb.build()
 
 

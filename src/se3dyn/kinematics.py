@@ -287,6 +287,12 @@ def _model_at(s: System, H: np.ndarray, alpha: np.ndarray, v: np.ndarray) -> Mod
     ``X_B' = H_B^-1 H(I, at')`` we have ``H_B X_B = H_B X_B' H(Q_B, 0)`` and the joint basis
     rotated by ``Q_B`` (like the axes of joints between node frames) describes the same
     constraint; ``X_A' = H_A^-1 H(I, at')`` then follows from ``H_B X_B = H_A X_A H_J``.
+
+    Points given in the inertial frame of the initial configuration follow their nodes: centres
+    of mass, points of application of loads, the points of spring-dampers (same free length).
+    Bushings get
+    the frame attached to node a in H as their point and orientation and the relative motion
+    reached as their initial deformation: same attached frames, same loading.
     """
     model = s.model
     nodes = []
@@ -305,8 +311,9 @@ def _model_at(s: System, H: np.ndarray, alpha: np.ndarray, v: np.ndarray) -> Mod
             d = s.node_dofadr[i]
             vel = np.concatenate([R @ v[d:d + 3], R @ v[d + 3:d + 6]])
         J = Qi @ n.inertia @ Qi.T
+        com = None if n.com is None else R @ s.node_com[i] + H[i, :3, 3]
         nodes.append(dataclasses.replace(n, position=H[i, :3, 3].copy(), orientation=R,
-                                         inertia=0.5 * (J + J.T), velocity=vel))
+                                         inertia=0.5 * (J + J.T), velocity=vel, com=com))
     joints = []
     for jj, j in enumerate(model.joints):
         Qb = Q[j.node_b]
@@ -332,7 +339,32 @@ def _model_at(s: System, H: np.ndarray, alpha: np.ndarray, v: np.ndarray) -> Mod
                 upd["control"] = dataclasses.replace(
                     j.control, target=_shift_tf(j.control.target, a, item, "control.target"))
         joints.append(dataclasses.replace(j, **upd))
-    return dataclasses.replace(model, nodes=tuple(nodes), joints=tuple(joints))
+    Hr = lie.make_frame(np.array([n.orientation for n in nodes]).reshape(len(nodes), 3, 3),
+                        np.array([n.position for n in nodes]).reshape(len(nodes), 3))
+    nidx = {n.name: i for i, n in enumerate(model.nodes)}
+    loads = []
+    for ld in model.loads:  # points of application where they are in H
+        at = ld.at
+        if at is not None:
+            i = nidx[ld.node]
+            at = Hr[i, :3, :3] @ (s.node_H0[i, :3, :3].T @ (at - s.node_H0[i, :3, 3])) \
+                + Hr[i, :3, 3]
+        loads.append(dataclasses.replace(ld, at=at))
+    springs = tuple(dataclasses.replace(sp, at_a=Hr[a, :3, :3] @ ca + Hr[a, :3, 3],
+                                        at_b=Hr[b, :3, :3] @ cb + Hr[b, :3, 3])
+                    for sp, (a, b, ca, cb, *_) in zip(model.springs, s.springs, strict=True))
+    bushings = []
+    if model.bushings:
+        from se3dyn.elements import bushing
+
+        fa, fb, Xa, Xb = bushing.frames(s)
+        for e, bu in enumerate(model.bushings):
+            Ha, Hb = Hr[fa[e]] @ Xa[e], Hr[fb[e]] @ Xb[e]
+            bushings.append(dataclasses.replace(
+                bu, at=Ha[:3, 3].copy(), orientation=Ha[:3, :3].copy(),
+                deformation=lie.log_se3(lie.inverse(Ha) @ Hb)))
+    return dataclasses.replace(model, nodes=tuple(nodes), joints=tuple(joints),
+                               loads=tuple(loads), springs=springs, bushings=tuple(bushings))
 
 
 # =============================================================================================

@@ -194,12 +194,18 @@ class BushingSpec:
     ----------
     name, node_a, node_b : str
     at : ndarray (3,)
-        The bushing point in the inertial frame of the initial configuration, where both
-        attached frames are, with the inertial orientation, at t0.
+        The bushing point in the inertial frame of the initial configuration: the origin of the
+        frame attached to node a at t0 (and of the one attached to node b, without
+        ``deformation``).
     stiffness, damping : ndarray (6, 6)
         Symmetric positive semi-definite K and D on ``(d_U, d_Omega)``, translation first, in
-        the axes of the attached frames (the inertial axes at t0): N/m, N/rad, N m/rad (K);
-        N s/m, N s/rad, N m s/rad (D).
+        the axes of the attached frames: N/m, N/rad, N m/rad (K); N s/m, N s/rad, N m s/rad (D).
+    orientation : ndarray (3, 3)
+        Rotation of the frame attached to node a at t0 (columns: the bushing axes in the
+        inertial frame); the identity by default.
+    deformation : ndarray (6,)
+        Relative motion d at t0 (a preloaded bushing): the frame attached to node b is
+        ``H(orientation, at) exp(deformation)`` at t0; zero by default.
     """
 
     name: str
@@ -208,6 +214,8 @@ class BushingSpec:
     at: np.ndarray
     stiffness: np.ndarray
     damping: np.ndarray
+    orientation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    deformation: np.ndarray = field(default_factory=lambda: np.zeros(6))
 
 
 @dataclass(frozen=True)
@@ -790,14 +798,15 @@ class ModelBuilder:
 
     # -----------------------------------------------------------------------------------------
     def bushing(self, name: str, node_a: str, node_b: str, *, at: Any = None, stiffness: Any,
-                damping: Any = 0.0) -> None:
+                damping: Any = 0.0, orientation: Any = None, deformation: Any = None) -> None:
         """Add a bushing: 6 x 6 stiffness and damping on the relative motion of two frames
         attached to two nodes.
 
         Both frames sit at the point ``at`` with the inertial orientation in the initial
         configuration (``X = H0^-1 H(I, at)`` on each node, the convention of joints with
-        ``at``) and move with their nodes; their relative motion is the twist
-        ``d = log(H_a'^-1 H_b')`` (6,), translation first, zero initially. The bushing stores
+        ``at``; ``H(orientation, at)`` with an ``orientation``) and move with their nodes;
+        their relative motion is the twist ``d = log(H_a'^-1 H_b')`` (6,), translation first,
+        zero initially (``deformation`` otherwise). The bushing stores
         the energy ``d^T K d / 2`` and dissipates ``d_dot^T D d_dot``, with ``d_dot = T(d)^-1 w``
         the rate of the log coordinates (Eqs. (26)-(27)), ``w`` the relative velocity of the
         frames: the forces ``T(d)^-T (K d + D d_dot)`` act on both nodes (equal and opposite).
@@ -814,11 +823,19 @@ class ModelBuilder:
             of ``node_b`` by default.
         stiffness : float, array_like (6,) or (6, 6)
             K on ``(d_U, d_Omega)`` in the axes of the attached frames (the inertial axes at
-            t0): six diagonal values ``(kx, ky, kz, krx, kry, krz)`` (N/m, N m/rad), one value
-            for all six, or a symmetric positive semi-definite 6 x 6 matrix (coupling blocks
-            in N/rad).
+            t0, or the columns of ``orientation``): six diagonal values
+            ``(kx, ky, kz, krx, kry, krz)`` (N/m, N m/rad), one value for all six, or a
+            symmetric positive semi-definite 6 x 6 matrix (coupling blocks in N/rad).
         damping : float, array_like (6,) or (6, 6)
             D on ``d_dot``, same forms (N s/m, N m s/rad); zero by default.
+        orientation : array_like (3, 3), optional
+            Rotation of the bushing frame at t0: its columns are the bushing axes in the
+            inertial frame (the identity by default).
+        deformation : array_like (6,), optional
+            Relative motion d at t0, in the bushing axes (a preloaded bushing; rotation angle
+            below pi): the frame attached to node b starts at ``H(orientation, at)
+            exp(deformation)``, the one attached to node a at ``H(orientation, at)``. Zero by
+            default: the bushing starts unloaded.
         """
         _check_name("bushing", name)
         item = f"bushing {name!r}"
@@ -837,7 +854,12 @@ class ModelBuilder:
         p = self._nodes[node_b].position.copy() if at is None else _vec(at, 3, item, "at")
         K = _sym6(stiffness, item, "stiffness")
         D = _sym6(damping, item, "damping")
-        self._bushings[name] = BushingSpec(name, node_a, node_b, p, K, D)
+        R = np.eye(3) if orientation is None else _rotation(orientation, item, "orientation")
+        d0 = np.zeros(6) if deformation is None else _vec(deformation, 6, item, "deformation")
+        if np.linalg.norm(d0[3:]) >= math.pi:
+            raise ModelError(item, "deformation", "a rotation part of norm below pi (the "
+                             "principal logarithm)", deformation)
+        self._bushings[name] = BushingSpec(name, node_a, node_b, p, K, D, R, d0)
 
     # -----------------------------------------------------------------------------------------
     def visual(self, name: str, node: str, shape: str, *, size: Any = None, color: Any = None,

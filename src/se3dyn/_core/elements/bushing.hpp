@@ -1,5 +1,6 @@
 // Bushing: 6 x 6 stiffness K and damping D on the relative motion of two frames attached to two
-// nodes, H_a' = H_a X_a and H_b' = H_b X_b (X constant, the frames coincide initially).
+// nodes, H_a' = H_a X_a and H_b' = H_b X_b (X constant; the frames coincide initially unless the
+// bushing is preloaded, H_b' = H_a' exp(d0) at t0).
 //
 // Relative motion d = log(G), G = H_a'^-1 H_b' (6,), translation first (Eq. (17) inverted).
 // Variations and velocities of G (material, right-trivialised, Eqs. (2), (4)):
