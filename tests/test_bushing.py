@@ -393,3 +393,20 @@ def test_a_model_restarted_at_a_static_equilibrium_stays_at_rest():
     for f in ("at", "orientation", "deformation", "stiffness"):
         np.testing.assert_array_equal(getattr(again.bushings[0], f),
                                       getattr(model.bushings[0], f))
+
+
+def test_driven_motion_on_a_bushing_inverse_dynamics_and_energy():
+    """A body driven along x by a prismatic joint, x(t) = a sin(w t), held by a bushing
+    K = diag(k, ...), D = diag(c, ...): the driver force is m x'' + c x' + k x and the elastic
+    energy k x^2 / 2 (kinematics and inverse dynamics, :func:`se3dyn.kinematics`)."""
+    k, c, a, w = KD[0], 4.0, 0.05, 3.0
+    mb = _body_on_bushing(damping=np.diag([c, 1, 1, 1, 1, 1]))
+    mb.joint("slide", "prismatic", "g", "b", axis=(1, 0, 0))
+    t = np.linspace(0.0, 2.0, 41)
+    res = sd.kinematics(mb.build(), {"slide": sd.Sine(a, w / (2 * math.pi))}, t)
+    x = a * np.sin(w * t)
+    xd = a * w * np.cos(w * t)
+    xdd = -a * w * w * np.sin(w * t)
+    np.testing.assert_allclose(res.efforts["slide"][:, 0], M * xdd + c * xd + k * x, rtol=0,
+                               atol=1e-9)
+    np.testing.assert_allclose(res.spring, 0.5 * k * x ** 2, rtol=0, atol=1e-12)

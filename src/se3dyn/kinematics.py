@@ -180,19 +180,6 @@ def _null_space(Jsc: np.ndarray, rcond: float = _RCOND) -> tuple[int, np.ndarray
     return r, Vt[r:].T
 
 
-def _energies(s: System, H: np.ndarray, v: np.ndarray, alpha: np.ndarray) -> tuple:
-    """Kinetic (Eq. (47)), gravity potential and spring (Eq. (62)) energies of a state."""
-    vb = v[s.node_dofidx]
-    mass = s.node_mass[s.node_free]
-    J = s.node_J[s.node_free]
-    kin = 0.5 * float(np.sum(mass * np.einsum("ni,ni->n", vb[:, :3], vb[:, :3]))
-                      + np.einsum("ni,nij,nj->", vb[:, 3:], J, vb[:, 3:]))
-    pot = -float(np.sum(s.node_mass * (H[:, :3, 3] @ s.gravity)))
-    e = alpha - s.dof_reference
-    spring = 0.5 * float(np.sum(s.dof_stiffness * e * e))
-    return kin, pot, spring
-
-
 # ---------------------------------------------------------------------------------------------
 class _Accessors:
     """Accessors by node and joint name on arrays with a leading axis (one row per configuration).
@@ -833,7 +820,8 @@ class KinematicsResult(_Accessors):
     efforts : dict                 driver name -> ndarray (n, k): the force/torque an actuator in
                                    that joint must exert (actuator sign of Eq. (66): power
                                    ``effort . alpha_dot``)
-    kinetic, potential, spring : ndarray (n,)   energies (Eq. (47), gravity, Eq. (62))
+    kinetic, potential, spring : ndarray (n,)   energies (Eq. (47), gravity, elastic: Eq. (62)
+                                   and the elastic elements, e.g. spring-dampers, bushings)
     iterations : ndarray (n,) int  Newton iterations for the positions
     """
 
@@ -1140,7 +1128,9 @@ def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol:
         out_v[i], out_vd[i] = v, vd
         out_lam[i] = sol[:nm]
         out_mu[i] = sol[nm:]
-        energy[i] = _energies(s, H, v, evd.alpha)
+        # kinetic (Eq. (47)), gravity potential, elastic energy of every element (joint
+        # springs Eq. (62), spring-dampers, bushings), by the element kernels
+        energy[i] = evd.energy[:3]
     efforts = {}
     off = 0
     for name, dofs, _ in drv:
