@@ -806,11 +806,16 @@ class ModelBuilder:
         configuration (``X = H0^-1 H(I, at)`` on each node, the convention of joints with
         ``at``; ``H(orientation, at)`` with an ``orientation``) and move with their nodes;
         their relative motion is the twist ``d = log(H_a'^-1 H_b')`` (6,), translation first,
-        zero initially (``deformation`` otherwise). The bushing stores
-        the energy ``d^T K d / 2`` and dissipates ``d_dot^T D d_dot``, with ``d_dot = T(d)^-1 w``
-        the rate of the log coordinates (Eqs. (26)-(27)), ``w`` the relative velocity of the
-        frames: the forces ``T(d)^-T (K d + D d_dot)`` act on both nodes (equal and opposite).
-        The relative rotation angle must stay below pi (principal logarithm).
+        zero initially (``deformation`` otherwise). The bushing stores the energy
+        ``d^T K d / 2`` and dissipates ``d_dot^T D d_dot``, with ``d_dot = T(d)^-1 w`` the rate
+        of the log coordinates (Eqs. (26)-(27)), ``w`` the relative velocity of the frames: the
+        wrench ``T(d)^-T (K d + D d_dot)`` acts on frame b', its opposite on frame a'. The
+        relative rotation angle must stay below pi (principal logarithm).
+
+        Examples
+        --------
+        >>> mb.bushing("mount", "ground", "engine", at=(0.3, 0.2, 0.0),
+        ...            stiffness=(2e5, 2e5, 3e5, 1e3, 1e3, 1e3), damping=200.0)  # doctest: +SKIP
 
         Parameters
         ----------
