@@ -79,6 +79,12 @@ def _check_one(path: str, rank_max: int) -> None:
     print(f"{path}: ok")
     print(f"  model '{model.name}': {len(model.nodes)} nodes ({n_free} free, {bodies} with mass),"
           f" {len(model.joints)} joints, {len(model.loads)} loads")
+    from se3dyn.modelfile import ELEMENT_SECTIONS
+
+    others = [f"{len(getattr(model, es.key))} {es.key}" for es in ELEMENT_SECTIONS
+              if es.key not in ("joints", "loads") and getattr(model, es.key, ())]
+    if others:  # force elements of the other element types (model attribute = file section)
+        print("  force elements: " + ", ".join(others))
     kinds: dict[str, int] = {}
     for j in model.joints:
         kinds[j.type] = kinds.get(j.type, 0) + 1

@@ -33,8 +33,8 @@ from se3dyn.joints import JOINT_TYPES, is_abelian, unit_vector
 from se3dyn.timefunc import Component, TimeFunction, as_timefunc
 from se3dyn.visuals import VisualSpec, make_visual
 
-__all__ = ["NodeSpec", "JointSpec", "LoadSpec", "SpringDamperSpec", "PD", "Model",
-           "ModelBuilder", "VisualSpec"]
+__all__ = ["NodeSpec", "JointSpec", "LoadSpec", "SpringDamperSpec", "BushingSpec", "PD",
+           "Model", "ModelBuilder", "VisualSpec"]
 
 
 @dataclass(frozen=True)
@@ -186,6 +186,39 @@ class SpringDamperSpec:
 
 
 @dataclass(frozen=True)
+class BushingSpec:
+    """A bushing: stiffness and damping on the relative motion of two frames attached to two
+    nodes at the point ``at``, ``d = log(H_a'^-1 H_b')`` (see :mod:`se3dyn.elements.bushing`).
+
+    Attributes
+    ----------
+    name, node_a, node_b : str
+    at : ndarray (3,)
+        The bushing point in the inertial frame of the initial configuration: the origin of the
+        frame attached to node a at t0 (and of the one attached to node b, without
+        ``deformation``).
+    stiffness, damping : ndarray (6, 6)
+        Symmetric positive semi-definite K and D on ``(d_U, d_Omega)``, translation first, in
+        the axes of the attached frames: N/m, N/rad, N m/rad (K); N s/m, N s/rad, N m s/rad (D).
+    orientation : ndarray (3, 3)
+        Rotation of the frame attached to node a at t0 (columns: the bushing axes in the
+        inertial frame); the identity by default.
+    deformation : ndarray (6,)
+        Relative motion d at t0 (a preloaded bushing): the frame attached to node b is
+        ``H(orientation, at) exp(deformation)`` at t0; zero by default.
+    """
+
+    name: str
+    node_a: str
+    node_b: str
+    at: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    orientation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    deformation: np.ndarray = field(default_factory=lambda: np.zeros(6))
+
+
+@dataclass(frozen=True)
 class Model:
     """A validated, immutable model. Build it with :class:`ModelBuilder`."""
 
@@ -198,6 +231,7 @@ class Model:
     springs: tuple[SpringDamperSpec, ...] = ()
     #: shapes drawn by the viewer (never used by the physics), see :mod:`se3dyn.visuals`
     visuals: tuple[VisualSpec, ...] = ()
+    bushings: tuple[BushingSpec, ...] = ()
 
     def node(self, name: str) -> NodeSpec:
         """The node called ``name`` (KeyError listing valid names otherwise)."""
@@ -284,6 +318,40 @@ def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.nd
     return _bounded(a, item, fld, v)
 
 
+def _sym6(v: Any, item: str, fld: str) -> np.ndarray:
+    """A symmetric positive semi-definite 6 x 6 matrix from one number (all six diagonal
+    values), 6 diagonal values or a 6 x 6 matrix."""
+    expected = ("a non-negative number, 6 non-negative diagonal values or a symmetric positive "
+                "semi-definite 6 x 6 matrix")
+    try:
+        if isinstance(v, bool | str | bytes) or v is None:
+            raise TypeError(v)
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(item, fld, expected, v) from None
+    if a.shape not in ((), (6,), (6, 6)):
+        raise ModelError(item, fld, expected, v, f"got an array of shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ModelError(item, fld, "finite values (" + expected + ")", v)
+    _bounded(a, item, fld, v)
+    if a.ndim < 2:
+        if np.any(a < 0):
+            raise ModelError(item, fld, "non-negative diagonal values", v,
+                             "a negative stiffness or damping creates energy")
+        return np.diag(np.broadcast_to(a, (6,))).astype(float)
+    tol = 1e-12 * max(1.0, float(np.abs(a).max()))
+    if np.abs(a - a.T).max() > tol:
+        i, j = np.unravel_index(int(np.argmax(np.abs(a - a.T))), a.shape)
+        raise ModelError(item, fld, "a symmetric 6 x 6 matrix", v,
+                         f"entries [{i}][{j}] = {a[i, j]:g} and [{j}][{i}] = {a[j, i]:g} differ")
+    a = 0.5 * (a + a.T)
+    ev = np.linalg.eigvalsh(a)
+    if ev[0] < -1e-12 * max(1.0, float(np.abs(ev).max())):
+        raise ModelError(item, fld, "a positive semi-definite 6 x 6 matrix", v,
+                         f"eigenvalue {ev[0]:g} < 0: the element would create energy")
+    return a
+
+
 def _rotation(v: Any, item: str, fld: str) -> np.ndarray:
     try:
         R = np.asarray(v, dtype=float)
@@ -322,6 +390,7 @@ class ModelBuilder:
         self._joints: dict[str, JointSpec] = {}
         self._loads: dict[str, LoadSpec] = {}
         self._springs: dict[str, SpringDamperSpec] = {}
+        self._bushings: dict[str, BushingSpec] = {}
         self._composites: dict[str, tuple[str, ...]] = {}
         self._visuals: dict[str, VisualSpec] = {}
 
@@ -728,6 +797,76 @@ class ModelBuilder:
                                                vals["stiffness"], vals["damping"], L0)
 
     # -----------------------------------------------------------------------------------------
+    def bushing(self, name: str, node_a: str, node_b: str, *, at: Any = None, stiffness: Any,
+                damping: Any = 0.0, orientation: Any = None, deformation: Any = None) -> None:
+        """Add a bushing: 6 x 6 stiffness and damping on the relative motion of two frames
+        attached to two nodes.
+
+        Both frames sit at the point ``at`` with the inertial orientation in the initial
+        configuration (``X = H0^-1 H(I, at)`` on each node, the convention of joints with
+        ``at``; ``H(orientation, at)`` with an ``orientation``) and move with their nodes;
+        their relative motion is the twist ``d = log(H_a'^-1 H_b')`` (6,), translation first,
+        zero initially (``deformation`` otherwise). The bushing stores the energy
+        ``d^T K d / 2`` and dissipates ``d_dot^T D d_dot``, with ``d_dot = T(d)^-1 w`` the rate
+        of the log coordinates (Eqs. (26)-(27)), ``w`` the relative velocity of the frames: the
+        wrench ``T(d)^-T (K d + D d_dot)`` acts on frame b', its opposite on frame a'. The
+        relative rotation angle must stay below pi (principal logarithm).
+
+        Examples
+        --------
+        >>> mb.bushing("mount", "ground", "engine", at=(0.3, 0.2, 0.0),
+        ...            stiffness=(2e5, 2e5, 3e5, 1e3, 1e3, 1e3), damping=200.0)  # doctest: +SKIP
+
+        Parameters
+        ----------
+        name : str
+            Unique name.
+        node_a, node_b : str
+            The nodes the frames are attached to (either may be fixed, not both).
+        at : array_like (3,), optional
+            The bushing point in the inertial frame of the initial configuration; the position
+            of ``node_b`` by default.
+        stiffness : float, array_like (6,) or (6, 6)
+            K on ``(d_U, d_Omega)`` in the axes of the attached frames (the inertial axes at
+            t0, or the columns of ``orientation``): six diagonal values
+            ``(kx, ky, kz, krx, kry, krz)`` (N/m, N m/rad), one value for all six, or a
+            symmetric positive semi-definite 6 x 6 matrix (coupling blocks in N/rad).
+        damping : float, array_like (6,) or (6, 6)
+            D on ``d_dot``, same forms (N s/m, N m s/rad); zero by default.
+        orientation : array_like (3, 3), optional
+            Rotation of the bushing frame at t0: its columns are the bushing axes in the
+            inertial frame (the identity by default).
+        deformation : array_like (6,), optional
+            Relative motion d at t0, in the bushing axes (a preloaded bushing; rotation angle
+            below pi): the frame attached to node b starts at ``H(orientation, at)
+            exp(deformation)``, the one attached to node a at ``H(orientation, at)``. Zero by
+            default: the bushing starts unloaded.
+        """
+        _check_name("bushing", name)
+        item = f"bushing {name!r}"
+        if name in self._bushings:
+            raise ModelError(item, "name", "a unique bushing name", name, "defined twice")
+        for fld, nd in (("node_a", node_a), ("node_b", node_b)):
+            if not isinstance(nd, str) or nd not in self._nodes:
+                raise ModelError(item, fld, "the name of a defined node", nd,
+                                 _unknown("node", nd, list(self._nodes))
+                                 if isinstance(nd, str) else None)
+        if node_a == node_b:
+            raise ModelError(item, "node_b", "a node other than node_a", node_b)
+        if self._nodes[node_a].fixed and self._nodes[node_b].fixed:
+            raise ModelError(item, "node_b", "at least one free node", node_b,
+                             "both nodes are fixed: the element does nothing")
+        p = self._nodes[node_b].position.copy() if at is None else _vec(at, 3, item, "at")
+        K = _sym6(stiffness, item, "stiffness")
+        D = _sym6(damping, item, "damping")
+        R = np.eye(3) if orientation is None else _rotation(orientation, item, "orientation")
+        d0 = np.zeros(6) if deformation is None else _vec(deformation, 6, item, "deformation")
+        if np.linalg.norm(d0[3:]) >= math.pi:
+            raise ModelError(item, "deformation", "a rotation part of norm below pi (the "
+                             "principal logarithm)", deformation)
+        self._bushings[name] = BushingSpec(name, node_a, node_b, p, K, D, R, d0)
+
+    # -----------------------------------------------------------------------------------------
     def visual(self, name: str, node: str, shape: str, *, size: Any = None, color: Any = None,
                offset: Any = None, orientation: Any = None, axis: Any = None,
                file: Any = None) -> None:
@@ -788,4 +927,5 @@ class ModelBuilder:
         return Model(tuple(self._nodes.values()), tuple(self._joints.values()),
                      tuple(self._loads.values()), self._gravity.copy(), dict(self._composites),
                      self._name, tuple(self._springs.values()),
-                     visuals=tuple(self._visuals.values()))
+                     visuals=tuple(self._visuals.values()),
+                     bushings=tuple(self._bushings.values()))

@@ -10,6 +10,7 @@
 #include "joint_force.hpp"
 #include "load.hpp"
 #include "spring_damper.hpp"
+#include "bushing.hpp"
 
 namespace se3dyn {
 
@@ -19,6 +20,7 @@ inline std::unique_ptr<ElementBatch> make_batch(const std::string& key) {
   if (key == "joint_force") return std::make_unique<JointForces>();
   if (key == "load") return std::make_unique<Loads>();
   if (key == "spring_damper") return std::make_unique<SpringDampers>();
+  if (key == "bushing") return std::make_unique<Bushings>();
   throw std::invalid_argument("no compiled kernel for the element type '" + key + "'");
 }
 
