@@ -277,7 +277,9 @@ struct Stepper {
         }
       }
       dn_prev = dnmax;
-      if (ep <= P.ltol && dnmax <= 4e-16 * std::fmax(nmax, 1e-300)) {
+      // (round-off of the positions: of the increment, or of the model's length scale when the
+      // motion has come to rest and the forces with it)
+      if (ep <= P.ltol && dnmax <= 4e-16 * std::fmax(nmax, P.lscale)) {
         double fs2 = G.evaluate(alpha_n, n, v, vd, lam, u, cM, cC, cK, stab, cv, false, o);
         measure(fs2);
         break;
