@@ -22,9 +22,9 @@ The order of the registry is the order of the batches in the engine.
 
 from __future__ import annotations
 
-from se3dyn.elements import body, joint, joint_force, load, spring_damper
+from se3dyn.elements import beam, body, joint, joint_force, load, spring_damper
 
 #: type key -> module, in engine order
-REGISTRY = {m.KEY: m for m in (body, joint, joint_force, load, spring_damper)}
+REGISTRY = {m.KEY: m for m in (body, joint, joint_force, load, spring_damper, beam)}
 
 __all__ = ["REGISTRY"]
