@@ -1,0 +1,341 @@
+"""Validation of the geometrically exact SE(3) beam element (se3dyn.elements.beam) against
+closed-form solutions and published benchmarks.
+
+Beam paper: V. Sonneville, A. Cardona, O. Bruls, "Geometrically exact beam finite element
+formulated on the special Euclidean group SE(3)", Comput. Methods Appl. Mech. Engrg. 268 (2014)
+451-474, doi:10.1016/j.cma.2013.10.008.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import se3dyn as sd
+from se3dyn import lie, sections
+from se3dyn.elements.beam import section_forces
+from se3dyn.errors import ModelError
+from se3dyn.statics import static_equilibrium
+from se3dyn.system import compile_model
+
+
+def _cantilever(n, L=1.0, EA=1e4, GA=1e4, GJ=50.0, EI=100.0, **kw):
+    mb = sd.ModelBuilder()
+    mb.node("root", fixed=True)
+    mb.node("tip", position=(L, 0.0, 0.0))
+    mb.beam("b", "root", "tip", elements=n, EA=EA, GA=GA, GJ=GJ, EI=EI, **kw)
+    return mb
+
+
+# ---------------------------------------------------------------------------------------------
+# (1) roll-up: pure bending is a constant strain, which the element represents exactly
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("n", [3, 4, 8, 16])
+def test_end_moment_2pi_EI_over_L_rolls_the_cantilever_into_a_full_circle(n):
+    """A material end moment M = 2 pi EI / L bends the cantilever into a circle of radius
+    EI/M = L/(2 pi) (Euler-Bernoulli: curvature M/EI everywhere, the classical roll-up
+    benchmark, e.g. Simo & Vu-Quoc 1986, Sec. 7.1). The SE(3) element interpolates by the
+    screw motion exp(s d/L) and is exact for constant strain, so every element count gives the
+    circle to round-off, as long as each element turns by less than pi (n >= 3): the log of a
+    relative rotation of 2 pi / n must be unique."""
+    L, EI = 1.0, 100.0
+    M = 2 * math.pi * EI / L
+    mb = _cantilever(n, L=L, EI=EI)
+    mb.load("m", "tip", torque=(0.0, 0.0, M), torque_frame="body")
+    st = static_equilibrium(mb.build(), load_steps=4)
+    H = st.H
+    s = st.system
+    R = L / (2 * math.pi)
+    tip = H[s.node_names.index("tip")]
+    assert np.linalg.norm(tip[:3, 3]) < 1e-9 * L  # the tip is back on the root
+    assert np.abs(tip[:3, :3] - np.eye(3)).max() < 1e-9  # and turned by 2 pi
+    for i in range(len(s.node_names)):  # every node on the circle centred at (0, R, 0)
+        assert abs(np.linalg.norm(H[i, :3, 3] - [0.0, R, 0.0]) - R) < 1e-9 * L
+    out = section_forces(s, H)
+    np.testing.assert_allclose(out["strain"][:, 5], 2 * math.pi / L, rtol=1e-9)
+    np.testing.assert_allclose(out["force"][:, 5], M, rtol=1e-9)
+    assert np.abs(out["force"][:, :5]).max() < 1e-8 * M
+    np.testing.assert_allclose(out["energy"].sum(), M ** 2 * L / (2 * EI), rtol=1e-9)
+
+
+def test_one_element_is_exact_for_any_arc_below_half_a_turn():
+    """One element under an end moment with ML/EI = 3 pi / 4: the tip lies on the circle of
+    radius EI/M at the angle ML/EI, (R sin t, R (1 - cos t)), turned by t."""
+    L, EI = 2.0, 30.0
+    t = 0.75 * math.pi
+    M = t * EI / L
+    mb = _cantilever(1, L=L, EI=EI)
+    mb.load("m", "tip", torque=(0.0, 0.0, M), torque_frame="body")
+    st = static_equilibrium(mb.build(), load_steps=2)
+    R = EI / M
+    tip = st.H[1]
+    np.testing.assert_allclose(tip[:3, 3], [R * math.sin(t), R * (1 - math.cos(t)), 0.0],
+                               atol=1e-10 * L)
+    np.testing.assert_allclose(tip[:3, :3], lie.exp_so3(np.array([0.0, 0.0, t])), atol=1e-10)
+
+
+# ---------------------------------------------------------------------------------------------
+# (2) small tip force: Timoshenko deflection, mesh convergence, no shear locking
+# ---------------------------------------------------------------------------------------------
+def _tip_deflection(n, L, EI, GA, P):
+    mb = _cantilever(n, L=L, EI=EI, GA=GA, EA=1e2 * EI / L ** 2, GJ=EI)
+    mb.load("p", "tip", force=(0.0, P, 0.0))
+    # the axial forces of the elements carry a round-off of EA * 1e-16 (positions of size L):
+    # the residual tolerance, relative to the load, must stay above it
+    st = static_equilibrium(mb.build(), tol=1e-9)
+    return st.H[1, 1, 3]
+
+
+def test_small_tip_force_gives_the_timoshenko_deflection_with_second_order_mesh_error():
+    """Linear limit (deflection 1e-5 L, geometric nonlinearity ~1e-10 relative): the
+    Timoshenko cantilever deflection is P L^3/(3 EI) + P L/(GA). The element's constant strains
+    are those of the linear two-node Timoshenko element with one-point (midpoint) quadrature:
+    element curvatures equal the exact moment at the element midpoints (nodal rotations are
+    exact, midpoint rule on a linear moment) and the deflection integrates the rotations by the
+    trapezoidal rule, whose error on the parabola theta(s) is -P h^3/(12 EI) per element, so
+    delta_n = P L^3/(3 EI) (1 - 1/(4 n^2)) + P L/(GA): second-order convergence."""
+    L, EI, GA = 1.0, 10.0, 500.0
+    P = 3e-4 * EI / L ** 2
+    exact = P * L ** 3 / (3 * EI) + P * L / GA
+    ns = [1, 2, 4, 8, 16]
+    err = []
+    for n in ns:
+        dn = _tip_deflection(n, L, EI, GA, P)
+        np.testing.assert_allclose(dn, exact - P * L ** 3 / (12 * EI * n ** 2), rtol=1e-7)
+        err.append(abs(dn - exact))
+    order = np.log2(np.array(err[:-1]) / np.array(err[1:]))
+    np.testing.assert_allclose(order, 2.0, atol=1e-3)
+
+
+def test_slender_beam_on_a_coarse_mesh_bends_without_shear_locking():
+    """L/h = 1000 (circle of radius 5e-4 in a 1 m beam): a shear-locking element would be
+    stiffer by a factor ~ GA L^2 / EI ~ 1e6; two elements give 1 - 1/16 of the Euler-Bernoulli
+    deflection (see the previous test), the shear part being ~1e-6 of it."""
+    sec = sections.circle(5e-4, E=2e11, nu=0.3)
+    EI, GA = sec["EI"][0], sec["GA"][0]
+    L = 1.0
+    P = 1e-3 * 3 * EI / L ** 3  # tip deflection 1e-3 L
+    mb = sd.ModelBuilder()
+    mb.node("root", fixed=True)
+    mb.node("tip", position=(L, 0.0, 0.0))
+    mb.beam("b", "root", "tip", elements=2, **{k: v for k, v in sec.items()
+                                               if k not in ("mass_per_length",
+                                                            "rotary_inertia")})
+    mb.load("p", "tip", force=(0.0, 0.0, P))
+    # round-off of the axial force EA * 1e-16 is ~1e-6 of the load here (EA L^2/EI = 1.6e7)
+    st = static_equilibrium(mb.build(), tol=1e-5)
+    eb = P * L ** 3 / (3 * EI)
+    # geometric nonlinearity ~ (1e-3)^2, round-off ~1e-6
+    np.testing.assert_allclose(st.H[1, 2, 3] / eb, (1 - 1 / 16) + 3 * EI / (GA * L ** 2),
+                               rtol=1e-4)
+
+
+def test_section_moment_balances_the_tip_force():
+    """Statics of the cantilever: the bending moment at the midpoint of every element is
+    P (L - s_mid), the shear force P (small deflection)."""
+    L, EI, n = 1.0, 10.0, 5
+    P = 1e-5 * EI / L ** 2
+    mb = _cantilever(n, L=L, EI=EI, EA=1e3)
+    mb.load("p", "tip", force=(0.0, P, 0.0))
+    st = static_equilibrium(mb.build(), tol=1e-8)
+    out = section_forces(st.system, st.H)
+    # nodes created along the beam: b/1 ... b/4, in the order of the elements
+    mid = (np.arange(n) + 0.5) * L / n
+    np.testing.assert_allclose(out["force"][:, 5], P * (L - mid), rtol=1e-6)
+    np.testing.assert_allclose(out["force"][:, 1], P, rtol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# (3) Bathe & Bolourchi's 45-degree bend (pre-curved reference)
+# ---------------------------------------------------------------------------------------------
+def _bend(n=8, G=None):
+    """The 45-degree bend of K.-J. Bathe and S. Bolourchi, "Large displacement analysis of
+    three-dimensional beam structures", Int. J. Numer. Meth. Engng 14 (1979) 961-986: an eighth
+    of a circle of radius 100 in the x-y plane, unit square section, E = 1e7, G = 5e6, clamped
+    at the origin (tangent x), loaded at the tip by a force out of the plane (z)."""
+    R = 100.0
+    frames = []
+    for i in range(n + 1):
+        phi = 0.25 * math.pi * i / n
+        frames.append(lie.make_frame(lie.exp_so3(np.array([0.0, 0.0, phi])),
+                                     np.array([R * math.sin(phi), R * (1 - math.cos(phi)), 0.0])))
+    frames = np.array(frames)
+    if G is not None:
+        frames = G @ frames
+    mb = sd.ModelBuilder()
+    mb.node("root", position=frames[0, :3, 3], orientation=frames[0, :3, :3], fixed=True)
+    mb.node("tip", position=frames[-1, :3, 3], orientation=frames[-1, :3, :3])
+    sec = sections.rectangle(1.0, 1.0, E=1e7, G=5e6)
+    mb.beam("bend", "root", "tip", frames=frames,
+            **{k: v for k, v in sec.items() if k not in ("mass_per_length", "rotary_inertia")})
+    return mb
+
+
+#: Tip positions with 8 elements, J. C. Simo and L. Vu-Quoc, "A three-dimensional
+#: finite-strain rod model. Part II: Computational aspects", Comput. Methods Appl. Mech. Engrg.
+#: 58 (1986) 79-116 (their table of the 45-degree bend, as quoted in the EXUDYN example
+#: geometricallyExactBeamCurvedTest and in SPHinXsys' beam test); Bathe & Bolourchi (1979)
+#: give (47.2, 15.9, 53.4) at 600.
+SIMO_VU_QUOC = {300.0: (58.84, 22.33, 40.08), 450.0: (52.32, 18.62, 48.39),
+                600.0: (47.23, 15.79, 53.37)}
+
+
+@pytest.mark.parametrize("P", sorted(SIMO_VU_QUOC))
+def test_45_degree_bend_tip_matches_the_published_positions(P):
+    mb = _bend()
+    mb.load("p", "tip", force=(0.0, 0.0, P))
+    st = static_equilibrium(mb.build(), load_steps=6)
+    tip = st.H[1, :3, 3]
+    # different element formulations on 8 elements: agreement to 1 % of the displacement
+    ref = np.array(SIMO_VU_QUOC[P])
+    disp = np.linalg.norm(ref - [100 * math.sin(math.pi / 4), 100 * (1 - math.cos(math.pi / 4)),
+                                 0.0])
+    assert np.abs(tip - ref).max() < 1e-2 * disp, (tip, ref)
+    if P == 600.0:
+        assert np.abs(tip - [47.2, 15.9, 53.4]).max() < 0.35  # Bathe & Bolourchi, to 0.1
+
+
+def test_unloaded_bend_keeps_its_shape():
+    """The pre-curved reference is stress-free: without a load every node stays put."""
+    s = compile_model(_bend().build())
+    out = section_forces(s, s.node_H0)
+    assert np.abs(out["force"]).max() < 1e-6
+    assert np.abs(out["strain"]).max() < 1e-13
+
+
+# ---------------------------------------------------------------------------------------------
+# (5) invariance under a superposed rigid motion
+# ---------------------------------------------------------------------------------------------
+def test_bend_under_a_rigidly_moved_load_is_the_rigidly_moved_equilibrium():
+    """Moving the whole problem (reference, clamp, load direction) by a rigid motion G moves
+    the equilibrium by G: the element is frame-indifferent (objective)."""
+    rng = np.random.default_rng(5)
+    G = lie.exp_se3(np.concatenate([50 * rng.normal(size=3), rng.normal(size=3)]))
+    P = 450.0
+    a = _bend()
+    a.load("p", "tip", force=(0.0, 0.0, P))
+    b = _bend(G=G)
+    b.load("p", "tip", force=tuple(G[:3, :3] @ [0.0, 0.0, P]))
+    sa = static_equilibrium(a.build(), load_steps=4)
+    sb = static_equilibrium(b.build(), load_steps=4)
+    np.testing.assert_allclose(sb.H[1], G @ sa.H[1], atol=1e-8 * 100)
+    fa = section_forces(sa.system, sa.H)
+    fb = section_forces(sb.system, sb.H)
+    np.testing.assert_allclose(fb["force"], fa["force"], atol=1e-7 * np.abs(fa["force"]).max())
+
+
+# ---------------------------------------------------------------------------------------------
+# (4) dynamics: energy of a free-flying beam
+# ---------------------------------------------------------------------------------------------
+def _flyer(n=4):
+    sec = sections.circle(0.02, E=2e6, nu=0.3, density=1000.0)
+    mb = sd.ModelBuilder()
+    mb.node("a", position=(0.0, 0.0, 0.0), velocity=(0.0, 0.3, 0.1),
+            angular_velocity=(0.2, -0.3, 1.5))
+    mb.node("b", position=(1.0, 0.0, 0.0), velocity=(0.1, -0.2, 0.0),
+            angular_velocity=(0.0, 0.4, -0.5))
+    mb.beam("f", "a", "b", elements=n, **sec)
+    return mb.build()
+
+
+def test_free_flying_beam_conserves_energy_with_second_order_drift():
+    """No damping, no load, rho_inf = 1 (no numerical dissipation): the total energy
+    (kinetic + elastic) is conserved up to the integration error, which falls with h^2
+    (generalized-alpha is second-order accurate, Sec. 7 of the multibody paper). The nodes start
+    with inconsistent velocities (the intermediate nodes at rest), so the beam flies, spins and
+    vibrates."""
+    model = _flyer()
+    hs = (4e-3, 2e-3, 1e-3, 5e-4)
+    drift = []
+    for h in hs:
+        E = sd.simulate(model, 0.5, h, rho_inf=1.0).total_energy
+        drift.append(np.abs(E - E[0]).max() / E[0])
+    # the maximum deviation oscillates with h: the mean order over a factor 8 in h
+    order = np.log2(drift[0] / drift[-1]) / 3
+    assert 1.7 < order < 2.5, (drift, order)
+    assert drift[-1] < 5e-5, drift
+
+
+def test_strain_rate_damping_dissipates_what_the_energy_loses():
+    """With damping ``f = K eps + D deps/dt`` the dissipated work (power L epsd^T D epsd >= 0)
+    grows monotonically and accounts for the energy lost: the energy balance (total energy +
+    dissipated work) is conserved up to an integration error falling with h^2."""
+    sec = sections.circle(0.02, E=2e6, nu=0.3, density=1000.0)
+    mb = sd.ModelBuilder()
+    mb.node("a", position=(0.0, 0.0, 0.0), angular_velocity=(0.0, 0.0, 2.0))
+    mb.node("b", position=(1.0, 0.0, 0.0), velocity=(0.0, -0.5, 0.3))
+    mb.beam("f", "a", "b", elements=3, damping=2e-3, **sec)
+    model = mb.build()
+    err = []
+    for h in (1e-3, 5e-4, 2.5e-4):
+        res = sd.simulate(model, 0.1, h, rho_inf=1.0)
+        D = res.dissipation
+        assert np.all(np.diff(D) >= -1e-15)
+        eb = res.energy_balance
+        err.append(np.abs(eb - eb[0]).max())
+    assert D[-1] > 0.02 * res.total_energy[0]
+    order = np.log2(np.array(err[:-1]) / np.array(err[1:]))
+    np.testing.assert_allclose(order, 2.0, atol=0.1)
+
+
+# ---------------------------------------------------------------------------------------------
+# builder
+# ---------------------------------------------------------------------------------------------
+def test_builder_names_and_orients_the_intermediate_nodes():
+    mb = sd.ModelBuilder()
+    mb.node("a", fixed=True)
+    mb.node("b", position=(0.0, 3.0, 4.0))
+    mb.beam("arm", "a", "b", elements=5, EA=1.0, GA=(1.0, 2.0), GJ=1.0, EI=(1.0, 2.0))
+    m = mb.build()
+    names = [f"arm/{i}" for i in range(1, 5)]
+    assert m.beams[0].nodes == ("a", *names, "b")
+    e1 = np.array([0.0, 0.6, 0.8])
+    for i, nm in enumerate(names, 1):
+        nd = m.node(nm)
+        np.testing.assert_allclose(nd.position, i / 5 * np.array([0.0, 3.0, 4.0]), atol=1e-15)
+        np.testing.assert_allclose(nd.orientation[:, 0], e1, atol=1e-15)  # axis 1 along
+        np.testing.assert_allclose(nd.orientation.T @ nd.orientation, np.eye(3), atol=1e-15)
+    s = compile_model(m)
+    assert [b["L"] for b in s.beams] == pytest.approx([1.0] * 5)
+
+
+def test_lumped_mass_is_the_beam_mass():
+    sec = sections.tube(0.05, 0.04, E=7e10, nu=0.33, density=2700.0)
+    mb = sd.ModelBuilder()
+    mb.node("a", mass=2.0, inertia=(0.1, 0.1, 0.1))
+    mb.node("b", position=(2.0, 0.0, 0.0))
+    mb.beam("t", "a", "b", elements=4, **sec)
+    s = compile_model(mb.build())
+    A = math.pi * (0.05 ** 2 - 0.04 ** 2)
+    assert s.node_mass.sum() == pytest.approx(2.0 + 2700.0 * A * 2.0)
+    # rotary inertia about the beam axis: density * polar moment * length
+    assert s.node_J[:, 0, 0].sum() == pytest.approx(0.1 + 2700.0 * math.pi / 2
+                                                    * (0.05 ** 4 - 0.04 ** 4) * 2.0)
+
+
+@pytest.mark.parametrize("kw, field", [
+    (dict(EA=-1.0), "EA"), (dict(GA=(1.0, 0.0)), "GA"), (dict(EI=(1.0, 2.0, 3.0)), "EI"),
+    (dict(elements=0), "elements"), (dict(mass_per_length=1.0), "rotary_inertia"),
+    (dict(damping=(1.0, 2.0)), "damping"), (dict(axis2=(1.0, 0.0, 0.0)), "axis2"),
+])
+def test_builder_errors_name_the_beam_and_the_field(kw, field):
+    mb = sd.ModelBuilder()
+    mb.node("a", fixed=True)
+    mb.node("b", position=(1.0, 0.0, 0.0))
+    args = dict(EA=1.0, GA=1.0, GJ=1.0, EI=1.0)
+    args.update(kw)
+    with pytest.raises(ModelError) as exc:
+        mb.beam("bm", "a", "b", **args)
+    assert exc.value.item == "beam 'bm'" and exc.value.field == field
+
+
+def test_frames_too_far_apart_are_refused():
+    mb = sd.ModelBuilder()
+    mb.node("a", fixed=True)
+    mb.node("b", position=(0.0, 0.0, 0.0))
+    F = np.array([np.eye(4), np.eye(4)])
+    F[1, :3, :3] = lie.exp_so3(np.array([0.0, 0.0, 3.1]))
+    with pytest.raises(ModelError, match="frames"):
+        mb.beam("bm", "a", "b", frames=F, EA=1.0, GA=1.0, GJ=1.0, EI=1.0)
