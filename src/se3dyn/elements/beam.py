@@ -63,16 +63,19 @@ def tables(s, lay) -> dict:
     return t
 
 
-def section_forces(s, H: np.ndarray, v: np.ndarray | None = None) -> dict:
+def section_forces(s, H: np.ndarray, v: np.ndarray | None = None,
+                   vq: np.ndarray | None = None) -> dict:
     """Strains, section forces and energies of every beam element of a compiled system.
 
     Parameters
     ----------
     s : System
     H : ndarray, shape (M, 4, 4) or (nt, M, 4, 4)
-        Node frames (e.g. ``StaticResult.H`` or ``Results`` frames over time).
+        Node frames (e.g. ``StaticResult.H``, or ``Results.H`` over time).
     v : ndarray, shape (M, 6) or (nt, M, 6), optional
         Material node velocities, for the strain rates and the damping forces.
+    vq : ndarray, shape (nq,) or (nt, nq), optional
+        Instead of ``v``: the velocities of the unknowns (``Results.v``).
 
     Returns
     -------
@@ -85,7 +88,6 @@ def section_forces(s, H: np.ndarray, v: np.ndarray | None = None) -> dict:
         ``L/2 eps^T K eps`` (J).
     """
     H = np.asarray(H, float)
-    lead = H.shape[:-3]
     bs = s.beams
     n = len(bs)
     a = np.array([b["a"] for b in bs], np.int64)
@@ -100,6 +102,11 @@ def section_forces(s, H: np.ndarray, v: np.ndarray | None = None) -> dict:
     d = lie.log_se3(Hr)
     eps = (d - d0) / L[:, None]
     rate = np.zeros_like(eps)
+    if vq is not None:
+        vq = np.asarray(vq, float)
+        v = np.zeros(vq.shape[:-1] + (s.M, 6))
+        for i in np.flatnonzero(~s.node_fixed):
+            v[..., i, :] = vq[..., s.node_dofadr[i]:s.node_dofadr[i] + 6]
     if v is not None:
         v = np.asarray(v, float)
         vA = np.einsum("eij,...ej->...ei", lie.adjoint_inv(XA), v[..., a, :])
@@ -108,7 +115,6 @@ def section_forces(s, H: np.ndarray, v: np.ndarray | None = None) -> dict:
         rate = np.einsum("...ij,...j->...i", lie.tangent_se3_inv(d), vr) / L[:, None]
     f = np.einsum("eij,...ej->...ei", K, eps) + np.einsum("eij,...ej->...ei", D, rate)
     energy = 0.5 * L * np.einsum("...ei,eij,...ej->...e", eps, K, eps)
-    del lead
     return dict(beam=np.array([b["beam"] for b in bs]), index=np.array([b["index"] for b in bs]),
                 L=L, strain=eps, strain_rate=rate, force=f, energy=energy)
 
