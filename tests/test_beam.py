@@ -418,3 +418,26 @@ def test_section_outputs_over_a_run_match_the_energy_and_dissipation_channels():
     work = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(res.t))])
     np.testing.assert_allclose(work, res.dissipation - res.dissipation[0],
                                atol=1e-9 * res.total_energy[0])
+
+
+def test_beam_channels_give_the_section_outputs():
+    from se3dyn.channels import channel_unit, get_channel, list_channels
+
+    sec = sections.circle(0.02, E=2e6, nu=0.3, density=1000.0)
+    mb = sd.ModelBuilder()
+    mb.node("a", position=(0.0, 0.0, 0.0), angular_velocity=(0.0, 0.0, 2.0))
+    mb.node("b", position=(1.0, 0.0, 0.0), velocity=(0.0, -0.5, 0.3))
+    mb.beam("f/x", "a", "b", elements=2, damping=1e-3, **sec)
+    res = sd.simulate(mb.build(), 0.01, 1e-3, rho_inf=1.0)
+    names = [c for c in list_channels(res) if c.startswith("beam/")]
+    assert len(names) == 2 * 13 and names[0] == "beam/f%2Fx/0/force/N"
+    out = section_forces(res.system, res.H, vq=res.v)
+    np.testing.assert_array_equal(get_channel(res, "beam/f%2Fx/1/force/M3"), out["force"][:, 1, 5])
+    np.testing.assert_array_equal(get_channel(res, "beam/f%2Fx/0/strain/g2"),
+                                  out["strain"][:, 0, 1])
+    np.testing.assert_array_equal(get_channel(res, "beam/f%2Fx/1/energy"), out["energy"][:, 1])
+    assert channel_unit("beam/f%2Fx/1/force/M3") == "N m"
+    assert channel_unit("beam/f%2Fx/1/strain/k2") == "1/m"
+    for bad in ("beam/f%2Fx/2/energy", "beam/nope/0/energy", "beam/f%2Fx/0/force/M4"):
+        with pytest.raises(KeyError):
+            get_channel(res, bad)
