@@ -456,3 +456,28 @@ def test_the_equilibrium_model_restarts_in_equilibrium():
     np.testing.assert_allclose(fb, fa, atol=1e-9 * np.abs(fa).max())
     st2 = static_equilibrium(st.model)
     assert st2.iterations.sum() == 0
+
+
+@pytest.mark.parametrize("n", [2, 4, 8, 16])
+def test_self_weight_of_a_cantilever_lumped_at_the_nodes(n):
+    """Cantilever under its own weight q = mu g (the lumped mass carries gravity, half of each
+    element's weight on each node), linear limit: Timoshenko tip deflection
+    q L^4/(8 EI) + q L^2/(2 GA), tip rotation q L^3/(6 EI). With lumped loads the midpoint moment
+    of every element exceeds the exact one by q h^2/8 (h = L/n), so the nodal rotations carry
+    q h^2 s/(12 EI) (midpoint rule on M'' = q: + q h^3/24 per element), while the trapezoidal
+    rule on the rotations loses exactly that much: the nodal deflections are exact."""
+    L, EI, GA, g = 1.0, 10.0, 500.0, 9.81
+    mu = 1e-4 * 8 * EI / (g * L ** 4)  # tip deflection 1e-4 L
+    q = mu * g
+    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -g))
+    mb.node("root", fixed=True)
+    mb.node("tip", position=(L, 0.0, 0.0))
+    mb.beam("b", "root", "tip", elements=n, EA=1e3, GA=GA, GJ=EI, EI=EI, mass_per_length=mu,
+            rotary_inertia=(2e-6, 1e-6, 1e-6))
+    st = static_equilibrium(mb.build(), tol=1e-9)
+    h = L / n
+    # geometric nonlinearity ~ (1e-4)^2
+    np.testing.assert_allclose(-st.H[1, 2, 3], q * L ** 4 / (8 * EI) + q * L ** 2 / (2 * GA),
+                               rtol=1e-7)
+    rot = lie.log_so3(st.H[1, :3, :3])[1]
+    np.testing.assert_allclose(rot, q * L ** 3 / (6 * EI) + q * h ** 2 * L / (12 * EI), rtol=1e-6)
