@@ -82,9 +82,7 @@ def test_one_element_is_exact_for_any_arc_below_half_a_turn():
 def _tip_deflection(n, L, EI, GA, P):
     mb = _cantilever(n, L=L, EI=EI, GA=GA, EA=1e2 * EI / L ** 2, GJ=EI)
     mb.load("p", "tip", force=(0.0, P, 0.0))
-    # the axial forces of the elements carry a round-off of EA * 1e-16 (positions of size L):
-    # the residual tolerance, relative to the load, must stay above it
-    st = static_equilibrium(mb.build(), tol=1e-9)
+    st = static_equilibrium(mb.build())
     return st.H[1, 1, 3]
 
 
@@ -124,10 +122,10 @@ def test_slender_beam_on_a_coarse_mesh_bends_without_shear_locking():
                                                if k not in ("mass_per_length",
                                                             "rotary_inertia")})
     mb.load("p", "tip", force=(0.0, 0.0, P))
-    # round-off of the axial force EA * 1e-16 is ~1e-6 of the load here (EA L^2/EI = 1.6e7)
-    st = static_equilibrium(mb.build(), tol=1e-5)
+    st = static_equilibrium(mb.build())
     eb = P * L ** 3 / (3 * EI)
-    # geometric nonlinearity ~ (1e-3)^2, round-off ~1e-6
+    # geometric nonlinearity ~ (1e-3)^2; the round-off of the axial forces (EA 1e-16, with
+    # EA L^2 / EI = 1.6e7) is ~1e-6 of the load
     np.testing.assert_allclose(st.H[1, 2, 3] / eb, (1 - 1 / 16) + 3 * EI / (GA * L ** 2),
                                rtol=1e-4)
 
@@ -139,7 +137,7 @@ def test_section_moment_balances_the_tip_force():
     P = 1e-5 * EI / L ** 2
     mb = _cantilever(n, L=L, EI=EI, EA=1e3)
     mb.load("p", "tip", force=(0.0, P, 0.0))
-    st = static_equilibrium(mb.build(), tol=1e-8)
+    st = static_equilibrium(mb.build())
     out = section_forces(st.system, st.H)
     # nodes created along the beam: b/1 ... b/4, in the order of the elements
     mid = (np.arange(n) + 0.5) * L / n
@@ -474,7 +472,7 @@ def test_self_weight_of_a_cantilever_lumped_at_the_nodes(n):
     mb.node("tip", position=(L, 0.0, 0.0))
     mb.beam("b", "root", "tip", elements=n, EA=1e3, GA=GA, GJ=EI, EI=EI, mass_per_length=mu,
             rotary_inertia=(2e-6, 1e-6, 1e-6))
-    st = static_equilibrium(mb.build(), tol=1e-9)
+    st = static_equilibrium(mb.build())
     h = L / n
     # geometric nonlinearity ~ (1e-4)^2
     np.testing.assert_allclose(-st.H[1, 2, 3], q * L ** 4 / (8 * EI) + q * L ** 2 / (2 * GA),

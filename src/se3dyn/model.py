@@ -774,7 +774,7 @@ class ModelBuilder:
     def beam(self, name: str, node_a: str, node_b: str, *, elements: int | None = None,
              EA: Any, GA: Any, GJ: Any, EI: Any, mass_per_length: Any = 0.0,
              rotary_inertia: Any = None, damping: Any = 0.0, axis2: Any = None,
-             frames: Any = None) -> None:
+             frames: Any = None, initial_velocity: str = "rest") -> None:
         """Add a geometrically exact beam between two existing nodes, meshed into two-node SE(3)
         elements (Sonneville, Cardona & Bruls, Comput. Methods Appl. Mech. Engrg. 268 (2014)
         451-474, doi:10.1016/j.cma.2013.10.008; see :mod:`se3dyn.elements.beam`).
@@ -815,6 +815,10 @@ class ModelBuilder:
             (homogeneous 4 x 4, inertial frame, axis 1 along the beam); the first and last
             positions must be those of node_a and node_b. Consecutive frames must be less
             than pi apart in rotation. Replaces the straight segment and ``axis2``.
+        initial_velocity : {"rest", "rigid"}
+            Initial velocity of the intermediate nodes: at rest, or moving rigidly with node_a
+            (``v = v_a + w_a x (x - x_a)``, ``w = w_a``, inertial frame); the end nodes keep
+            theirs.
         """
         _check_name("beam", name)
         item = f"beam {name!r}"
@@ -941,6 +945,8 @@ class ModelBuilder:
             if nm_ in self._nodes:
                 raise ModelError(item, "name", f"a name whose intermediate node {nm_!r} is "
                                  "free", name, "a node of that name exists")
+        if initial_velocity not in ("rest", "rigid"):
+            raise ModelError(item, "initial_velocity", "'rest' or 'rigid'", initial_velocity)
         if na.fixed and nb.fixed and n == 1:
             raise ModelError(item, "node_b", "at least one free node", node_b,
                              "both nodes are fixed: the element does nothing")
@@ -951,8 +957,13 @@ class ModelBuilder:
             X[i] = lie.inverse(H0) @ F[i]
             X[i, :3, 3] = 0.0  # the node sits on the beam end
         for i in range(1, n):
+            vel = np.zeros(6)
+            if initial_velocity == "rigid":
+                wa = na.velocity[3:]
+                vel = np.concatenate([na.velocity[:3] + np.cross(wa, F[i, :3, 3] - na.position),
+                                      wa])
             self._nodes[names[i]] = NodeSpec(names[i], F[i, :3, 3].copy(), F[i, :3, :3].copy(),
-                                             0.0, np.zeros((3, 3)), False, np.zeros(6))
+                                             0.0, np.zeros((3, 3)), False, vel)
         self._beams[name] = BeamSpec(name, tuple(names), F, X, np.diag(Kd), np.diag(Dd), mpl,
                                      rot)
 

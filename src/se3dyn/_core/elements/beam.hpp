@@ -173,6 +173,25 @@ struct Beams : ElementBatch {
       frame_force(T, fb[e], gB, 1.0, X.r);
       X.scale(gA, 6);
       X.scale(gB, 6);
+      {
+        // Round-off floor of the force scale. The strain is the difference of d and d0, each
+        // of size 1 relative to L, and d comes from absolute positions |x|: the section forces
+        // carry a round-off of about eps S, S = kU (|x| + L)/L max(1, L) + kO/L (kU, kO the
+        // largest translational and rotational stiffnesses), whatever the load. Reporting
+        // ROUNDOFF_SCALE S as a force magnitude keeps the relative residual tolerances (1e-10
+        // by default) some 50 times above that round-off, e.g. for a steel beam (EA ~ 1e8 N)
+        // carrying a few newtons, instead of asking Newton for digits that do not exist.
+        constexpr double ROUNDOFF_SCALE = 1e-4;
+        double xs = std::fmax(std::sqrt(dot3(S.H[fa[e]].x, S.H[fa[e]].x)),
+                              std::sqrt(dot3(S.H[fb[e]].x, S.H[fb[e]].x)));
+        double kU = 0.0, kO = 0.0;
+        for (int i = 0; i < 3; ++i) {
+          kU = std::fmax(kU, std::fabs(Ke[7 * i]));
+          kO = std::fmax(kO, std::fabs(Ke[7 * (i + 3)]));
+        }
+        double floor = ROUNDOFF_SCALE * (kU * (xs + Le) / Le * std::fmax(1.0, Le) + kO / Le);
+        X.scale(&floor, 1);
+      }
       if (X.energy) {
         double we = 0.0, wd = 0.0;
         for (int i = 0; i < 6; ++i) {
