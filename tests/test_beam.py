@@ -479,3 +479,56 @@ def test_self_weight_of_a_cantilever_lumped_at_the_nodes(n):
                                rtol=1e-7)
     rot = lie.log_so3(st.H[1, :3, :3])[1]
     np.testing.assert_allclose(rot, q * L ** 3 / (6 * EI) + q * h ** 2 * L / (12 * EI), rtol=1e-6)
+
+
+@pytest.mark.parametrize("n", [4, 8, 16])
+def test_spinning_beam_on_a_hinge_stretches_by_the_centrifugal_force(n):
+    """A beam on a hub hinge (a joint on its root node), started spinning rigidly at 10 rad/s
+    (initial_velocity='rigid'), damped to its steady rotation: the axial force
+    N(s) = mu w^2 (L^2 - s^2)/2 stretches it by mu w^2 L^3 / (3 EA) (w the final rate, measured:
+    angular momentum is conserved while the beam lengthens). With the lumped masses (mu h inside,
+    mu h/2 at the tip) the element forces are N_i = mu w^2 h^2 (n^2 - i^2 - i)/2 and the
+    stretch is mu w^2 L^3/(3 EA) (1 + 1/(2 n^2)) exactly (sum over the elements)."""
+    L, mu, w = 1.0, 1.0, 10.0
+    EA = mu * w ** 2 * L ** 3 / (3 * 1e-5)  # strain ~1e-5: geometric nonlinearity ~1e-5
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("a", angular_velocity=(0.0, 0.0, w))
+    mb.node("b", position=(L, 0.0, 0.0), velocity=(0.0, w * L, 0.0),
+            angular_velocity=(0.0, 0.0, w))
+    mb.joint("hub", "hinge", "g", "a", axis=(0.0, 0.0, 1.0))
+    mb.beam("r", "a", "b", elements=n, EA=EA, GA=EA, GJ=10.0, EI=10.0, mass_per_length=mu,
+            rotary_inertia=(2e-4, 1e-4, 1e-4), damping=2e-3, initial_velocity="rigid")
+    res = sd.simulate(mb.build(), 0.4, 1e-3, rho_inf=0.8)
+    r = np.linalg.norm(res.node_position("b")[:, :2], axis=1)
+    assert np.ptp(r[-50:]) < 1e-6 * (r[-1] - L)  # steady
+    wf = res.node_velocity("b")[-1, 5]
+    np.testing.assert_allclose(r[-1] - L, mu * wf ** 2 * L ** 3 / (3 * EA) * (1 + 0.5 / n ** 2),
+                               rtol=1e-4)
+
+
+@pytest.mark.parametrize("n", [1, 2, 4])
+def test_simply_supported_beam_on_joints_with_a_load_on_its_middle_node(n):
+    """Joints and loads on beam nodes: a pin (hinge about y) at one end, a roller (prismatic
+    along x, then a hinge about y, through a cross node) at the other, a force P on the middle
+    node "s/n" of 2n elements. Each half is a cantilever of length L/2 under P/2 (symmetry), so
+    by the tip-force result above the deflection is P L^3/(48 EI) (1 - 1/(4 n^2)) + P L/(4 GA)
+    (Timoshenko: P L^3/(48 EI) + P L/(4 GA))."""
+    L, EI, GA = 2.0, 10.0, 400.0
+    P = 1e-4 * 48 * EI / L ** 3  # deflection 1e-4 L: linear limit
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("A")
+    mb.node("B", position=(L, 0.0, 0.0))
+    mb.node("Bc", position=(L, 0.0, 0.0))
+    mb.joint("pin", "hinge", "g", "A", axis=(0.0, 1.0, 0.0))
+    mb.joint("slide", "prismatic", "g", "Bc", axis=(1.0, 0.0, 0.0))
+    mb.joint("roll", "hinge", "Bc", "B", axis=(0.0, 1.0, 0.0))
+    mb.beam("s", "A", "B", elements=2 * n, EA=1e3, GA=GA, GJ=EI, EI=EI)
+    mb.load("p", f"s/{n}", force=(0.0, 0.0, -P))
+    st = static_equilibrium(mb.build())
+    mid = st.system.node_names.index(f"s/{n}")
+    np.testing.assert_allclose(-st.H[mid, 2, 3], P * L ** 3 / (48 * EI) * (1 - 0.25 / n ** 2)
+                               + P * L / (4 * GA), rtol=1e-6)
+    # the roller end slides only to second order in the deflection (~1e-8 L)
+    np.testing.assert_allclose(st.H[st.system.node_names.index("B"), 0, 3], L, atol=1e-7 * L)
