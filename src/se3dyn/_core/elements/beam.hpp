@@ -202,7 +202,8 @@ struct Beams : ElementBatch {
         X.energy[P_DISSIPATION] += Le * wd;
       }
       if (!X.vals) continue;
-      // Y = T^-T [K/L T^-1 + D/L T^-1 Qc + Pi DT(-d, Pi y) T^-1],  Qc = -ad(A_r v'_A) - DT(d, d') T^-1
+      // Y = T^-T [K/L T^-1 + D/L T^-1 Qc + Pi DT(-d, Pi y) T^-1],
+      // Qc = -ad(A_r v'_A) - DT(d, d') T^-1 (configuration derivative of d' = T^-1 v_r)
       double M1[36], M2[36], M3[36], Y[36], Yv[36];
       double KL[36], DL[36];
       for (int i = 0; i < 36; ++i) {
