@@ -532,3 +532,35 @@ def test_simply_supported_beam_on_joints_with_a_load_on_its_middle_node(n):
                                + P * L / (4 * GA), rtol=1e-6)
     # the roller end slides only to second order in the deflection (~1e-8 L)
     np.testing.assert_allclose(st.H[st.system.node_names.index("B"), 0, 3], L, atol=1e-7 * L)
+
+
+def test_free_flying_beam_after_a_load_pulse_keeps_its_momentum_and_energy():
+    """Large overall motion, in the spirit of the free-flying "spaghetti" of Simo & Vu-Quoc
+    (1986-88): a 10 m beam (EA = GA = 1e4, EI = 500, mu = 1) pushed at its lower end by a
+    force and a torque that rise linearly to 8 N and 80 N m at 2.5 s and fall back to zero at
+    5 s, then free. Checked are conservation laws only: the linear momentum after the pulse is
+    its impulse (20, 0, 0) N s (to the O(h^2) integration error), the energy of the free flight is constant up to the integration
+    error (order 2 in h, rho_inf = 1), and during the pulse energy minus the work of the loads."""
+    drift = []
+    for h in (0.01, 0.005):
+        mb = sd.ModelBuilder()
+        mb.node("a", position=(6.0, 0.0, 0.0))
+        mb.node("b", position=(0.0, 0.0, 8.0))
+        mb.beam("s", "a", "b", elements=10, EA=1e4, GA=1e4, GJ=500.0, EI=500.0,
+                mass_per_length=1.0, rotary_inertia=(20.0, 10.0, 10.0))
+        t_ = [0.0, 2.5, 5.0, 100.0]
+        mb.load("push", "a", force=sd.Table(t_, [[0, 0, 0], [8, 0, 0], [0, 0, 0], [0, 0, 0]]),
+                torque=sd.Table(t_, [[0, 0, 0], [0, -80, 0], [0, 0, 0], [0, 0, 0]]),
+                torque_frame="inertial")
+        res = sd.simulate(mb.build(), 15.0, h, rho_inf=1.0)
+        s = res.system
+        p = sum(s.node_mass[i] * res.node_velocity(nm, frame="inertial")[-1, :3]
+                for i, nm in enumerate(s.node_names))
+        # the Lie-group scheme conserves momentum up to its O(h^2) error (3e-3 at h = 0.01)
+        np.testing.assert_allclose(p, [20.0, 0.0, 0.0], atol=1e-3 * 20.0 * (h / 0.01) ** 2)
+        free = res.t >= 5.0
+        E = res.total_energy[free]
+        drift.append(np.ptp(E) / E[0])
+        assert np.ptp(res.energy_balance) < 1e-4 * E[0]
+    assert drift[-1] < 1e-5
+    assert 3.0 < drift[0] / drift[1] < 5.0, drift
