@@ -539,8 +539,9 @@ def test_free_flying_beam_after_a_load_pulse_keeps_its_momentum_and_energy():
     (1986-88): a 10 m beam (EA = GA = 1e4, EI = 500, mu = 1) pushed at its lower end by a
     force and a torque that rise linearly to 8 N and 80 N m at 2.5 s and fall back to zero at
     5 s, then free. Checked are conservation laws only: the linear momentum after the pulse is
-    its impulse (20, 0, 0) N s (to the O(h^2) integration error), the energy of the free flight is constant up to the integration
-    error (order 2 in h, rho_inf = 1), and during the pulse energy minus the work of the loads."""
+    its impulse (20, 0, 0) N s (to the O(h^2) integration error), the energy of the free flight
+    is constant up to the integration error (order 2 in h, rho_inf = 1), and during the pulse
+    energy minus the work of the loads."""
     drift = []
     for h in (0.01, 0.005):
         mb = sd.ModelBuilder()
