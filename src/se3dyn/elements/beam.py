@@ -122,7 +122,8 @@ def section_forces(s, H: np.ndarray, v: np.ndarray | None = None,
 def examples(rng):
     """A straight free-flying beam with mass, damping and an anisotropic section; a pre-curved
     and pre-twisted beam (frames along a helix) from a fixed node to a node whose own frame is
-    not the section frame, with damping proportional to the stiffness."""
+    not the section frame, with damping proportional to the stiffness; a damped beam on a hinge
+    with a body on a spherical joint at an inner node (beam and joints together, index 2)."""
     import se3dyn as sd
 
     out = []
@@ -155,5 +156,19 @@ def examples(rng):
             mass=0.4, inertia=(0.02, 0.03, 0.04))
     mb.beam("h", "g", "tip", EA=4.0, GA=3.0, GJ=0.5, EI=(0.8, 0.6), damping=0.05,
             frames=frames, mass_per_length=0.2, rotary_inertia=(0.004, 0.002, 0.002))
+    out.append(mb.build())
+
+    # a damped beam hanging from a hinge, a spherical joint on one of its inner nodes: the
+    # velocity-level blocks of the beam enter the index-2 products with the joints
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("a", position=(0.0, 0.0, 0.0))
+    mb.node("b", position=(0.0, 0.2, -1.0))
+    mb.joint("hinge", "hinge", "g", "a", axis=(1.0, 0.0, 0.0))
+    mb.beam("p", "a", "b", elements=3, EA=6.0, GA=(4.0, 5.0), GJ=0.4, EI=(0.5, 0.7),
+            mass_per_length=0.3, rotary_inertia=(0.003, 0.0015, 0.0015),
+            damping=0.02, initial_velocity="rigid")
+    mb.node("c", position=(0.3, 0.1, -0.5), mass=0.2, inertia=(0.01, 0.01, 0.01))
+    mb.joint("ball", "spherical", "p/1", "c")
     out.append(mb.build())
     return out
