@@ -565,3 +565,48 @@ def test_free_flying_beam_after_a_load_pulse_keeps_its_momentum_and_energy():
         assert np.ptp(res.energy_balance) < 1e-4 * E[0]
     assert drift[-1] < 1e-5
     assert 3.0 < drift[0] / drift[1] < 5.0, drift
+
+
+def _elastica(k):
+    """Euler's elastica of a cantilever (L = EI = 1) under a tip force k perpendicular to its
+    initial axis (Bisshopp & Drucker, "Large deflection of cantilever beams", Q. Appl. Math. 3
+    (1945) 272-275): theta'' = -k cos(theta), theta(0) = 0, theta'(1) = 0, solved by shooting on
+    theta'(0). Returns (tip angle, tip x, tip y)."""
+    from scipy.integrate import solve_ivp
+    from scipy.optimize import brentq
+
+    def shoot(k0):
+        sol = solve_ivp(lambda s, y: [y[1], -k * math.cos(y[0]), math.cos(y[0]),
+                                      math.sin(y[0])], (0.0, 1.0), [0.0, k0, 0.0, 0.0],
+                        rtol=1e-12, atol=1e-14)
+        return sol.y[:, -1]
+
+    th, _, x, y = shoot(brentq(lambda c: shoot(c)[1], 0.0, k, xtol=1e-15))
+    return th, x, y
+
+
+def test_elastica_reference_matches_the_tabulated_values():
+    """The shooting solution reproduces the elliptic-integral values tabulated by K. Mattiasson,
+    "Numerical results from large deflection beam and frame problems analysed by means of
+    elliptic integrals", Int. J. Numer. Meth. Engng 17 (1981) 145-153: PL^2/EI = 1:
+    (1 - x, y, theta) = (0.05643, 0.30172, 0.46135); 2: (0.16064, 0.49346, 0.78175)."""
+    for k, ref in ((1.0, (0.05643, 0.30172, 0.46135)), (2.0, (0.16064, 0.49346, 0.78175))):
+        th, x, y = _elastica(k)
+        np.testing.assert_allclose((1 - x, y, th), ref, atol=6e-6)
+
+
+def test_large_tip_force_converges_to_the_elastica_with_second_order():
+    """PL^2/EI = 2 (tip rotation 0.78 rad) on a nearly inextensible, shear-rigid cantilever
+    (EA = GA = 1e5 EI/L^2: their effect ~2e-5 L): the tip converges to the elastica with order
+    2 (errors ~ 0.1 L / n^2)."""
+    th, x, y = _elastica(2.0)
+    err = []
+    for n in (4, 8, 16):
+        mb = _cantilever(n, L=1.0, EA=1e5, GA=1e5, GJ=1.0, EI=1.0)
+        mb.load("p", "tip", force=(0.0, 2.0, 0.0))
+        st = static_equilibrium(mb.build(), load_steps=2)
+        err.append(math.hypot(st.H[1, 0, 3] - x, st.H[1, 1, 3] - y))
+        assert abs(lie.log_so3(st.H[1, :3, :3])[2] - th) < 0.2 / n ** 2
+    order = np.log2(np.array(err[:-1]) / np.array(err[1:]))
+    np.testing.assert_allclose(order, 2.0, atol=0.1)
+    assert err[-1] < 5e-4
