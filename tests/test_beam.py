@@ -610,3 +610,44 @@ def test_large_tip_force_converges_to_the_elastica_with_second_order():
     order = np.log2(np.array(err[:-1]) / np.array(err[1:]))
     np.testing.assert_allclose(order, 2.0, atol=0.1)
     assert err[-1] < 5e-4
+
+
+# ---------------------------------------------------------------------------------------------
+# section helpers
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("ratio, beta", [(1.0, 0.141), (2.0, 0.229), (3.0, 0.263), (5.0, 0.291),
+                                         (10.0, 0.312)])
+def test_rectangle_torsion_constant_matches_saint_venant_table(ratio, beta):
+    """J = beta a b^3 for sides a >= b, beta from the classical table of Saint-Venant's
+    solution (Timoshenko & Goodier, Theory of Elasticity, 3rd ed., Sec. 109: 0.141, 0.229,
+    0.263, 0.291, 0.312 for a/b = 1, 2, 3, 5, 10, given to three digits)."""
+    b = 0.1
+    sec = sections.rectangle(ratio * b, b, E=1.0, G=1.0)
+    assert sec["GJ"] / (ratio * b * b ** 3) == pytest.approx(beta, abs=6e-4)
+
+
+def test_section_helpers_give_the_textbook_properties():
+    E, nu, rho = 210e9, 0.3, 7850.0
+    G = E / (2 * (1 + nu))
+    r = 0.02
+    c = sections.circle(r, E=E, nu=nu, density=rho)
+    A, I_ = math.pi * r ** 2, math.pi * r ** 4 / 4
+    assert c["EA"] == pytest.approx(E * A)
+    assert c["EI"] == pytest.approx((E * I_, E * I_))
+    assert c["GJ"] == pytest.approx(G * 2 * I_)
+    # Cowper (1966): 6(1+nu)/(7+6nu) = 0.886 for a solid circle at nu = 0.3
+    assert c["GA"][0] / (G * A) == pytest.approx(0.886, abs=5e-4)
+    assert c["mass_per_length"] == pytest.approx(rho * A)
+    assert c["rotary_inertia"] == pytest.approx((rho * 2 * I_, rho * I_, rho * I_))
+    rect = sections.rectangle(0.04, 0.01, E=E, nu=nu)  # width along axis 2
+    assert rect["EI"] == pytest.approx((E * 0.04 * 0.01 ** 3 / 12, E * 0.01 * 0.04 ** 3 / 12))
+    assert rect["GA"][0] / (G * 4e-4) == pytest.approx(10 * 1.3 / (12 + 3.3))  # Cowper: 0.850
+    # a thin tube: Cowper's factor tends to 2(1+nu)/(4+3nu), its polar moment to 2 pi r^3 t
+    t = sections.tube(0.1, 0.0999, E=E, G=G)
+    assert t["GA"][0] / (G * math.pi * (0.1 ** 2 - 0.0999 ** 2)) == pytest.approx(
+        2 * 1.3 / 4.9, rel=1e-3)
+    assert t["GJ"] / G == pytest.approx(2 * math.pi * 0.09995 ** 3 * 1e-4, rel=1e-3)
+    with pytest.raises(ModelError, match="nu"):
+        sections.circle(0.1, E=1.0, nu=0.3, G=1.0)
+    with pytest.raises(ModelError, match="inner_radius"):
+        sections.tube(0.1, 0.2, E=1.0, nu=0.3)
