@@ -3,8 +3,10 @@
 A model is what the user describes, with names, not numbers: nodes (frames with optional mass and
 inertia, Sec. 2 and 6), kinematic joints between two nodes (``H_B = H_A H_J``, Eq. (7), or, with
 an attachment point ``at``, ``H_B X_B = H_A X_A H_J``) with their force elements (springs
-Eq. (62), dampers Eq. (64), actuators Eq. (66), PD control laws), nodal loads (Eq. (66)) and
-gravity. :func:`se3dyn.system.compile_model` turns it into arrays.
+Eq. (62), dampers Eq. (64), actuators Eq. (66), PD control laws), nodal loads (Eq. (66)),
+point spring-dampers, geometrically exact beams (chains of SE(3) beam elements between nodes,
+:meth:`ModelBuilder.beam`, :mod:`se3dyn.elements.beam`) and gravity.
+:func:`se3dyn.system.compile_model` turns it into arrays.
 
 Initial configuration (Sec. 5.2): node frames are ``H(R0, x0)`` with ``R0`` the identity unless
 an ``orientation`` is given; joint transformations start at ``H_J0 = H_A0^-1 H_B0`` so that the
