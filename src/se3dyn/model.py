@@ -839,22 +839,27 @@ class ModelBuilder:
                                      or elements > 100000):
             raise ModelError(item, "elements", "an integer >= 1", elements)
 
-        def pos(fld, v):
-            if np.ndim(v) != 0:
-                raise ModelError(item, fld, "a positive number", v)
-            x = _kvec(v, 1, item, fld)[0]
-            if x <= 0:
-                raise ModelError(item, fld, "a positive number", v)
-            return float(x)
-
-        def pair(fld, v):
-            a = _kvec(v, 2, item, fld)
-            if np.any(a <= 0):
-                raise ModelError(item, fld, "a positive number or a pair of them", v)
+        def nums(fld, v, sizes, what, positive):
+            """v as an array of one of ``sizes`` (a single number fills the first size)."""
+            try:
+                if isinstance(v, bool | str):
+                    raise TypeError(v)
+                a = np.asarray(v, dtype=float)
+            except (TypeError, ValueError):
+                raise ModelError(item, fld, what, v) from None
+            if a.ndim == 0 and sizes[0] > 1:
+                a = np.full(sizes[0], float(a))
+            ok = ((a.ndim == 0 and sizes[0] == 1)
+                  or (a.ndim == 1 and a.shape[0] in sizes and a.shape[0] > 1))
+            if (not ok or not np.all(np.isfinite(a)) or np.any(np.abs(a) > MAX_ABS)
+                    or np.any(a <= 0 if positive else a < 0)):
+                raise ModelError(item, fld, what, v)
             return a
 
-        ea, gj = pos("EA", EA), pos("GJ", GJ)
-        ga, ei = pair("GA", GA), pair("EI", EI)
+        ea = float(nums("EA", EA, (1,), "a positive number (N)", True))
+        gj = float(nums("GJ", GJ, (1,), "a positive number (N m^2)", True))
+        ga = nums("GA", GA, (2,), "a positive number or a pair (GA2, GA3) (N)", True)
+        ei = nums("EI", EI, (2,), "a positive number or a pair (EI2, EI3) (N m^2)", True)
         Kd = np.array([ea, ga[0], ga[1], gj, ei[0], ei[1]])
         try:
             mpl = float(mass_per_length)
@@ -866,7 +871,8 @@ class ModelBuilder:
             raise ModelError(item, "mass_per_length", "a non-negative number (kg/m)",
                              mass_per_length)
         rot = (np.zeros(3) if rotary_inertia is None
-               else _kvec(rotary_inertia, 3, item, "rotary_inertia", nonneg=True))
+               else nums("rotary_inertia", rotary_inertia, (3,), "three non-negative values "
+                         "(kg m) about section axes 1, 2, 3", False))
         if mpl > 0 and np.any(rot <= 0):
             raise ModelError(item, "rotary_inertia", "three positive values (kg m) for a beam "
                              "with mass", rotary_inertia, "density * (I2 + I3, I2, I3); the "
@@ -878,10 +884,9 @@ class ModelBuilder:
                 or rot[2] > (rot[0] + rot[1]) * (1 + 1e-9):
             raise ModelError(item, "rotary_inertia", "moments satisfying the triangle "
                              "inequality (as density * (I2 + I3, I2, I3) does)", rotary_inertia)
-        Dd = _kvec(damping, 6, item, "damping", nonneg=True) if np.ndim(damping) else None
-        if Dd is None:
-            beta = _kvec(damping, 1, item, "damping", nonneg=True)[0]
-            Dd = beta * Kd
+        Dd = nums("damping", damping, (1, 6), "a non-negative number beta (s, D = beta K) or "
+                  "the 6 non-negative diagonal entries of D", False)
+        Dd = Dd * Kd if Dd.ndim == 0 else Dd
         if frames is None:
             n = 1 if elements is None else int(elements)
             xa, xb = na.position, nb.position
