@@ -195,6 +195,20 @@ def test_45_degree_bend_tip_matches_the_published_positions(P):
         assert np.abs(tip - [47.2, 15.9, 53.4]).max() < 0.35  # Bathe & Bolourchi, to 0.1
 
 
+def test_arc_frames_give_the_bend():
+    """arc_frames(start, centre, axis, 45 degrees, 8) are the frames of the bend above: tangent,
+    inward normal and axis, at equal angles on the circle."""
+    from se3dyn.elements.beam import arc_frames
+
+    F = arc_frames((0.0, 0.0, 0.0), (0.0, 100.0, 0.0), (0.0, 0.0, 1.0), math.pi / 4, 8)
+    for i in range(9):
+        phi = math.pi / 4 * i / 8
+        np.testing.assert_allclose(F[i, :3, 3], [100 * math.sin(phi), 100 * (1 - math.cos(phi)),
+                                                 0.0], atol=1e-12)
+        np.testing.assert_allclose(F[i, :3, :3], lie.exp_so3(np.array([0.0, 0.0, phi])),
+                                   atol=1e-14)
+
+
 def test_unloaded_bend_keeps_its_shape():
     """The pre-curved reference is stress-free: without a load every node stays put."""
     s = compile_model(_bend().build())

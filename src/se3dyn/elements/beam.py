@@ -34,7 +34,7 @@ from se3dyn import lie
 KEY = "beam"
 TRAITS = dict(conservative=True, constraint=False, objective=True)
 
-__all__ = ["KEY", "TRAITS", "tables", "examples", "section_forces"]
+__all__ = ["KEY", "TRAITS", "tables", "examples", "section_forces", "arc_frames"]
 
 
 def tables(s, lay) -> dict:
@@ -117,6 +117,40 @@ def section_forces(s, H: np.ndarray, v: np.ndarray | None = None,
     energy = 0.5 * L * np.einsum("...ei,eij,...ej->...e", eps, K, eps)
     return dict(beam=np.array([b["beam"] for b in bs]), index=np.array([b["index"] for b in bs]),
                 L=L, strain=eps, strain_rate=rate, force=f, energy=energy)
+
+
+def arc_frames(start, center, axis, angle: float, n: int) -> np.ndarray:
+    """Section frames of a circular arc, for ``ModelBuilder.beam(..., frames=...)``.
+
+    Parameters
+    ----------
+    start, center : array_like (3,)
+        First point of the arc and centre of its circle (inertial frame).
+    axis : array_like (3,)
+        Axis of the circle (normal to the plane of the arc); the arc turns positively about it.
+    angle : float
+        Angle of the arc (rad), ``0 < |angle| < 2 pi``.
+    n : int
+        Number of elements.
+
+    Returns
+    -------
+    ndarray, shape (n + 1, 4, 4)
+        Frames at equal angles: axis 1 along the tangent, axis 2 towards the centre, axis 3
+        along ``axis``.
+    """
+    x0, c = np.asarray(start, float), np.asarray(center, float)
+    a = np.asarray(axis, float)
+    a = a / np.linalg.norm(a)
+    r0 = c - x0
+    r0 = r0 - (r0 @ a) * a
+    nrm = r0 / np.linalg.norm(r0)
+    R0 = np.column_stack([np.cross(nrm, a), nrm, a])
+    out = []
+    for phi in np.linspace(0.0, angle, n + 1):
+        Q = lie.exp_so3(phi * a)
+        out.append(lie.make_frame(Q @ R0, c + Q @ (x0 - c)))
+    return np.array(out)
 
 
 def examples(rng):
