@@ -13,7 +13,8 @@ and is exact for constant strain (any constant curvature and twist, below a rela
 of pi per element). The section law ``f = K eps + D deps/dt`` with ``K = diag(EA, GA2, GA3, GJ,
 EI2, EI3)`` (translation first, as the paper orders twists) gives the elastic energy
 ``L/2 eps^T K eps`` and the internal forces through the derivative of log, ``delta d = T^-1(d)
-delta h_r`` (the beam paper's Eqs. (23)-(27); ``T`` is Eq. (21) of the multibody paper):
+delta h_r`` (``T`` the tangent operator of Eqs. (21)-(22) of the multibody paper,
+``delta h = T(n) delta n``, its Eqs. (20), (23), (26)):
 
     g_B = Ad(X_B^-1)^T T^-T(d) f,    g_A = -Ad(X_A^-1)^T Ad(H_r^-1)^T T^-T(d) f.
 

@@ -10,11 +10,12 @@
 // D the strain-rate damping) gives the elastic energy L/2 eps^T K eps.
 //
 // With H_r = exp(d), A_r = Ad(H_r^-1) and the (right-trivialised) tangent operator T(d) of
-// Eq. (21) of the multibody paper (delta h_r = T(d) delta d):
+// Eqs. (21)-(22) of the multibody paper (delta h_r = T(d) delta d, its Eq. (23)):
 //   delta d = T^-1(d) (delta h'_B - A_r delta h'_A),  h'_X = Ad(X^-1) h_X,
 //   d' = T^-1(d) v_r, v_r = v'_B - A_r v'_A,
 //   y = T^-T(d) f, forces on the node frames g_B = Ad(X_B^-1)^T y, g_A = -Ad(X_A^-1)^T A_r^T y
-// (the beam paper's internal forces, its Eqs. (23)-(27): the derivative of log is T^-1).
+// (the derivative of log is T^-1: delta h = T(n) delta n, Eqs. (20)-(23) and (26) of the
+// multibody paper).
 // Exact linearisation: delta A_r = -ad(delta h_r) A_r, so delta(A_r^T y) = A_r^T (delta y -
 // Lambda(y) delta h_r) with ad(x)^T p = Lambda(p) x; delta(T^-1 z) = -T^-1 DT(d, T^-1 z) delta d
 // with DT(x, z) = d(T(x) z)/dx (dt_apply below); and T(x)^T = Pi T(-x) Pi (Pi swapping the
