@@ -22,9 +22,9 @@ The order of the registry is the order of the batches in the engine.
 
 from __future__ import annotations
 
-from se3dyn.elements import body, bushing, joint, joint_force, load, spring_damper
+from se3dyn.elements import beam, body, bushing, joint, joint_force, load, spring_damper
 
 #: type key -> module, in engine order
-REGISTRY = {m.KEY: m for m in (body, joint, joint_force, load, spring_damper, bushing)}
+REGISTRY = {m.KEY: m for m in (body, joint, joint_force, load, spring_damper, bushing, beam)}
 
 __all__ = ["REGISTRY"]
