@@ -465,6 +465,30 @@ class Mat(_Type):
 
 
 @dataclass(frozen=True)
+class MatList(_Type):
+    """A list of ``lo``..``hi`` matrices of ``rows`` x ``cols`` numbers (lists of rows)."""
+
+    rows: int = 4
+    cols: int = 4
+    lo: int = 2
+    hi: int = 100001
+
+    @property
+    def text(self) -> str:
+        return f"list of {self.rows} x {self.cols} matrices (lists of rows)"
+
+    def schema(self) -> dict:
+        return {"type": "array", "items": Mat(self.rows, self.rows, self.cols).schema(),
+                "minItems": self.lo, "maxItems": self.hi}
+
+    def convert(self, ctx, node, item, fld):
+        if not isinstance(node, SequenceNode) or not self.lo <= len(node.value) <= self.hi:
+            ctx.fail(node, item, fld, f"a {self.text}, {self.lo} or more")
+        m = Mat(self.rows, self.rows, self.cols)
+        return [m.convert(ctx, x, item, f"{fld}[{i}]") for i, x in enumerate(node.value)]
+
+
+@dataclass(frozen=True)
 class OneOf(_Type):
     """The first alternative whose YAML shape matches (scalar / list / list of lists)."""
 
@@ -646,6 +670,9 @@ class ElementSection:
         name -> entry (plain data) of a model's elements of this type; empty for none.
     subsections : tuple of (name, doc, fields)
         Mappings inside an entry (:class:`Section` fields), e.g. a joint's ``control``.
+    nodes : callable (Model) -> set of str, optional
+        Names of the nodes the entries create themselves (a beam's intermediate nodes): left
+        out of the ``nodes:`` section when saving.
     """
 
     key: str
@@ -656,6 +683,7 @@ class ElementSection:
     add: Callable[[ModelBuilder, str, dict], None]
     save: Callable[[Model], dict]
     subsections: tuple[tuple[str, str, tuple[Field, ...]], ...] = ()
+    nodes: Callable[[Model], set] | None = None
 
 
 def _element_sections() -> tuple[ElementSection, ...]:
@@ -1153,8 +1181,11 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
     """
     doc: dict[str, Any] = {"se3dyn": FORMAT_VERSION, "name": model.name,
                            "gravity": plain(model.gravity)}
-    cross = {f"{c}:cross" for c in model.composites}
-    doc["nodes"] = {n.name: _node_out(n) for n in model.nodes if n.name not in cross}
+    made = {f"{c}:cross" for c in model.composites}  # nodes their elements create
+    for es in ELEMENT_SECTIONS:
+        if es.nodes is not None:
+            made |= es.nodes(model)
+    doc["nodes"] = {n.name: _node_out(n) for n in model.nodes if n.name not in made}
     for es in ELEMENT_SECTIONS:
         entries = es.save(model)
         if entries:

@@ -207,3 +207,98 @@ def examples(rng):
     mb.joint("ball", "spherical", "p/1", "c")
     out.append(mb.build())
     return out
+
+
+def model_file(mf):
+    """The ``beams:`` section of model files (:class:`se3dyn.modelfile.ElementSection`); ``mf``
+    is :mod:`se3dyn.modelfile` (its field types). A saved beam is written with ``elements`` and
+    ``axis2`` when these rebuild its reference frames exactly, else with its ``frames``; its
+    intermediate nodes are not written (the beam creates them)."""
+    F = mf.Field
+    pair = mf.OneOf((mf.Num(exclusive_minimum=0), mf.Vec(2)))
+    fields = (
+        F("a", mf.Str(ref="node"), None, "End node A (required).", True),
+        F("b", mf.Str(ref="node"), None, "End node B (required).", True),
+        F("elements", mf.Num(integer=True, minimum=1), 1, "Number of two-node elements; the "
+          "beam creates the intermediate nodes `<name>/1` ... `<name>/<n-1>` (joints, springs "
+          "and loads may use them)."),
+        F("EA", mf.Num(exclusive_minimum=0), None, "Axial stiffness (N) (required).",
+          True),
+        F("GA", pair, None, "Shear stiffness along section axes 2 and 3 (N): one number or a "
+          "pair (required).", True),
+        F("GJ", mf.Num(exclusive_minimum=0), None, "Torsional stiffness (N m^2) "
+          "(required).", True),
+        F("EI", pair, None, "Bending stiffness about section axes 2 and 3 (N m^2): one number "
+          "or a pair (required).", True),
+        F("mass_per_length", mf.Num(minimum=0), 0, "Mass per unit length (kg/m), lumped on "
+          "the nodes with the rotary inertia."),
+        F("rotary_inertia", mf.Vec(3), None, "Rotary inertia of the section per unit length "
+          "about axes 1, 2, 3 (kg m); required with a mass."),
+        F("damping", mf.OneOf((mf.Num(minimum=0), mf.Vec(6))), 0, "Damping on the strain "
+          "rates: a number beta (s) for D = beta K, or the 6 diagonal values of D."),
+        F("axis2", mf.Vec(3), "z x axis 1", "Straight beam: direction of section axis 2."),
+        F("frames", mf.MatList(4, 4), None, "Curved or pre-twisted beam: the stress-free "
+          "section frames from node A to node B (4 x 4, inertial frame, axis 1 along the "
+          "beam; n + 1 of them for n elements), instead of `elements` and `axis2`."),
+        F("initial_velocity", mf.Str(("rest", "rigid")), "rest", "Intermediate nodes at rest, "
+          "or moving rigidly with node A."),
+    )
+
+    def one_or_pair(a, b):
+        return float(a) if a == b else [float(a), float(b)]
+
+    def straight_kw(model, b):
+        """elements and axis2 when they rebuild b's reference frames exactly, else None."""
+        import se3dyn as sd
+
+        ends = [model.node(b.nodes[0]), model.node(b.nodes[-1])]
+        mb = sd.ModelBuilder()
+        for nd in ends:
+            mb.node(nd.name, position=nd.position, orientation=nd.orientation, fixed=True)
+        kw = dict(elements=b.elements, axis2=b.reference[0, :3, 1])
+        try:
+            mb.beam(b.name, ends[0].name, ends[1].name, EA=1.0, GA=1.0, GJ=1.0, EI=1.0, **kw)
+        except Exception:  # noqa: BLE001 (not a straight beam)
+            return None
+        ref = mb._beams[b.name].reference
+        return kw if np.array_equal(ref, b.reference) else None
+
+    def save(model) -> dict:
+        out = {}
+        for b in model.beams:
+            K = np.diag(b.stiffness)
+            d = {"a": b.nodes[0], "b": b.nodes[-1]}
+            kw = straight_kw(model, b)
+            if kw is None:
+                d["frames"] = mf.plain(b.reference)
+            else:
+                if kw["elements"] != 1:
+                    d["elements"] = kw["elements"]
+                d["axis2"] = mf.plain(kw["axis2"])
+            d.update(EA=float(K[0]), GA=one_or_pair(K[1], K[2]), GJ=float(K[3]),
+                     EI=one_or_pair(K[4], K[5]))
+            if b.mass_per_length:
+                d["mass_per_length"] = float(b.mass_per_length)
+                d["rotary_inertia"] = mf.plain(b.rotary_inertia)
+            D = np.diag(b.damping)
+            if np.any(D != 0):
+                d["damping"] = mf.plain(D)
+            inner = [model.node(nd) for nd in b.nodes[1:-1]]
+            if any(np.any(nd.velocity != 0) for nd in inner):
+                d["initial_velocity"] = "rigid"
+            out[b.name] = d
+        return out
+
+    def add(mb, name, kw):
+        mb.beam(name, kw.pop("a"), kw.pop("b"), **kw)
+
+    return mf.ElementSection(
+        key="beams", kind="beam",
+        doc="Geometrically exact beams (chains of SE(3) beam elements between two nodes) by "
+            "name.",
+        entry_doc="An entry of `beams:` (key: the name). A beam from node `a` to node `b` "
+                  "meshed into `elements` two-node elements on SE(3) (Sonneville, Cardona & "
+                  "Brüls 2014): strains from the relative motion of consecutive nodes, section "
+                  "law diag(EA, GA2, GA3, GJ, EI2, EI3), lumped mass (docs/beams.md).",
+        fields=fields, add=add, save=save,
+        nodes=lambda model: {nd for b in model.beams for nd in b.nodes[1:-1]})
