@@ -82,9 +82,14 @@ def _check_one(path: str, rank_max: int) -> None:
     from se3dyn.modelfile import ELEMENT_SECTIONS
 
     others = [f"{len(getattr(model, es.key))} {es.key}" for es in ELEMENT_SECTIONS
-              if es.key not in ("joints", "loads") and getattr(model, es.key, ())]
+              if es.key not in ("joints", "loads", "beams") and getattr(model, es.key, ())]
     if others:  # force elements of the other element types (model attribute = file section)
         print("  force elements: " + ", ".join(others))
+    if model.beams:
+        n_el = sum(b.elements for b in model.beams)
+        n_in = sum(len(b.nodes) - 2 for b in model.beams)
+        print(f"  beams: {len(model.beams)} with {n_el} elements in all ({n_in} of the nodes "
+              "created by them)")
     kinds: dict[str, int] = {}
     for j in model.joints:
         kinds[j.type] = kinds.get(j.type, 0) + 1
