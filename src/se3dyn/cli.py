@@ -108,8 +108,46 @@ def _check_one(path: str, rank_max: int) -> None:
                   + "; ".join(r.redundant))
         else:
             print("  no redundant constraints")
+        from se3dyn.analysis import massless_motions
+
+        free = massless_motions(s)
+        if free:
+            raise _Usage(f"{path}: {', '.join(free[:4])}"
+                         + (f" and {len(free) - 4} more" if len(free) > 4 else "")
+                         + " can move with no mass and no joint determining the motion: a "
+                         "simulation would stop at t = 0 (a node meant as ground needs "
+                         "'fixed: true'; a massless node needs joints that fix its motion)")
     if settings:
         print("  simulation settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()))
+    _check_start(path, s, settings)
+
+
+def _check_start(path: str, s, settings: dict) -> None:
+    """What `run` would refuse at t = 0: the settings, the initial accelerations (a singular
+    iteration matrix) and, with initial_velocities 'strict', inconsistent velocities; and
+    the initial velocities that would be projected."""
+    from se3dyn.errors import ModelError, SimulationError
+    from se3dyn.integrator import GeneralizedAlpha, initial_velocity_changes
+    from se3dyn.simulate import check_settings
+
+    if "t_end" in settings and "step" in settings:
+        try:
+            check_settings(s, **settings)
+        except ModelError as exc:
+            raise _Usage(f"{path}: simulation settings: {exc}") from None
+    opts = {k: settings[k] for k in ("formulation", "redundant", "initial_velocities")
+            if k in settings}
+    try:
+        st = GeneralizedAlpha(**opts).init(s, float(settings.get("t_start", 0.0)))
+    except (ModelError, SimulationError) as exc:
+        raise _Usage(f"{path}: at t = 0: {exc}") from None
+    ch = initial_velocity_changes(s, st)
+    if ch:
+        worst = max(ch, key=lambda c: max(c["dv"], c["dw"]))
+        print(f"  initial velocities the joints do not allow will be projected ({len(ch)} "
+              f"nodes; largest change: node {worst['node']!r}, velocity {worst['dv']:.3g} m/s, "
+              f"angular velocity {worst['dw']:.3g} rad/s); initial_velocities: strict refuses "
+              "them")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -146,8 +184,10 @@ class _Progress:
 
 def cmd_run(args) -> int:
     """Simulate a model file, stream the results to an HDF5 file, print a summary."""
+    import warnings
+
     import se3dyn as sd
-    from se3dyn.errors import ModelError, SimulationError
+    from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
     from se3dyn.h5 import ResultsWriter
 
     model, settings = _load(args.model)
@@ -178,7 +218,9 @@ def cmd_run(args) -> int:
     failed = None
     with ResultsWriter(path, s, model_text=text, settings=cfg) as writer:
         try:
-            res = sd.simulate(s, progress=prog, on_output=writer.append, **cfg)
+            with warnings.catch_warnings():  # (the summary below reports them)
+                warnings.simplefilter("ignore", Se3dynWarning)
+                res = sd.simulate(s, progress=prog, on_output=writer.append, **cfg)
         except SimulationError as exc:
             failed = exc
             res = exc.result
@@ -204,12 +246,11 @@ def cmd_run(args) -> int:
         _err(f"{failed}")
         print(f"  simulation failed; {n} steps kept in {path}", file=sys.stderr)
         return 1
-    eb = res.energy_balance
     print(f"  {res.stats['steps']} steps, {res.stats['newton_iterations']} Newton iterations "
           f"(max {int(res.iterations.max())} per step), wall time {wall:.2f} s")
-    print(f"  energy balance error {np.abs(eb - eb[0]).max():.3e} J (of max energy "
-          f"{np.abs(res.total_energy).max():.3e} J); max constraint violation "
-          f"{res.constraint.max():.2e}")
+    for line in run_report(res.stats):
+        print("  " + line)
+    print(f"  max constraint violation {res.constraint.max():.2e}")
     print(f"  results: {path}")
     return 0
 
@@ -391,7 +432,31 @@ def _positive(kind):
     return conv
 
 
-_OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step")
+_OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step",
+              "initial_velocities")
+
+
+def run_report(stats: dict) -> list[str]:
+    """Summary lines on what a run's results may hide: the initial velocities changed to
+    satisfy the joints, and the energy balance error against the energy in play."""
+    out = []
+    ch = stats.get("initial_velocity_changes") or []
+    if ch:
+        worst = max(ch, key=lambda c: max(c["dv"], c["dw"]))
+        out.append(f"initial velocities projected onto the joints' velocity constraints "
+                   f"({len(ch)} nodes; largest change: node {worst['node']!r}, velocity "
+                   f"{worst['dv']:.3g} m/s, angular velocity {worst['dw']:.3g} rad/s); kinetic "
+                   f"energy {stats['initial_kinetic_energy_given']:.6g} J given, "
+                   f"{stats['initial_kinetic_energy_used']:.6g} J used "
+                   "(--initial-velocities strict refuses them)")
+    if "energy_balance_error" in stats:
+        err, scale = stats["energy_balance_error"], stats["energy_scale"]
+        rel = f"{100 * err / scale:.3g} % of" if scale > 0 else "with no"
+        warn = "  WARNING: large; the step is probably too large for the motion" if (
+            err > 0.1 * scale and err > 1e-12) else ""
+        out.append(f"energy balance error {err:.3e} J ({rel} the energy in play, "
+                   f"{scale:.3e} J){warn}")
+    return out
 
 
 def _add_overrides(p: argparse.ArgumentParser) -> None:
@@ -405,6 +470,9 @@ def _add_overrides(p: argparse.ArgumentParser) -> None:
                    help="adaptive steps: position error tolerance over the run (m, rad)")
     p.add_argument("--output-step", type=_positive("pos"),
                    help="store results every OUTPUT_STEP seconds (dense output)")
+    p.add_argument("--initial-velocities", choices=("project", "strict"),
+                   help="initial velocities the joints do not allow: project them (default; "
+                        "reported) or refuse them")
 
 
 def _overrides(args) -> dict:

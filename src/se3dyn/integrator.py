@@ -27,7 +27,7 @@ from se3dyn.errors import ModelError, NewtonError, SimulationError
 from se3dyn.system import LinearSolver, System, evaluate, input_table, step_inputs
 
 __all__ = ["State", "SolverMemory", "StepInfo", "GeneralizedAlpha", "step_inputs",
-           "input_table", "energies", "interpolate"]
+           "input_table", "energies", "interpolate", "initial_velocity_changes"]
 
 #: modified Newton: refactorise when more than KMAX further iterations are predicted (a
 #: factorisation costs about five iterations on the benchmark models; 5-12 perform alike)
@@ -51,6 +51,43 @@ class SolverMemory:
 
     def __post_init__(self):
         self.ref.flags.writeable = False
+
+
+def _velocity_changes(s: System, v: np.ndarray) -> list[dict]:
+    """The free nodes with mass whose velocities in ``v`` (nq,) differ from the model's initial
+    ones by more than round-off (1e-9 of the largest velocity, linear and angular apart)."""
+    given = s.node_v0[s.node_free]
+    used = np.asarray(v)[s.node_dofidx]
+    d = used - given
+    out = []
+    if not len(given):
+        return out
+    sv = max(float(np.abs(given[:, :3]).max()), float(np.abs(used[:, :3]).max()), 1e-300)
+    sw = max(float(np.abs(given[:, 3:]).max()), float(np.abs(used[:, 3:]).max()), 1e-300)
+    for i, node in enumerate(s.node_free):
+        if not (s.node_mass[node] > 0 or np.any(s.node_J[node] != 0)):
+            continue  # massless: its velocities are the joints' to determine, not the user's
+        dv, dw = float(np.linalg.norm(d[i, :3])), float(np.linalg.norm(d[i, 3:]))
+        if dv > 1e-9 * sv or dw > 1e-9 * sw:
+            R = s.node_H0[node, :3, :3]  # material -> inertial components at t0
+            out.append(dict(node=s.node_names[node], dv=dv, dw=dw,
+                            given=np.concatenate([R @ given[i, :3], R @ given[i, 3:]]),
+                            used=np.concatenate([R @ used[i, :3], R @ used[i, 3:]])))
+    return out
+
+
+def initial_velocity_changes(s: System, st: State) -> list[dict]:
+    """What :meth:`GeneralizedAlpha.init` changed in the model's initial velocities to satisfy
+    the velocity constraints of the joints.
+
+    Returns
+    -------
+    list of dict, one per changed node: ``node`` (name), ``dv`` and ``dw`` (norms of the change
+    of the velocity, m/s, and of the angular velocity, rad/s), ``given`` and ``used`` (6,) the
+    model's and the state's velocity and angular velocity in the inertial frame. Empty when the
+    velocities were consistent.
+    """
+    return _velocity_changes(s, st.v)
 
 
 def _ws(s: System, ws=None):
@@ -183,6 +220,13 @@ class GeneralizedAlpha:
     engine : {"auto", "compiled", "numpy"}
         Kept for compatibility: every evaluation and Newton iteration runs in the compiled
         engine (``se3dyn/_core``, C++ built at install); there is no second implementation.
+    initial_velocities : {"project", "strict"}
+        Initial velocities that violate the velocity constraints of the joints (a body given
+        only part of its motion, a velocity out of a hinge's plane): ``"project"`` (default)
+        makes them consistent, keeping consistent body velocities exactly (see
+        :meth:`init`; :func:`initial_velocity_changes` and ``simulate``'s stats and warning
+        report every change); ``"strict"`` refuses them with a :class:`ModelError` naming the
+        nodes.
     newton : {"modified", "full"}
         ``"modified"`` (default) factorises the iteration matrix at the
         predictor of each step and keeps it over the iterations while Newton contracts fast
@@ -199,6 +243,7 @@ class GeneralizedAlpha:
     redundant: str = "drop"
     engine: str = "auto"
     newton: str = "modified"
+    initial_velocities: str = "project"
 
     def __post_init__(self):
         r = self.rho_inf
@@ -219,6 +264,9 @@ class GeneralizedAlpha:
             raise ModelError("integrator", "redundant", "'drop' or 'error'", self.redundant)
         if self.newton not in ("modified", "full"):
             raise ModelError("integrator", "newton", "'modified' or 'full'", self.newton)
+        if self.initial_velocities not in ("project", "strict"):
+            raise ModelError("integrator", "initial_velocities", "'project' or 'strict'",
+                             self.initial_velocities)
         if self.engine not in ("auto", "compiled", "numpy"):
             raise ModelError("integrator", "engine", "'auto', 'compiled' or 'numpy'",
                              self.engine)
@@ -282,6 +330,18 @@ class GeneralizedAlpha:
                       ws=ws)
         if nm and np.any(v != 0):
             v = self._project_velocity(s, LinearSolver(s, drop=dropped), ev.values, v)
+            if self.initial_velocities == "strict":
+                changed = _velocity_changes(s, v)
+                if changed:
+                    c = changed[0]
+                    raise ModelError(
+                        f"node {c['node']!r}", "velocity",
+                        "initial velocities that satisfy the velocity constraints of the joints",
+                        f"velocity changed by {c['dv']:.3g} m/s and angular velocity by "
+                        f"{c['dw']:.3g} rad/s to satisfy them"
+                        + (f" ({len(changed) - 1} more nodes)" if len(changed) > 1 else ""),
+                        hint="give consistent velocities, or initial_velocities='project' "
+                             "to have them projected (reported)")
             ev = evaluate(s, H, HJ, zero, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0),
                           accel=True, ws=ws)
         # [M Phi_q^T; Phi_q 0][vd; lam] = [-r; arhs] with the acceleration-level constraints

@@ -772,6 +772,9 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("h_max", Num(exclusive_minimum=0), "duration / 10", "Largest adaptive step (s)."),
         Field("output_step", Num(exclusive_minimum=0), None, "Store results every output_step "
               "seconds (dense output), whatever the internal steps."),
+        Field("initial_velocities", Str(("project", "strict")), "project", "Initial "
+              "velocities the joints do not allow: projected onto the velocity constraints "
+              "(reported per node in the run summary and the results' stats), or refused."),
     ),
     "constant": (
         Field("value", _VALUE, None, "f(t) = value (required).", True),

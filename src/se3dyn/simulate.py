@@ -17,7 +17,7 @@ from se3dyn.model import Model
 from se3dyn.results import Results
 from se3dyn.system import System, Workspace, compile_model
 
-__all__ = ["simulate", "SCALARS"]
+__all__ = ["simulate", "check_settings", "energy_balance_check", "SCALARS"]
 
 
 #: Most steps of one fixed-step run (the compiled loop counts steps in 32-bit integers), and
@@ -89,6 +89,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
              redundant: str = "drop", tol: float | None = None, h_min: float | None = None,
              h_max: float | None = None, output_step: float | None = None,
              engine: str = "auto", newton: str = "modified",
+             initial_velocities: str = "project",
              progress: Callable[[float, int], None] | None = None,
              on_output: Callable[[State, dict], None] | None = None) -> Results:
     """Simulate a model from ``t_start`` to ``t_end`` (Eqs. (38)-(46)), with a fixed step or,
@@ -140,6 +141,13 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     newton : {"modified", "full"}
         Reuse of the factorised iteration matrix by the compiled engine, see
         :class:`~se3dyn.integrator.GeneralizedAlpha`.
+    initial_velocities : {"project", "strict"}
+        Initial velocities the joints do not allow are projected (default): every change is
+        in ``stats["initial_velocity_changes"]`` (per node: the change of velocity and angular
+        velocity, the given and the used values) with the kinetic energy given and used, and
+        a :class:`~se3dyn.errors.Se3dynWarning` is issued when it exceeds 1e-6 of the
+        velocities; ``"strict"`` refuses them (:class:`~se3dyn.errors.ModelError` naming the
+        node).
     progress : callable(t, step_index), optional
         Called after every step.
     on_output : callable(state, scalars), optional
@@ -151,7 +159,13 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     Returns
     -------
     Results
-        ``stats`` holds steps, rejected steps, Newton iterations, smallest/largest step, etc.
+        ``stats`` holds steps, rejected steps, Newton iterations, smallest/largest step, the
+        initial velocity changes (above), and ``energy_balance_error`` (J: the largest drift
+        of kinetic + potential + elastic energy - work of actuators and loads + dissipation)
+        beside ``energy_scale`` (J: the energy in play, see :func:`energy_balance_check`); a
+        :class:`~se3dyn.errors.Se3dynWarning` says so when the
+        error exceeds 10 % of the scale (a step too large for the motion, or ``rho_inf``
+        near 1 with the index-3 form).
 
     Raises
     ------
@@ -161,34 +175,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         names the time, the step, the norms and the worst item.
     """
     s = model if isinstance(model, System) else compile_model(model)
-    for fld, val in (("t_end", t_end), ("step", step), ("t_start", t_start)):
-        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
-                or not math.isfinite(float(val))):
-            raise ModelError("simulate", fld, "a finite number (s)", val)
-    t_end, step, t_start = float(t_end), float(step), float(t_start)
-    if not step > 0:
-        raise ModelError("simulate", "step", "a positive time step (s)", step)
-    if not t_end > t_start:
-        raise ModelError("simulate", "t_end", f"a time after t_start={t_start}", t_end)
-    if isinstance(output_every, numbers.Integral) and not isinstance(output_every, bool):
-        output_every = int(output_every)
-    if not (isinstance(output_every, int) and output_every >= 1):
-        raise ModelError("simulate", "output_every", "a positive integer", output_every)
-    span = t_end - t_start
-    opt = {}
-    for fld, val, default in (("tol", tol, None), ("h_min", h_min, 1e-12 * span),
-                              ("h_max", h_max, span / 10), ("output_step", output_step, None)):
-        if val is None:
-            opt[fld] = default
-            continue
-        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
-                or not (math.isfinite(float(val)) and float(val) > 0)):
-            raise ModelError("simulate", fld, "a positive number", val)
-        opt[fld] = float(val)
-    if opt["tol"] is not None and opt["tol"] < 1e-15:
-        raise ModelError("simulate", "tol", "a tolerance of at least 1e-15 (m, rad)", opt["tol"])
-    if opt["h_min"] > opt["h_max"]:
-        raise ModelError("simulate", "h_min", f"at most h_max={opt['h_max']:g}", opt["h_min"])
+    t_end, step, t_start, output_every, span, opt = _settings(
+        t_end, step, t_start, output_every, tol, h_min, h_max, output_step)
     for fld, val in (("progress", progress), ("on_output", on_output)):
         if val is not None and not callable(val):
             raise ModelError("simulate", fld, "a callable or None", val)
@@ -198,7 +186,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,
                              tol_constraint=tol_constraint, max_iter=max_iter,
                              formulation=formulation, redundant=redundant, engine=engine,
-                             newton=newton)
+                             newton=newton, initial_velocities=initial_velocities)
     adaptive = opt["tol"] is not None
     grid = None
     if opt["output_step"] is not None:
@@ -218,6 +206,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     st = integ.init(s, t_start, ws=ws)
     solver = integ.solver(s, st)
     e = energies(s, st, step_inputs(s, t_start), ws)
+    v_report = _velocity_report(s, st, e["kinetic"], ws)
     rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
     gi = 1  # next grid time to fill
     stats = dict(steps=0, rejected=0, newton_iterations=0, rho_inf=rho_inf, step=step,
@@ -226,7 +215,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                  matrix_size=solver.N, formulation=formulation,
                  redundant=[equation_name(s, r) for r in st.dropped],
                  linear_solver="dense LU" if solver.dense else "sparse LU (SuperLU)",
-                 adaptive=adaptive, tol=opt["tol"], h_min_used=math.inf, h_max_used=0.0)
+                 adaptive=adaptive, tol=opt["tol"], h_min_used=math.inf, h_max_used=0.0,
+                 **v_report)
     nsteps = 0 if adaptive else max(1, math.ceil(span / step - 1e-9))
     h = min(step, opt["h_max"]) if adaptive else step
     i = 0
@@ -328,7 +318,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         if adaptive:
             h = min(opt["h_max"], h * min(2.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.5)))
     stats.update(steps=i, failed=False, wall_time=time.perf_counter() - wall0, final_state=st)
-    return rec.results(stats)
+    res = rec.results(stats)
+    _energy_check(res)
+    return res
 
 
 def _check_size(s: System, span: float, step: float, output_every: int,
@@ -357,6 +349,130 @@ def _check_size(s: System, span: float, step: float, output_every: int,
             "results that fit in memory", f"{rows:.3g} stored rows of {per_row} bytes = "
             f"{need / 2**30:.1f} GiB", f"{avail / 2**30:.1f} GiB available; store fewer rows "
             "with output_every or output_step (CLI: --output-step), or use a larger step")
+
+
+def _settings(t_end, step, t_start, output_every, tol, h_min, h_max, output_step):
+    """The time settings of a run, checked (ModelError naming the field) and normalised:
+    (t_end, step, t_start, output_every, span, dict of tol, h_min, h_max, output_step)."""
+    for fld, val in (("t_end", t_end), ("step", step), ("t_start", t_start)):
+        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
+                or not math.isfinite(float(val))):
+            raise ModelError("simulate", fld, "a finite number (s)", val)
+    t_end, step, t_start = float(t_end), float(step), float(t_start)
+    if not step > 0:
+        raise ModelError("simulate", "step", "a positive time step (s)", step)
+    if not t_end > t_start:
+        raise ModelError("simulate", "t_end", f"a time after t_start={t_start}", t_end)
+    if isinstance(output_every, numbers.Integral) and not isinstance(output_every, bool):
+        output_every = int(output_every)
+    if not (isinstance(output_every, int) and output_every >= 1):
+        raise ModelError("simulate", "output_every", "a positive integer", output_every)
+    span = t_end - t_start
+    opt = {}
+    for fld, val, default in (("tol", tol, None), ("h_min", h_min, 1e-12 * span),
+                              ("h_max", h_max, span / 10), ("output_step", output_step, None)):
+        if val is None:
+            opt[fld] = default
+            continue
+        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
+                or not (math.isfinite(float(val)) and float(val) > 0)):
+            raise ModelError("simulate", fld, "a positive number", val)
+        opt[fld] = float(val)
+    if opt["tol"] is not None and opt["tol"] < 1e-15:
+        raise ModelError("simulate", "tol", "a tolerance of at least 1e-15 (m, rad)", opt["tol"])
+    if opt["h_min"] > opt["h_max"]:
+        raise ModelError("simulate", "h_min", f"at most h_max={opt['h_max']:g}", opt["h_min"])
+    return t_end, step, t_start, output_every, span, opt
+
+
+def check_settings(model: Model | System, **settings) -> None:
+    """Check simulation settings as :func:`simulate` would before its first step, without
+    running: unknown names, types and ranges (``t_start < t_end``, ``h_min <= h_max``,
+    ``rho_inf`` in [0, 1], ...), and the size of the run. Raises :class:`ModelError` naming
+    the field; ``se3dyn check`` calls it with the model file's settings."""
+    import inspect
+
+    try:
+        b = inspect.signature(simulate).bind(model, **settings)
+    except TypeError as exc:
+        raise ModelError("simulation", "settings", "names of simulate's parameters",
+                         ", ".join(settings), str(exc)) from None
+    b.apply_defaults()
+    a = b.arguments
+    s = model if isinstance(model, System) else compile_model(model)
+    t_end, step, t_start, output_every, span, opt = _settings(
+        a["t_end"], a["step"], a["t_start"], a["output_every"], a["tol"], a["h_min"],
+        a["h_max"], a["output_step"])
+    _check_size(s, span, step, output_every, opt["output_step"], opt["tol"] is not None)
+    GeneralizedAlpha(rho_inf=a["rho_inf"], tol_residual=a["tol_residual"],
+                     tol_constraint=a["tol_constraint"], max_iter=a["max_iter"],
+                     formulation=a["formulation"], redundant=a["redundant"],
+                     engine=a["engine"], newton=a["newton"],
+                     initial_velocities=a["initial_velocities"])
+
+
+def _velocity_report(s: System, st: State, kinetic: float, ws) -> dict:
+    """Stats entries on the initial velocities init changed (and a warning when they matter)."""
+    import warnings
+
+    from se3dyn.errors import Se3dynWarning
+    from se3dyn.integrator import initial_velocity_changes
+
+    changes = initial_velocity_changes(s, st)
+    if not changes:
+        return dict(initial_velocity_changes=[])
+    v0 = np.zeros(s.nq)
+    v0[s.node_dofidx] = s.node_v0[s.node_free]
+    given = energies(s, dataclasses.replace(st, v=v0), step_inputs(s, st.t), ws)["kinetic"]
+    rows = [dict(node=c["node"], dv=c["dv"], dw=c["dw"], given=c["given"].tolist(),
+                 used=c["used"].tolist()) for c in changes]
+    scale = max(float(np.abs(s.node_v0).max()), 1e-300)
+    worst = max(changes, key=lambda c: max(c["dv"], c["dw"]))
+    if max(worst["dv"], worst["dw"]) > 1e-6 * scale:
+        names = ", ".join(repr(c["node"]) for c in changes[:5]) + (
+            f" and {len(changes) - 5} more" if len(changes) > 5 else "")
+        warnings.warn(Se3dynWarning(
+            f"initial velocities projected onto the joints' velocity constraints: {names} "
+            f"changed (largest: node {worst['node']!r}, velocity by {worst['dv']:.3g} m/s, "
+            f"angular velocity by {worst['dw']:.3g} rad/s); kinetic energy {given:.6g} J "
+            f"given, {kinetic:.6g} J used (stats['initial_velocity_changes']; "
+            "initial_velocities='strict' refuses them)"), stacklevel=3)
+    return dict(initial_velocity_changes=rows, initial_kinetic_energy_given=float(given),
+                initial_kinetic_energy_used=float(kinetic))
+
+
+def energy_balance_check(res: Results) -> tuple[float, float]:
+    """The largest energy balance error of a run and the energy scale it compares with (J).
+
+    The error is the largest drift of kinetic + potential + elastic energy - work of actuators
+    and loads + dissipation from its initial value. The scale is the largest of the kinetic and
+    the elastic energy (absolute quantities) and of the changes of the gravity potential (its
+    zero is arbitrary), of the works and of the dissipation over the run: the energy in play (a
+    pendulum released from rest has no energy at t0, a free spinning body exchanges none).
+    """
+    eb = res.energy_balance
+    if not len(eb):
+        return 0.0, 0.0
+    err = float(np.abs(eb - eb[0]).max())
+    scale = max(float(np.abs(res.kinetic).max()), float(np.abs(res.spring).max()),
+                *(float(np.abs(x - x[0]).max()) for x in (
+                    res.potential, res.work_actuators, res.work_loads, res.dissipation)))
+    return err, scale
+
+
+def _energy_check(res: Results) -> None:
+    import warnings
+
+    from se3dyn.errors import Se3dynWarning
+
+    err, scale = energy_balance_check(res)
+    res.stats.update(energy_balance_error=err, energy_scale=scale)
+    if err > 0.1 * scale and err > 1e-12:
+        warnings.warn(Se3dynWarning(
+            f"energy balance error {err:.3g} J is {100 * err / max(scale, 1e-300):.3g} % of "
+            f"the energy in play in the run ({scale:.3g} J): the step is probably too large "
+            "for the motion (the results may be far from the true motion; try a smaller step, "
+            "or rho_inf < 1 with the index-3 form)"), stacklevel=3)
 
 
 def _available_memory() -> float | None:

@@ -270,8 +270,9 @@ NB_MODULE(_engine, m) {
           })
       .def("lu_stats",
            [](const Stepper& S) {
-             // (n, nnz(L), nnz(U), multiply-adds of a refactorisation) of the current factors
-             return nb::make_tuple(S.N, S.lu.nnz_L(), S.lu.nnz_U(), S.lu.refactor_flops());
+             // (n, nnz(L), nnz(U), multiply-adds of a refactorisation, supernodes) of the factors
+             return nb::make_tuple(S.N, S.lu.nnz_L(), S.lu.nnz_U(), S.lu.refactor_flops(),
+                                   S.lu.num_supernodes());
            })
       .def("serials",
            [](const Stepper& S) {
