@@ -326,7 +326,7 @@ class GeneralizedAlpha:
         inputs = step_inputs(s, t0)
         zero = np.zeros(nq)
         lam0 = np.zeros(nm)
-        ev = evaluate(s, H, HJ, zero, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0), accel=True,
+        ev = evaluate(s, H, HJ, s.alpha0, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0), accel=True,
                       ws=ws)
         if nm and np.any(v != 0):
             v = self._project_velocity(s, LinearSolver(s, drop=dropped), ev.values, v)
@@ -342,7 +342,7 @@ class GeneralizedAlpha:
                         + (f" ({len(changed) - 1} more nodes)" if len(changed) > 1 else ""),
                         hint="give consistent velocities, or initial_velocities='project' "
                              "to have them projected (reported)")
-            ev = evaluate(s, H, HJ, zero, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0),
+            ev = evaluate(s, H, HJ, s.alpha0, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0),
                           accel=True, ws=ws)
         # [M Phi_q^T; Phi_q 0][vd; lam] = [-r; arhs] with the acceleration-level constraints
         # Phi_q vd = arhs (the time derivative of Phi_q v = 0), by the compiled sparse LU
@@ -360,7 +360,7 @@ class GeneralizedAlpha:
                 "determines, or a non-finite state")
         # powers at t0 (velocity-level: vd does not enter)
         return State(t=t0, H=H, HJ=HJ, v=v, vd=rhs[:nq].copy(), a=rhs[:nq].copy(),
-                     lam=rhs[nq:].copy(), alpha=np.zeros(nq), power=ev.energy[3:6].copy(),
+                     lam=rhs[nq:].copy(), alpha=s.alpha0.copy(), power=ev.energy[3:6].copy(),
                      dropped=dropped, solver=_ws(s, ws).memory(stp) if keep else None)
 
     @staticmethod

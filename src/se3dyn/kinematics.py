@@ -265,9 +265,11 @@ def _model_at(s: System, H: np.ndarray, alpha: np.ndarray, v: np.ndarray) -> Mod
 
     Nodes get the positions and orientations of H, inertia tensors and joint axes rotated with
     their node (so material inertias and the bases A in the material frame of node B are
-    unchanged), inertial velocities ``(R v_U, R v_Omega)``. Joint coordinates restart at 0: spring
-    references and PD targets are shifted by the coordinates alpha reached (exact for abelian
-    joints, Eq. (60); for non-abelian joints with springs the shift is exact only to first order).
+    unchanged), inertial velocities ``(R v_U, R v_Omega)``. Joints with absolute coordinates
+    (``initial``) get the coordinates reached as their new ``initial``; the others restart at 0:
+    spring references and PD targets are shifted by the coordinates alpha reached (exact for
+    abelian joints, Eq. (60); for non-abelian joints with springs the shift is exact only to
+    first order).
 
     A joint with an attachment point gets the point where the attachment frame of node B,
     ``H_B X_B``, is in H: its orientation there is ``Q_B = R_B R_B0^T``, so with the new
@@ -317,7 +319,10 @@ def _model_at(s: System, H: np.ndarray, alpha: np.ndarray, v: np.ndarray) -> Mod
         if j.at is not None:
             ib = s.joint_b[jj]
             upd["at"] = H[ib, :3, 3] + Rn[j.node_b] @ s.joint_XB[jj, :3, 3]
-        if j.k:
+        if j.k and j.initial is not None:  # absolute coordinates: the new start's values
+            d = s.joint_dofadr[jj]
+            upd["initial"] = alpha[d:d + j.k].copy()
+        elif j.k:
             d = s.joint_dofadr[jj]
             a = alpha[d:d + j.k]
             item = f"joint {j.name!r} ({j.type})"
@@ -492,7 +497,7 @@ def _start_config(s: System, coordinates, positions, orientations):
     """Starting frames: the model's, with imposed joint coordinates and node guesses."""
     H = s.node_H0.copy()
     HJ = s.joint_H0.copy()
-    alpha = np.zeros(s.nq)
+    alpha = s.alpha0.copy()
     for fld, mapping, shape in (("positions", positions, (3,)),
                                 ("orientations", orientations, (3, 3))):
         if mapping is None:
@@ -537,8 +542,9 @@ def _start_config(s: System, coordinates, positions, orientations):
                 aj = a[off:off + kj]
                 off += kj
                 g, row = _group_of(s, j)
-                HJ[j] = s.joint_H0[j] @ lie.exp_se3(g.A[row] @ aj)
-                alpha[s.joint_dofadr[j]:s.joint_dofadr[j] + kj] = aj
+                d = s.joint_dofadr[j]  # (coordinates absolute when the joint has initial)
+                HJ[j] = s.joint_H0[j] @ lie.exp_se3(g.A[row] @ (aj - s.alpha0[d:d + kj]))
+                alpha[d:d + kj] = aj
     return H, HJ, alpha
 
 
@@ -946,7 +952,8 @@ def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol:
     """Kinematic analysis of a driven mechanism and inverse dynamics.
 
     The relative coordinates of the driven (abelian) joints are prescribed,
-    ``alpha_D(t) = f(t)`` (alpha of Eq. (60), measured from the model's initial configuration).
+    ``alpha_D(t) = f(t)`` (alpha of Eq. (60), measured from the model's initial configuration,
+    or absolute for joints given ``initial`` values).
     With the joint constraints ``Phi = 0`` (Eq. (55)) they must leave no mobility: the Jacobian
     ``J = [B; D]`` (B: Eq. (58); D: selection of the driven coordinates) must have rank nq,
     redundant joint constraints being allowed. At every time:
@@ -1025,7 +1032,7 @@ def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol:
         return np.vstack([B, D]), PT
 
     # ----- structure at the initial configuration: mobility and redundant drivers
-    H, HJ, alpha = s.node_H0.copy(), s.joint_H0.copy(), np.zeros(nq)
+    H, HJ, alpha = s.node_H0.copy(), s.joint_H0.copy(), s.alpha0.copy()
     ev = evaluate(s, H, HJ, alpha, zq, zq, zq, lam0, zin, None, full_alpha=True)
     J, _ = jac(ev)
     Js = rs[:, None] * J * cs

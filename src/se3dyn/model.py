@@ -117,6 +117,10 @@ class JointSpec:
         PD law, normalised: kp, kd arrays (k,), target and target_rate TimeFunctions.
     composite : str or None
         Name of the composite joint (e.g. a universal joint) this joint belongs to.
+    initial : ndarray, shape (k,) or None
+        Values of the relative coordinates in the initial configuration (abelian joints):
+        coordinates, spring references and PD targets are then absolute; None: zero (they
+        count from the initial configuration).
     at : ndarray, shape (3,), or None
         Attachment point in the inertial frame of the initial configuration: the joint connects
         the frames ``X_A = H_A0^-1 H(I, at)`` and ``X_B = H_B0^-1 H(I, at)`` rigidly attached to
@@ -136,6 +140,7 @@ class JointSpec:
     control: PD | None
     composite: str | None = None
     at: np.ndarray | None = None
+    initial: np.ndarray | None = None
 
     @property
     def k(self) -> int:
@@ -561,7 +566,7 @@ class ModelBuilder:
               axes: Any = None, normal: Any = None, pitch: Any = None, A: Any = None,
               stiffness: Any = None, reference: Any = None, damping: Any = None,
               actuator: Any = None, torque: Any = None, force: Any = None,
-              control: PD | None = None, at: Any = None) -> None:
+              control: PD | None = None, at: Any = None, initial: Any = None) -> None:
         """Add a kinematic joint ``H_B = H_A H_J`` (Eq. (7)) between nodes A and B, or between
         frames attached to them at the point ``at``.
 
@@ -604,6 +609,13 @@ class ModelBuilder:
             centres), so a rigid body with several joints needs one node. Without ``at`` the
             joint acts between the node frames, as in the paper (``X_A = X_B = I``). A
             universal joint puts both hinges and its cross at ``at``.
+        initial : float or array_like (k,), optional
+            Abelian joints (hinge, prismatic, cylindrical, screw, universal): the values of
+            the relative coordinates in the initial configuration, e.g. a hinge that starts at
+            an absolute angle of 30 degrees: ``initial=math.radians(30)``. Coordinates
+            (results, Eq. (60)), spring references and PD targets are then absolute; the
+            configuration itself is the one the nodes give. By default the coordinates count
+            from the initial configuration (zero there).
         """
         jt_keys = sorted(list(JOINT_TYPES) + ["universal"])
         _check_name("joint", name)
@@ -629,7 +641,7 @@ class ModelBuilder:
         p = _vec(at, 3, item, "at", allow_none=True)
         if type == "universal":
             self._universal(name, node_a, node_b, axes, stiffness, reference, damping,
-                            act_field, act, control, p)
+                            act_field, act, control, p, initial)
             return
         given = {"axis": axis, "axes": axes, "normal": normal, "pitch": pitch, "A": A}
         jt = JOINT_TYPES[type]
@@ -643,10 +655,10 @@ class ModelBuilder:
                 raise ModelError(item, key, f"a value (required for a {type} joint)", None)
         A_ = jt.make_A(item, **params)
         self._add_joint(name, type, node_a, node_b, params, A_, stiffness, reference, damping,
-                        act_field, act, control, at=p)
+                        act_field, act, control, at=p, initial=initial)
 
     def _add_joint(self, name, type, node_a, node_b, params, A_, stiffness, reference, damping,
-                   act_field, act, control, composite=None, at=None):
+                   act_field, act, control, composite=None, at=None, initial=None):
         item = f"joint {name!r} ({type})"
         if name in self._joints:
             raise ModelError(f"joint {composite!r}" if composite else item, "name",
@@ -680,11 +692,19 @@ class ModelBuilder:
             rate = (None if control.target_rate is None
                     else as_timefunc(control.target_rate, item, "control.target_rate", k))
             pd = PD(kp, kd, tgt, rate)
+        init = None
+        if initial is not None:
+            if k == 0 or not is_abelian(A_):
+                raise ModelError(item, "initial", "an abelian joint (hinge, prismatic, "
+                                 "cylindrical, screw, universal): its coordinates add up",
+                                 type, "the coordinates of this joint are log coordinates of "
+                                 "its relative motion, zero in the initial configuration")
+            init = _kvec(initial, k, item, "initial")
         self._joints[name] = JointSpec(name, type, node_a, node_b, params, A_, K, a0, C, tau, pd,
-                                       composite, None if at is None else at.copy())
+                                       composite, None if at is None else at.copy(), init)
 
     def _universal(self, name, node_a, node_b, axes, stiffness, reference, damping, act_field,
-                   act, control, at=None):
+                   act, control, at=None, initial=None):
         item = f"joint {name!r} (universal)"
         try:
             ax = np.asarray(axes, dtype=float)
@@ -726,7 +746,7 @@ class ModelBuilder:
             self._add_joint(sname, "hinge", na, nb, {"axis": a}, A_, part(stiffness, i,
                             "stiffness"), part(reference, i, "reference"),
                             part(damping, i, "damping"), act_field, sub_act, sub_pd,
-                            composite=name, at=at)
+                            composite=name, at=at, initial=part(initial, i, "initial"))
             sub.append(sname)
         self._composites[name] = tuple(sub)
 

@@ -292,7 +292,7 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
     full = dict(step_inputs(s, float(t)), kind=s.inputs.kind)
     newton = _Newton(s, tol, max_iter)
     H, HJ = s.node_H0.copy(), s.joint_H0.copy()
-    alpha = np.zeros(s.nq)
+    alpha = s.alpha0.copy()
     lam = np.zeros(s.nm)
     lf = 0.0
     nominal = 1.0 / load_steps

@@ -136,6 +136,9 @@ class System(LayoutCounts):
     dof_kp: np.ndarray
     dof_kd: np.ndarray
     dof_is_joint: np.ndarray  # (nq,) bool
+    #: (nq,) relative coordinates in the initial configuration: the joints' ``initial`` values
+    #: (absolute coordinates), zero elsewhere
+    alpha0: np.ndarray
     gravity: np.ndarray  # (3,)
     labels: tuple[str, ...]  # (N,) item and component of each unknown / constraint row
     items: tuple[str, ...]  # (N,) item name of each row
@@ -242,11 +245,14 @@ def compile_model(model: Model) -> System:
     dof_kp = np.zeros(nq)
     dof_kd = np.zeros(nq)
     dof_is_joint = np.zeros(nq, dtype=bool)
+    alpha0 = np.zeros(nq)
     for jj, j in enumerate(joints):
         if not j.k:
             continue
         d = joint_dofadr[jj] + np.arange(j.k)
         dof_is_joint[d] = True
+        if j.initial is not None:
+            alpha0[d] = j.initial
         dof_K[d] = j.stiffness
         dof_ref[d] = j.reference
         dof_C[d] = j.damping
@@ -280,6 +286,7 @@ def compile_model(model: Model) -> System:
         joint_XA=joint_XA, joint_XB=joint_XB,
         joint_abelian=abelian, groups=tuple(groups), dof_stiffness=dof_K, dof_reference=dof_ref,
         dof_damping=dof_C, dof_kp=dof_kp, dof_kd=dof_kd, dof_is_joint=dof_is_joint,
+        alpha0=alpha0,
         gravity=model.gravity.copy(), labels=tuple(labels), items=tuple(items),
         length_scale=max(L, 1.0), pattern={}, node_com=_node_com(nodes, H0),
         springs=_springs(model, nidx, H0), beams=_beams(model, nidx))

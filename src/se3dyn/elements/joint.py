@@ -111,7 +111,11 @@ def model_file(mf):
         F("A", mf.Mat(6, 6, None, flat=True), None, "General joint: 6 x k subalgebra basis, "
           "columns (e_U, e_Omega)."),
         F("stiffness", kvec_nn, 0, "Spring K on the relative coordinates (Eq. 62)."),
-        F("reference", kvec, 0, "Spring reference alpha0."),
+        F("reference", kvec, 0, "Spring reference alpha0 (absolute when `initial` is given)."),
+        F("initial", kvec, None, "Abelian joints: the values of the relative coordinates in "
+          "the initial configuration (e.g. a hinge that starts at an absolute angle): "
+          "coordinates, `reference` and PD targets are then absolute; absent: they count from "
+          "the initial configuration."),
         F("damping", kvec_nn, 0, "Damper C on the relative velocities (Eq. 64)."),
         F("actuator", mf.TimeFunc(), None, act_doc),
         F("torque", mf.TimeFunc(), None, "Alias of `actuator`."),
@@ -168,6 +172,8 @@ def _joint_out(mf, j) -> dict:
                      ("damping", j.damping)):
         if np.any(arr != 0):
             d[key] = py(arr)
+    if j.initial is not None:
+        d["initial"] = py(j.initial)
     if j.actuator is not None:
         k = _act_key(j.type)
         d[k] = tf_out(j.actuator, item, k)
@@ -194,6 +200,8 @@ def _universal_out(mf, name: str, parts: tuple[str, ...], model) -> dict:
         a1, a2 = getattr(j1, key), getattr(j2, key)
         if a1[0] != 0 or a2[0] != 0:
             d[key] = [float(a1[0]), float(a2[0])]
+    if j1.initial is not None:
+        d["initial"] = [float(j1.initial[0]), float(j2.initial[0])]
 
     def source(f, fld):
         # the k-vector function a universal joint's per-hinge component was cut from

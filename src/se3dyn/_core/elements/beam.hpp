@@ -175,14 +175,11 @@ struct Beams : ElementBatch {
       X.scale(gA, 6);
       X.scale(gB, 6);
       {
-        // Round-off floor of the force scale. The strain is the difference of d and d0, each
-        // of size 1 relative to L, and d comes from absolute positions |x|: the section forces
-        // carry a round-off of about eps S, S = kU (|x| + L)/L max(1, L) + kO/L (kU, kO the
-        // largest translational and rotational stiffnesses), whatever the load. Reporting
-        // ROUNDOFF_SCALE S as a force magnitude keeps the relative residual tolerances (1e-10
-        // by default) some 50 times above that round-off, e.g. for a steel beam (EA ~ 1e8 N)
-        // carrying a few newtons, instead of asking Newton for digits that do not exist.
-        constexpr double ROUNDOFF_SCALE = 1e-4;
+        // Round-off floor of the force scale (ROUNDOFF_SCALE, context.hpp). The strain is the
+        // difference of d and d0, each of size 1 relative to L, and d comes from absolute
+        // positions |x|: the section forces carry a round-off of about eps S,
+        // S = kU (|x| + L)/L max(1, L) + kO/L (kU, kO the largest translational and rotational
+        // stiffnesses), whatever the load.
         double xs = std::fmax(std::sqrt(dot3(S.H[fa[e]].x, S.H[fa[e]].x)),
                               std::sqrt(dot3(S.H[fb[e]].x, S.H[fb[e]].x)));
         double kU = 0.0, kO = 0.0;

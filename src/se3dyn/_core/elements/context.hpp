@@ -13,6 +13,14 @@ namespace se3dyn {
 // external loads and dissipation (Eq. (64) and the dampers of the elements).
 enum Energy { KINETIC = 0, POTENTIAL, ELASTIC, P_ACTUATOR, P_LOADS, P_DISSIPATION, N_ENERGY };
 
+// Round-off floor of the force scale: a force computed as the difference of large terms (a
+// stiffness times positions or coordinates far from zero) carries a round-off of about eps
+// times the terms, whatever the net force. An element reports ROUNDOFF_SCALE times those terms
+// as a force magnitude (Context::scale), which keeps the relative residual tolerances (1e-10
+// by default) some 50 times above that round-off instead of asking Newton for digits that do
+// not exist (e.g. a spring at its reference, a steel beam carrying a few newtons).
+constexpr double ROUNDOFF_SCALE = 1e-4;
+
 struct Context {
   const FrameTables* T;
   const FrameState* S;

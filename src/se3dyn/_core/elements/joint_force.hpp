@@ -89,6 +89,17 @@ struct JointForces : ElementBatch {
       }
       X.scale(g, k);
       X.scale(tpd, k);
+      {  // round-off floor (ROUNDOFF_SCALE, context.hpp): K alpha - K alpha0, kp alpha - kp target
+        double floor = 0.0;
+        for (int c = 0; c < k; ++c) {
+          double a = std::fabs(al[c]);
+          floor = std::fmax(floor, K[6 * e + c] * (a + std::fabs(ref[6 * e + c])));
+          if (pref[e] >= 0)
+            floor = std::fmax(floor, kp[6 * e + c] * (a + std::fabs(X.u[pref[e] + c])));
+        }
+        floor *= ROUNDOFF_SCALE;
+        X.scale(&floor, 1);
+      }
       if (X.energy) {
         for (int c = 0; c < k; ++c) {
           double dl = al[c] - ref[6 * e + c];
