@@ -371,7 +371,8 @@ class Layout:
     # --- the pattern, derived from the blocks ------------------------------------------------
     def block_table(self, index2: bool) -> np.ndarray:
         """The rows of :attr:`blocks_table` of the index-3 or the stabilized index-2 matrix."""
-        return self.blocks_table if index2 else self.blocks_table[:self.nblocks3]
+        return self.blocks_table if index2 else np.ascontiguousarray(
+            self.blocks_table[:self.nblocks3])
 
     def entries(self, index2: bool) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) (nvals,) of every value of the index-3 or index-2 matrix."""
@@ -389,37 +390,17 @@ class Layout:
     def csc(self, index2: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Compressed-column pattern of the index-3 or index-2 matrix: ``indptr`` (N+1,),
         ``indices`` (nnz,) (int32, rows increasing in every column) and ``perm`` (nvals,): the
-        position of every value in it (blocks do not overlap: nnz = nvals)."""
+        position of every value in it (blocks do not overlap: nnz = nvals), by the compiled
+        ``block_csc`` (``_core/block_pattern.hpp``, which the stepper uses too)."""
+        from se3dyn.system import _core
+
         s = self.s
         N = s.nq + (2 * s.nm if index2 else s.nm)
-        b = self.block_table(index2)
         nv = self.nvals2 if index2 else self.nvals
-        # blocks by first column, then first row: within a column group (all its blocks have
-        # the same columns) each block's rows follow those of the blocks above it
-        o = np.lexsort((b[:, 0], b[:, 2]))
-        bs = b[o]
-        newcol = np.ones(len(bs), bool)
-        newcol[1:] = bs[1:, 2] != bs[:-1, 2]
-        cstart = np.flatnonzero(newcol)
-        csum = np.cumsum(bs[:, 1])
-        before = csum - bs[:, 1]
-        rowoff = before - before[cstart][np.cumsum(newcol) - 1]  # rows above in its column
-        height = np.add.reduceat(bs[:, 1], cstart) if len(bs) else np.zeros(0, np.int64)
-        count = np.zeros(N, np.int64)
-        gc0, gnc = bs[cstart, 2], bs[cstart, 3]
-        cidx = np.repeat(gc0, gnc) + _ragged(gnc)[1]
-        count[cidx] = np.repeat(height, gnc)
-        indptr = np.zeros(N + 1, np.int64)
-        np.cumsum(count, out=indptr[1:])
-        boff = np.empty(len(b), np.int64)
-        boff[o] = rowoff
+        indptr = np.empty(N + 1, np.int32)
         indices = np.empty(nv, np.int32)
         perm = np.empty(nv, np.int64)
-        for (nr, nc), sel in _by_shape(b):
-            ii, jj = np.divmod(np.arange(nr * nc, dtype=np.int64), nc)
-            p = indptr[b[sel, 2][:, None] + jj] + boff[sel][:, None] + ii
-            perm[b[sel, 4][:, None] + np.arange(nr * nc)] = p
-            indices[p] = b[sel, 0][:, None] + ii
+        _core().block_csc(N, self.block_table(index2), nv, indptr, indices, perm)
         return indptr, indices, perm
 
     @property

@@ -481,14 +481,13 @@ class Workspace:
         stp = self._steppers.get(key)
         if stp is None:
             s = self.s
-            p = pattern(s, index2)
             drop = np.zeros(s.nm, np.int64)
             drop[np.asarray(dropped, np.int64)] = 1
             lay = self.layout
             groups = lay.groups2 if index2 else lay.groups3
-            stp = _core().Stepper(self.engine, bool(index2), int(p["N"]),
-                                  p["indptr"].astype(np.int64), p["indices"].astype(np.int64),
-                                  p["inv"].astype(np.int64),
+            N = s.nq + (2 * s.nm if index2 else s.nm)
+            # the compiled stepper builds its pattern from the layout's blocks
+            stp = _core().Stepper(self.engine, bool(index2), int(N), lay.block_table(index2),
                                   np.ascontiguousarray(groups, np.int64), drop)
             if keep:
                 self._steppers[key] = stp
