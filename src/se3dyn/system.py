@@ -233,7 +233,15 @@ def compile_model(model: Model) -> System:
             continue
         Rb = R0[jb[jj]]
         A_mat.append(np.concatenate([Rb.T @ j.A[:3], Rb.T @ j.A[3:]], axis=0))
-    abelian = np.array([j.abelian for j in joints], dtype=bool)
+    abelian_of: dict = {}  # the bracket test once per distinct A (large models repeat a few)
+    abelian = np.zeros(m, dtype=bool)
+    for jj, j in enumerate(joints):
+        A_ = np.asarray(j.A)
+        key = (A_.shape, A_.dtype.str, A_.tobytes())
+        ab = abelian_of.get(key)
+        if ab is None:
+            ab = abelian_of[key] = bool(j.abelian)
+        abelian[jj] = ab
 
     dof_K = np.zeros(nq)
     dof_ref = np.zeros(nq)
