@@ -30,37 +30,47 @@ import scipy
 import se3dyn as sd
 
 
-def chain(n_links: int) -> sd.Model:
+def chain(n_links: int, spin=None, name: str | None = None) -> sd.Model:
     """Chain model: one node per link at its centre, spherical joints attached to the bodies at
-    the link ends (``at=``), the first to a fixed node: 6 N + 3 N unknowns, 6 N multipliers."""
-    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81), name=f"chain{n_links}")
+    the link ends (``at=``), the first to a fixed node: 6 N + 3 N unknowns, 6 N multipliers.
+    ``spin(i)``: the initial angular velocity of link i (None: at rest; called link after link,
+    tests/cpp/make_lu_matrices.py draws random ones)."""
+    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81), name=name or f"chain{n_links}")
     mb.node("ground", position=(0.0, 0.0, 0.0), fixed=True)
     J = 1.0 * 0.1**2 / 12.0
     prev = "ground"
     for i in range(n_links):
         x0 = 0.1 * i
-        mb.node(f"b{i}", position=(x0 + 0.05, 0.0, 0.0), mass=1.0, inertia=(1e-4 * J, J, J))
+        mb.node(f"b{i}", position=(x0 + 0.05, 0.0, 0.0), mass=1.0, inertia=(1e-4 * J, J, J),
+                angular_velocity=spin(i) if spin else None)
         mb.joint(f"s{i}", "spherical", prev, f"b{i}", at=(x0, 0.0, 0.0))
         prev = f"b{i}"
     return mb.build()
 
 
-def chain_nodes(n_links: int) -> sd.Model:
+def chain_nodes(n_links: int, spin=None, close: bool = False,
+                name: str | None = None) -> sd.Model:
     """The same chain in the paper's rigid-constraint form (Sec. 5): per link a joint node, a
-    body node at the centre and an end node, joined by rigid joints."""
-    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81), name=f"chain{n_links}")
+    body node at the centre and an end node, joined by rigid joints (massless joint and end
+    nodes: zero 6x6 diagonal blocks). ``spin`` as in :func:`chain`; ``close`` clamps the far
+    end by a spherical joint (a closed loop)."""
+    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81), name=name or f"chain{n_links}")
     mb.node("ground", position=(0.0, 0.0, 0.0), fixed=True)
     J = 1.0 * 0.1**2 / 12.0
     prev = "ground"
     for i in range(n_links):
         x0 = 0.1 * i
         mb.node(f"p{i}", position=(x0, 0.0, 0.0))
-        mb.node(f"b{i}", position=(x0 + 0.05, 0.0, 0.0), mass=1.0, inertia=(1e-4 * J, J, J))
+        mb.node(f"b{i}", position=(x0 + 0.05, 0.0, 0.0), mass=1.0, inertia=(1e-4 * J, J, J),
+                angular_velocity=spin(i) if spin else None)
         mb.node(f"e{i}", position=(x0 + 0.1, 0.0, 0.0))
         mb.joint(f"s{i}", "spherical", prev, f"p{i}")
         mb.joint(f"r{i}", "rigid", f"p{i}", f"b{i}")
         mb.joint(f"t{i}", "rigid", f"b{i}", f"e{i}")
         prev = f"e{i}"
+    if close:
+        mb.node("end", position=(0.1 * n_links, 0.0, -0.1), fixed=True)
+        mb.joint("close", "spherical", prev, "end")
     return mb.build()
 
 

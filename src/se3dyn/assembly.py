@@ -16,8 +16,18 @@ declare times the constraint gradient at the step start) and ``-B B_n^T`` (xi ro
 pairs of constraint elements sharing a frame). Their pattern and the list of products (``velprod``,
 ``xiprod``) are derived here from the dof maps, once.
 
-Values are stored block after block, each block row-major; ``rows``/``cols`` give the matrix
-position of every value (index-3 blocks first, then those only the index-2 matrix has).
+Values are stored block after block, each block row-major, in the order the blocks were first
+registered (index-3 blocks first, then those only the index-2 matrix has). The layout keeps one
+row per block (``blocks``: first row, rows, first column, columns, offset), never one per value:
+``rows``/``cols`` of every value and the compressed-column pattern are derived from it on demand
+(:meth:`Layout.entries`, :meth:`Layout.csc`; the compiled stepper builds its own from
+``blocks``).
+
+Element modules declare their blocks element by element (:meth:`Layout.block` and the helpers
+beside it) or, for whole batches, with arrays (:meth:`Layout.blocks`, :meth:`Layout.frame_groups`,
+:meth:`Layout.mult_groups`, :meth:`Layout.xi_groups`, :meth:`Layout.velocity_blocks`,
+:meth:`Layout.constraints`): both register in the order of the calls (array calls in the C order
+of the arrays), so they can be mixed.
 """
 
 from __future__ import annotations
@@ -28,6 +38,29 @@ from se3dyn import lie
 from se3dyn.elements import REGISTRY
 
 __all__ = ["Layout", "layout"]
+
+_KIND = {"f": 0, "c": 1, "x": 2}
+
+
+def _ragged(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For counts (n,): the owner (sum counts,) and the position within its owner of every item
+    of the concatenation of ranges of those lengths."""
+    counts = np.asarray(counts, np.int64)
+    owner = np.repeat(np.arange(len(counts)), counts)
+    start = np.cumsum(counts) - counts
+    return owner, np.arange(int(counts.sum()), dtype=np.int64) - start[owner]
+
+
+def _first_order(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct values of x in order of first appearance, and the rank (in that order) of
+    every element of x."""
+    if len(x) == 0:
+        return x[:0], np.zeros(0, np.int64)
+    u, first, inv = np.unique(x, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty(len(u), np.int64)
+    rank[order] = np.arange(len(u))
+    return u[order], rank[inv.reshape(-1)]
 
 
 class Layout:
@@ -40,8 +73,12 @@ class Layout:
         (type key, arrays)), ``velprod``/``xiprod`` and the log-coordinate tables.
     nvals, nvals2 : int
         Number of values of the index-3 matrix and of the stabilized index-2 matrix.
+    blocks : ndarray (nb, 5) int64
+        Every block in value order: first row, rows, first column, columns, offset of its
+        values (row-major); the first ``nblocks3`` are those of the index-3 matrix.
     rows3, cols3, rows2, cols2 : ndarray (nvals,), (nvals2,)
-        Matrix position of every value.
+        Matrix position of every value (computed on first access, not kept by the layout's
+        own users: see :meth:`entries`).
     groups3, groups2 : ndarray (N,)
         Block-group id of every matrix row (for the ordering of the sparse LU).
     """
@@ -54,25 +91,36 @@ class Layout:
         k = np.zeros(F, np.int64)
         A = np.zeros((F, 6, 6))
         A[:M] = np.eye(6)
-        for i in range(M):
-            if not s.node_fixed[i]:
-                dof[i] = s.node_dofadr[i]
-                k[i] = 6
+        free = np.flatnonzero(~np.asarray(s.node_fixed, bool))
+        dof[free] = np.asarray(s.node_dofadr)[free]
+        k[free] = 6
         for g in s.groups:
-            for row, j in enumerate(g.ids):
-                k[M + j] = g.k
-                if g.k:
-                    dof[M + j] = s.joint_dofadr[j]
-                    A[M + j, :, :g.k] = g.A[row]
+            ids = np.asarray(g.ids, np.int64)
+            k[M + ids] = g.k
+            if g.k:
+                dof[M + ids] = np.asarray(s.joint_dofadr)[ids]
+                A[M + ids, :, :g.k] = g.A
         self.F, self.frame_dof, self.frame_k, self.frame_A = F, dof, k, A
-        self._off: dict[tuple, int] = {}
-        self._keys: list[tuple] = []
+        # group codes: kind * G + index (kind 0 frame unknowns, 1 multipliers, 2 xi), -1 none
+        self._G = G = max(F, m, 1)
+        gstart = np.full(3 * G, -1, np.int64)
+        gsize = np.zeros(3 * G, np.int64)
+        gstart[:F], gsize[:F] = dof, k
+        madr = np.asarray(s.joint_multadr, np.int64)
+        gstart[G:G + m], gsize[G:G + m] = nq + madr, 6
+        gstart[2 * G:2 * G + m], gsize[2 * G:2 * G + m] = nq + nm + madr, 6
+        self._gstart, self._gsize = gstart, gsize
+        # registered blocks: key = row code * 3G + column code -> offset; sorted arrays plus
+        # the blocks registered one by one since they were last merged
+        self._sk = np.zeros(0, np.int64)
+        self._so = np.zeros(0, np.int64)
+        self._pending: dict[int, int] = {}
         self.n = 0
-        self._vel: dict[tuple[int, int], None] = {}
-        self._con: list[tuple[int, tuple[int, int, int]]] = []
-        self._logs: set[int] = set()
-        for f in range(F):  # every free frame has its diagonal block (for the LU)
-            self.frame_block(f, f)
+        self._vel: list = []        # arrays (f, g) of velocity-level blocks, in call order
+        self._con: list = []        # arrays (c, frames (., 3)) of constraint elements
+        self._logs: list = []       # arrays of joint frames whose logs Newton needs
+        fr = self.frame_groups(np.arange(F))  # every free frame has its diagonal block (LU)
+        self.blocks(fr, fr)
         elements = []
         for key, mod in REGISTRY.items():
             elements.append((key, mod.tables(s, self)))
@@ -81,78 +129,98 @@ class Layout:
         for key, mod in REGISTRY.items():
             if hasattr(mod, "index2_tables"):
                 mod.index2_tables(s, self, dict(elements)[key])
-        touch: dict[int, list[tuple[int, int]]] = {}  # frame -> [(constraint, slot)]
-        for c, frames in self._con:
-            for slot, f in enumerate(frames):
-                if k[f]:
-                    touch.setdefault(int(f), []).append((c, slot))
-        velprod = []
-        for fi, fj in self._vel:
-            if not (k[fi] and k[fj]):
-                continue
-            src = self._off[(self.frame_group(fi), self.frame_group(fj))]
-            for c, slot in touch.get(fj, ()):
-                velprod.append((self.block(self.frame_group(fi), self.xi_group(c)), src, k[fi],
-                                k[fj], c, slot))
-        xiprod = []
-        for f, lst in touch.items():
-            for c1, s1 in lst:
-                for c2, s2 in lst:
-                    xiprod.append((self.block(self.xi_group(c1), self.xi_group(c2)), k[f], c1,
-                                   s1, c2, s2))
-        for c, _ in self._con:
-            self.block(self.xi_group(c), self.xi_group(c))
+        con_c, con_f = self._constraint_arrays()
+        # touch: (constraint, slot, frame) of the constrained frames with unknowns, grouped by
+        # frame (frames in order of first appearance, each frame's entries in declaration order)
+        tc = np.repeat(con_c, 3)
+        ts = np.tile(np.arange(3, dtype=np.int64), len(con_c))
+        tf = con_f.reshape(-1)
+        keep = k[tf] > 0
+        tc, ts, tf = tc[keep], ts[keep], tf[keep]
+        tframes, trank = _first_order(tf)
+        o = np.argsort(trank, kind="stable")
+        tc, ts, tf = tc[o], ts[o], tf[o]
+        tcount = np.bincount(trank, minlength=len(tframes)).astype(np.int64)
+        tstart = np.cumsum(tcount) - tcount
+        fcount = np.zeros(F, np.int64)
+        fstart = np.zeros(F, np.int64)
+        fcount[tframes], fstart[tframes] = tcount, tstart
+        # velocity-level blocks (distinct, in declaration order) times B_n^T of every constraint
+        # element touching their column frame
+        vf, vg = self._velocity_pairs()
+        ok = (k[vf] > 0) & (k[vg] > 0)
+        vf, vg = vf[ok], vg[ok]
+        src = self._lookup(self._key(self.frame_groups(vf), self.frame_groups(vg)))
+        if np.any(src < 0):
+            raise KeyError("velocity-level block not registered")
+        pair, within = _ragged(fcount[vg])
+        ent = fstart[vg][pair] + within
+        tgt = self.blocks(self.frame_groups(vf[pair]), self.xi_groups(tc[ent]))
+        velprod = np.stack([tgt, src[pair], k[vf][pair], k[vg][pair], tc[ent], ts[ent]],
+                           axis=1) if len(ent) else np.zeros((0, 6), np.int64)
+        # pairs of constraint elements sharing a frame
+        grp, w = _ragged(tcount * tcount)
+        i, j = w // tcount[grp], w % tcount[grp]
+        e1, e2 = tstart[grp] + i, tstart[grp] + j
+        tgt = self.blocks(self.xi_groups(tc[e1]), self.xi_groups(tc[e2]))
+        xiprod = np.stack([tgt, k[tf[e1]], tc[e1], ts[e1], tc[e2], ts[e2]], axis=1) \
+            if len(e1) else np.zeros((0, 6), np.int64)
+        xc = self.xi_groups(con_c)
+        self.blocks(xc, xc)
         self.nvals2 = self.n
         # --- relative coordinates of non-abelian joints: log coordinates
-        logs = [j for j in range(m) if s.joint_k[j] and not s.joint_abelian[j]]
+        jk = np.asarray(s.joint_k, np.int64)
+        logs = np.flatnonzero((jk > 0) & ~np.asarray(s.joint_abelian, bool)) if m \
+            else np.zeros(0, np.int64)
         lA = np.zeros((len(logs), 6, 6))
-        for e, j in enumerate(logs):
-            lA[e, :s.joint_k[j], :] = np.linalg.pinv(A[M + j][:, :s.joint_k[j]])
+        for kk in np.unique(jk[logs]):
+            sel = np.flatnonzero(jk[logs] == kk)
+            lA[sel, :kk, :] = np.linalg.pinv(A[M + logs[sel]][:, :, :kk])
+        needed = np.zeros(F, bool)
+        if self._logs:
+            needed[np.concatenate(self._logs)] = True
         self.tables = dict(
             nq=nq, nm=nm, nu=s.inputs.nu, nvals=self.nvals, nvals2=self.nvals2,
             frame_dof=dof, frame_k=k, frame_node=(np.arange(F) < M).astype(np.int64),
             frame_A=A, frame_joint=(np.arange(F) >= M).astype(np.int64),
             elements=[(key, {n: np.ascontiguousarray(v) for n, v in t.items()})
                       for key, t in elements],
-            velprod=np.array(velprod, np.int64).reshape(-1, 6),
-            xiprod=np.array(xiprod, np.int64).reshape(-1, 6),
-            log_frame=np.array([M + j for j in logs], np.int64),
-            log_H0inv=(np.ascontiguousarray(lie.inverse(s.joint_H0[logs])) if logs
+            velprod=np.ascontiguousarray(velprod, np.int64).reshape(-1, 6),
+            xiprod=np.ascontiguousarray(xiprod, np.int64).reshape(-1, 6),
+            log_frame=(M + logs).astype(np.int64),
+            log_H0inv=(np.ascontiguousarray(lie.inverse(s.joint_H0[logs])) if len(logs)
                        else np.zeros((0, 4, 4))),
             log_Apinv=lA,
-            log_needed=np.array([int(M + j in self._logs) for j in logs], np.int64))
-        # --- positions of the values and row groups
-        rows, cols, gid = [], [], {}
-        for rg, cg in self._keys:
-            r0, nr = self._size(rg)
-            c0, nc = self._size(cg)
-            rows.append(np.repeat(np.arange(r0, r0 + nr), nc))
-            cols.append(np.tile(np.arange(c0, c0 + nc), nr))
-            gid.setdefault(rg, len(gid))
-        rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
-        cols = np.concatenate(cols) if cols else np.zeros(0, np.int64)
-        self.rows2, self.cols2 = rows, cols
-        self.rows3, self.cols3 = rows[:self.nvals], cols[:self.nvals]
+            log_needed=needed[M + logs].astype(np.int64))
+        # --- the blocks in value order
+        self._merge()
+        order = np.argsort(self._so, kind="stable")
+        keys, offs = self._sk[order], self._so[order]
+        rg, cg = keys // (3 * G), keys % (3 * G)
+        self.blocks_table = np.ascontiguousarray(np.stack(
+            [gstart[rg], gsize[rg], gstart[cg], gsize[cg], offs], axis=1), np.int64) \
+            if len(keys) else np.zeros((0, 5), np.int64)
+        self.nblocks3 = int(np.searchsorted(offs, self.nvals))
+        del self._sk, self._so, self._pending
         # ordering hint for the sparse LU: each constraint element's rows (multipliers, xi) go in
         # one group with the frames it couples that no earlier constraint took (for a tree or a
         # chain: a joint with its own coordinates and its child node), so the ordering sees the
         # pivots that make its zero diagonal blocks nonsingular together
-        owner = {g_: i for g_, i in gid.items()}
-        taken: set = set()
-        for c, frames in self._con:
-            target = owner.get(self.mult_group(c))
-            if target is None:
-                continue
-            for f in frames[1:]:
-                fgr = self.frame_group(f)
-                if fgr is not None and fgr not in taken:
-                    owner[fgr] = target
-                    taken.add(fgr)
-            owner[self.xi_group(c)] = target
+        gid, _ = _first_order(rg)               # row groups in order of first registration
+        owner = np.full(3 * G, -1, np.int64)
+        owner[gid] = np.arange(len(gid))
+        target = owner[self.mult_groups(con_c)]
+        cf = con_f[:, 1:]
+        fgr = self.frame_groups(cf.reshape(-1))
+        tg = np.repeat(target, 2)
+        ok = (tg >= 0) & (fgr >= 0)
+        fu, first = np.unique(fgr[ok], return_index=True)
+        owner[fu] = tg[ok][first]
+        ok = target >= 0
+        owner[self.xi_groups(con_c[ok])] = target[ok]
         groups = np.zeros(nq + 2 * nm, np.int64)
-        for g_ in gid:
-            r0, nr = self._size(g_)
-            groups[r0:r0 + nr] = owner[g_]
+        idx = np.repeat(gstart[gid], gsize[gid]) + _ragged(gsize[gid])[1]
+        groups[idx] = np.repeat(owner[gid], gsize[gid])
         self.groups2, self.groups3 = groups, groups[:nq + nm]
 
     # --- what element modules call -----------------------------------------------------------
@@ -170,21 +238,91 @@ class Layout:
         """The index-2 velocity-constraint rows (multipliers xi) of constraint element c."""
         return ("x", int(c))
 
+    def frame_groups(self, f) -> np.ndarray:
+        """:meth:`frame_group` of an array of frames, as group codes (-1: no unknowns)."""
+        f = np.asarray(f, np.int64)
+        return np.where(self.frame_k[f] > 0, f, -1)
+
+    def mult_groups(self, c) -> np.ndarray:
+        """:meth:`mult_group` of an array of constraint elements, as group codes."""
+        return self._G + np.asarray(c, np.int64)
+
+    def xi_groups(self, c) -> np.ndarray:
+        """:meth:`xi_group` of an array of constraint elements, as group codes."""
+        return 2 * self._G + np.asarray(c, np.int64)
+
+    def _code(self, g) -> int:
+        if g is None:
+            return -1
+        if isinstance(g, tuple):
+            return _KIND[g[0]] * self._G + int(g[1])
+        return int(g)
+
+    def _key(self, rg, cg):
+        rg, cg = np.asarray(rg, np.int64), np.asarray(cg, np.int64)
+        ok = (rg >= 0) & (cg >= 0)
+        ok &= (self._gsize[np.maximum(rg, 0)] > 0) & (self._gsize[np.maximum(cg, 0)] > 0)
+        return np.where(ok, rg * (3 * self._G) + cg, -1)
+
+    def _merge(self) -> None:
+        if self._pending:
+            k = np.fromiter(self._pending.keys(), np.int64, len(self._pending))
+            o = np.fromiter(self._pending.values(), np.int64, len(self._pending))
+            self._pending = {}
+            sk, so = np.concatenate([self._sk, k]), np.concatenate([self._so, o])
+            p = np.argsort(sk, kind="stable")
+            self._sk, self._so = sk[p], so[p]
+
+    def _lookup(self, keys: np.ndarray) -> np.ndarray:
+        """Offsets of the blocks of keys (-1 for -1 keys or blocks not registered)."""
+        self._merge()
+        keys = np.asarray(keys, np.int64)
+        if len(self._sk) == 0:
+            return np.full(keys.shape, -1, np.int64)
+        i = np.minimum(np.searchsorted(self._sk, keys), len(self._sk) - 1)
+        return np.where((self._sk[i] == keys) & (keys >= 0), self._so[i], -1)
+
+    def blocks(self, rg, cg) -> np.ndarray:
+        """:meth:`block` of arrays of row and column groups (codes of :meth:`frame_groups`,
+        :meth:`mult_groups`, :meth:`xi_groups`; broadcast together): the offsets, the new
+        blocks registered in the C order of the broadcast arrays."""
+        rg, cg = np.broadcast_arrays(np.asarray(rg, np.int64), np.asarray(cg, np.int64))
+        shape = rg.shape
+        keys = self._key(rg.reshape(-1), cg.reshape(-1))
+        off = self._lookup(keys)
+        new = (off < 0) & (keys >= 0)
+        if np.any(new):
+            nk, _ = _first_order(keys[new])
+            G3 = 3 * self._G
+            size = self._gsize[nk // G3] * self._gsize[nk % G3]
+            no = self.n + np.cumsum(size) - size
+            self.n += int(size.sum())
+            sk, so = np.concatenate([self._sk, nk]), np.concatenate([self._so, no])
+            p = np.argsort(sk, kind="stable")
+            self._sk, self._so = sk[p], so[p]
+            off = self._lookup(keys)
+        return off.reshape(shape)
+
     def block(self, rg, cg) -> int:
         """Offset of the block (row group, column group) in the values, registering it on
         first use; -1 when either group is None or empty."""
-        if rg is None or cg is None:
+        r, c = self._code(rg), self._code(cg)
+        if r < 0 or c < 0:
             return -1
-        key = (rg, cg)
-        o = self._off.get(key)
-        if o is None:
-            r, c = self._size(rg)[1], self._size(cg)[1]
-            if r == 0 or c == 0:
-                return -1
-            o = self.n
-            self._off[key] = o
-            self._keys.append(key)
-            self.n += r * c
+        nr, nc = int(self._gsize[r]), int(self._gsize[c])
+        if nr == 0 or nc == 0:
+            return -1
+        key = r * (3 * self._G) + c
+        o = self._pending.get(key)
+        if o is not None:
+            return o
+        if len(self._sk):
+            i = int(np.searchsorted(self._sk, key))
+            if i < len(self._sk) and self._sk[i] == key:
+                return int(self._so[i])
+        o = self.n
+        self._pending[key] = o
+        self.n += nr * nc
         return o
 
     def frame_block(self, f: int, g: int) -> int:
@@ -194,24 +332,106 @@ class Layout:
     def velocity_block(self, f: int, g: int) -> None:
         """Declare that an element writes velocity-level terms (``cM M + cC C_T``) into the block
         (f, g): the index-2 matrix then has ``-(cM M + cC C_T) B_n^T`` there."""
-        self._vel[(int(f), int(g))] = None
+        self.velocity_blocks([f], [g])
+
+    def velocity_blocks(self, f, g) -> None:
+        """:meth:`velocity_block` of arrays of frames (broadcast together, C order)."""
+        f, g = np.broadcast_arrays(np.asarray(f, np.int64), np.asarray(g, np.int64))
+        self._vel.append((f.reshape(-1).copy(), g.reshape(-1).copy()))
 
     def constraint(self, c: int, frames: tuple[int, int, int]) -> None:
         """Declare constraint element c acting on the frames (node A, node B, joint)."""
-        self._con.append((int(c), tuple(int(f) for f in frames)))
+        self.constraints([c], [frames])
 
-    def log_needed(self, f: int) -> None:
-        """The log coordinates of joint frame f are needed inside the Newton iterations."""
-        self._logs.add(int(f))
+    def constraints(self, c, frames) -> None:
+        """:meth:`constraint` of an array of constraint elements (n,) and their frames (n, 3)."""
+        c = np.asarray(c, np.int64).reshape(-1)
+        self._con.append((c, np.asarray(frames, np.int64).reshape(len(c), 3)))
 
-    def _size(self, gr) -> tuple[int, int]:
-        kind, i = gr
+    def log_needed(self, f) -> None:
+        """The log coordinates of joint frame f (or of an array of them) are needed inside the
+        Newton iterations."""
+        self._logs.append(np.asarray(f, np.int64).reshape(-1))
+
+    def _constraint_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        if not self._con:
+            return np.zeros(0, np.int64), np.zeros((0, 3), np.int64)
+        return (np.concatenate([c for c, _ in self._con]),
+                np.concatenate([f for _, f in self._con]))
+
+    def _velocity_pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The distinct velocity-level blocks (f, g) in order of first declaration."""
+        if not self._vel:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        f = np.concatenate([a for a, _ in self._vel])
+        g = np.concatenate([b for _, b in self._vel])
+        u, _ = _first_order(f * self.F + g)
+        return u // self.F, u % self.F
+
+    # --- the pattern, derived from the blocks ------------------------------------------------
+    def block_table(self, index2: bool) -> np.ndarray:
+        """The rows of :attr:`blocks_table` of the index-3 or the stabilized index-2 matrix."""
+        return self.blocks_table if index2 else np.ascontiguousarray(
+            self.blocks_table[:self.nblocks3])
+
+    def entries(self, index2: bool) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) (nvals,) of every value of the index-3 or index-2 matrix."""
+        b = self.block_table(index2)
+        nv = self.nvals2 if index2 else self.nvals
+        rows = np.empty(nv, np.int64)
+        cols = np.empty(nv, np.int64)
+        for (nr, nc), sel in _by_shape(b):
+            ii, jj = np.divmod(np.arange(nr * nc, dtype=np.int64), nc)
+            pos = b[sel, 4][:, None] + np.arange(nr * nc)
+            rows[pos] = b[sel, 0][:, None] + ii
+            cols[pos] = b[sel, 2][:, None] + jj
+        return rows, cols
+
+    def csc(self, index2: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Compressed-column pattern of the index-3 or index-2 matrix: ``indptr`` (N+1,),
+        ``indices`` (nnz,) (int32, rows increasing in every column) and ``perm`` (nvals,): the
+        position of every value in it (blocks do not overlap: nnz = nvals), by the compiled
+        ``block_csc`` (``_core/block_pattern.hpp``, which the stepper uses too)."""
+        from se3dyn.system import _core
+
         s = self.s
-        if kind == "f":
-            return int(self.frame_dof[i]), int(self.frame_k[i])
-        if kind == "c":
-            return s.nq + int(s.joint_multadr[i]), 6
-        return s.nq + s.nm + int(s.joint_multadr[i]), 6
+        N = s.nq + (2 * s.nm if index2 else s.nm)
+        nv = self.nvals2 if index2 else self.nvals
+        indptr = np.empty(N + 1, np.int32)
+        indices = np.empty(nv, np.int32)
+        perm = np.empty(nv, np.int64)
+        _core().block_csc(N, self.block_table(index2), nv, indptr, indices, perm)
+        return indptr, indices, perm
+
+    @property
+    def rows2(self):
+        return self.entries(True)[0]
+
+    @property
+    def cols2(self):
+        return self.entries(True)[1]
+
+    @property
+    def rows3(self):
+        return self.entries(False)[0]
+
+    @property
+    def cols3(self):
+        return self.entries(False)[1]
+
+
+def _by_shape(b: np.ndarray):
+    """(rows, columns) and the indices of the blocks of that shape, for every shape in b."""
+    if len(b) == 0:
+        return []
+    shp = b[:, 1] * 64 + b[:, 3] if b[:, 3].max(initial=0) < 64 else b[:, 1] * (
+        int(b[:, 3].max()) + 1) + b[:, 3]
+    u, inv = np.unique(shp, return_inverse=True)
+    out = []
+    for t in range(len(u)):
+        sel = np.flatnonzero(inv.reshape(-1) == t)
+        out.append(((int(b[sel[0], 1]), int(b[sel[0], 3])), sel))
+    return out
 
 
 def layout(s) -> Layout:

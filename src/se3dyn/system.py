@@ -237,7 +237,15 @@ def compile_model(model: Model) -> System:
             continue
         Rb = R0[jb[jj]]
         A_mat.append(np.concatenate([Rb.T @ j.A[:3], Rb.T @ j.A[3:]], axis=0))
-    abelian = np.array([j.abelian for j in joints], dtype=bool)
+    abelian_of: dict = {}  # the bracket test once per distinct A (large models repeat a few)
+    abelian = np.zeros(m, dtype=bool)
+    for jj, j in enumerate(joints):
+        A_ = np.asarray(j.A)
+        key = (A_.shape, A_.dtype.str, A_.tobytes())
+        ab = abelian_of.get(key)
+        if ab is None:
+            ab = abelian_of[key] = bool(j.abelian)
+        abelian[jj] = ab
 
     dof_K = np.zeros(nq)
     dof_ref = np.zeros(nq)
@@ -565,14 +573,13 @@ class Workspace:
         stp = self._steppers.get(key)
         if stp is None:
             s = self.s
-            p = pattern(s, index2)
             drop = np.zeros(s.nm, np.int64)
             drop[np.asarray(dropped, np.int64)] = 1
             lay = self.layout
             groups = lay.groups2 if index2 else lay.groups3
-            stp = _core().Stepper(self.engine, bool(index2), int(p["N"]),
-                                  p["indptr"].astype(np.int64), p["indices"].astype(np.int64),
-                                  p["inv"].astype(np.int64),
+            N = s.nq + (2 * s.nm if index2 else s.nm)
+            # the compiled stepper builds its pattern from the layout's blocks
+            stp = _core().Stepper(self.engine, bool(index2), int(N), lay.block_table(index2),
                                   np.ascontiguousarray(groups, np.int64), drop)
             if keep:
                 self._steppers[key] = stp
@@ -598,27 +605,21 @@ def _engine(s: System, ws: Workspace | None = None):
 
 
 def _pattern(s: System, index2: bool = False) -> dict:
-    """Fixed sparsity pattern: the (row, col) of every value of the iteration matrix, in the
-    order the engine writes them (:mod:`se3dyn.assembly`), and the map of each value to its
-    slot in CSC storage."""
-    N, rows, cols = pattern_entries(s, index2)
-    key = cols * N + rows  # column-major: CSC order after sorting
-    uniq, inv = np.unique(key, return_inverse=True)
-    indices = (uniq % N).astype(np.int32)
-    colnum = uniq // N
-    indptr = np.searchsorted(colnum, np.arange(N + 1)).astype(np.int32)
-    dense_key = rows * N + cols
-    return dict(keep=np.arange(len(rows)), inv=inv, nnz=len(uniq), indices=indices,
-                indptr=indptr, dense_key=dense_key, nvals=len(rows), N=N, rows=rows, cols=cols)
+    """Fixed sparsity pattern of the iteration matrix in CSC storage and the map ``inv`` of each
+    value, in the order the engine writes them (:mod:`se3dyn.assembly`), to its slot there
+    (blocks do not overlap: one slot per value)."""
+    lay = layout_of(s)
+    N = s.nq + (2 * s.nm if index2 else s.nm)
+    indptr, indices, inv = lay.csc(index2)
+    return dict(inv=inv, nnz=len(indices), indices=indices, indptr=indptr.astype(np.int32),
+                nvals=len(inv), N=N)
 
 
 def pattern_entries(s: System, index2: bool = False) -> tuple:
     """(N, rows, cols): the matrix size and the row and column (nvals,) of every value."""
     lay = layout_of(s)
     N = s.nq + (2 * s.nm if index2 else s.nm)
-    if index2:
-        return N, lay.rows2, lay.cols2
-    return N, lay.rows3, lay.cols3
+    return (N, *lay.entries(index2))
 
 
 def pattern(s: System, index2: bool = False) -> dict:
@@ -779,6 +780,7 @@ class LinearSolver:
         self._lu = None
         self.drop = np.unique(np.asarray(drop, dtype=np.int64))
         self._pat = None  # built on first use: the compiled engine may never need it
+        self._dense_key = None
 
     @property
     def pat(self) -> dict:
@@ -797,18 +799,21 @@ class LinearSolver:
             dropped[nq + self.drop] = True
             if index2:
                 dropped[nq + nm + self.drop] = True
-            rows, cols = self.pat["rows"], self.pat["cols"]
+            _, rows, cols = pattern_entries(s, index2)
             self._mask = ~(dropped[rows] | dropped[cols])
             self._one = (dropped[rows] & (rows == cols)).astype(float)
 
     def matrix(self, values: np.ndarray):
         """The matrix (dense ndarray or scipy CSC) from the values in pattern order."""
         p = self.pat
-        v = values[p["keep"]]
+        v = np.asarray(values)[:p["nvals"]]
         if self._mask is not None:
             v = np.where(self._mask, v, 0.0) + self._one
         if self.dense:
-            return np.bincount(p["dense_key"], weights=v, minlength=self.N * self.N).reshape(
+            if self._dense_key is None:
+                _, rows, cols = pattern_entries(self.s, self.index2)
+                self._dense_key = rows * self.N + cols
+            return np.bincount(self._dense_key, weights=v, minlength=self.N * self.N).reshape(
                 self.N, self.N)
         data = np.bincount(p["inv"], weights=v, minlength=p["nnz"])
         return sp.csc_matrix((data, p["indices"], p["indptr"]), shape=(self.N, self.N))

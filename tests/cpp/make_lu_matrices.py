@@ -33,7 +33,9 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
+import chain_scaling  # noqa: E402  (the chain models, defined once there)
 import se3dyn as sd  # noqa: E402
 from se3dyn import lie  # noqa: E402
 from se3dyn.examples import slider_crank  # noqa: E402
@@ -50,43 +52,19 @@ def spin(rng, planar):
 
 
 def chain(n_links: int, planar: bool = False) -> sd.Model:
-    """benchmarks/chain_scaling.py: one node per link, spherical joints at the link ends."""
+    """benchmarks/chain_scaling.py's chain: one node per link, spherical joints at the link
+    ends, the bodies spinning (see spin) unless ``planar``."""
     rng = np.random.default_rng(n_links)
-    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81), name=f"chain{n_links}")
-    mb.node("ground", position=(0.0, 0.0, 0.0), fixed=True)
-    J = 1.0 * 0.1**2 / 12.0
-    prev = "ground"
-    for i in range(n_links):
-        x0 = 0.1 * i
-        mb.node(f"b{i}", position=(x0 + 0.05, 0.0, 0.0), mass=1.0, inertia=(1e-4 * J, J, J),
-                angular_velocity=spin(rng, planar))
-        mb.joint(f"s{i}", "spherical", prev, f"b{i}", at=(x0, 0.0, 0.0))
-        prev = f"b{i}"
-    return mb.build()
+    return chain_scaling.chain(n_links, spin=lambda i: spin(rng, planar))
 
 
 def chain_nodes(n_links: int, close: bool = False) -> sd.Model:
-    """The paper's form: massless joint and end nodes rigidly attached to each body (zero 6x6
-    diagonal blocks); ``close`` clamps the far end by a spherical joint (a closed loop)."""
+    """benchmarks/chain_scaling.py's chain in the paper's form: massless joint and end nodes
+    rigidly attached to each body (zero 6x6 diagonal blocks); ``close`` clamps the far end by a
+    spherical joint (a closed loop)."""
     rng = np.random.default_rng(n_links)
-    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81), name=f"chainn{n_links}")
-    mb.node("ground", position=(0.0, 0.0, 0.0), fixed=True)
-    J = 1.0 * 0.1**2 / 12.0
-    prev = "ground"
-    for i in range(n_links):
-        x0 = 0.1 * i
-        mb.node(f"p{i}", position=(x0, 0.0, 0.0))
-        mb.node(f"b{i}", position=(x0 + 0.05, 0.0, 0.0), mass=1.0, inertia=(1e-4 * J, J, J),
-                angular_velocity=spin(rng, False))
-        mb.node(f"e{i}", position=(x0 + 0.1, 0.0, 0.0))
-        mb.joint(f"s{i}", "spherical", prev, f"p{i}")
-        mb.joint(f"r{i}", "rigid", f"p{i}", f"b{i}")
-        mb.joint(f"t{i}", "rigid", f"b{i}", f"e{i}")
-        prev = f"e{i}"
-    if close:
-        mb.node("end", position=(0.1 * n_links, 0.0, -0.1), fixed=True)
-        mb.joint("close", "spherical", prev, "end")
-    return mb.build()
+    return chain_scaling.chain_nodes(n_links, spin=lambda i: spin(rng, False), close=close,
+                                     name=f"chainn{n_links}")
 
 
 def binary_tree(depth: int) -> sd.Model:

@@ -10,6 +10,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "block_pattern.hpp"
 #include "newton.hpp"
 
 namespace nb = nanobind;
@@ -27,6 +28,7 @@ using namespace se3dyn;
 using DArr = nb::ndarray<double, nb::c_contig, nb::device::cpu>;        // written
 using CArr = nb::ndarray<const double, nb::c_contig, nb::device::cpu>;  // read (may be read-only)
 using IArr = nb::ndarray<int64_t, nb::c_contig, nb::device::cpu>;
+using I32Arr = nb::ndarray<int32_t, nb::c_contig, nb::device::cpu>;
 
 namespace {
 
@@ -229,6 +231,18 @@ NB_MODULE(_engine, m) {
         for (int i = 0; i < E.nq; ++i) o[i] = -o[i];
       });
 
+  m.def("block_csc", [](int N, IArr blocks, long nvals, I32Arr colptr, I32Arr rowind,
+                        IArr perm) {
+    // the compressed-column pattern of a matrix of non-overlapping dense blocks (se3dyn.assembly
+    // Layout.csc): colptr (N+1,), rowind (nvals,), perm (nvals,) value -> CSC position
+    if (blocks.size() % 5) throw std::invalid_argument("blocks: (nb, 5)");
+    if (colptr.size() != size_t(N) + 1 || rowind.size() != size_t(nvals) ||
+        perm.size() != size_t(nvals))
+      throw std::invalid_argument("block_csc: output sizes");
+    block_csc(N, blocks.data(), long(blocks.size() / 5), nvals, colptr.data(), rowind.data(),
+              perm.data());
+  });
+
   nb::class_<Stepper>(m, "Stepper")
       .def("__init__",
            [](Stepper* S, Engine& E, bool index2, int N, IArr colptr, IArr rowind, IArr perm,
@@ -242,6 +256,26 @@ NB_MODULE(_engine, m) {
              if (cp.size() != size_t(N + 1)) throw std::invalid_argument("colptr size");
              if (dr.size() != size_t(E.nm)) throw std::invalid_argument("drop size");
              S->init(&E, index2, N, cp.data(), ri.data(), pm.data(), long(pm.size()),
+                     gr.empty() ? nullptr : gr.data(), dr.data());
+           },
+           nb::keep_alive<1, 2>())
+      .def("__init__",
+           [](Stepper* S, Engine& E, bool index2, int N, IArr blocks, IArr group, IArr drop) {
+             // the pattern from the blocks of se3dyn.assembly (block_pattern.hpp): no pattern
+             // arrays per value cross the binding
+             new (S) Stepper();
+             const long nv = index2 ? E.nvals2 : E.nvals;
+             if (blocks.size() % 5) throw std::invalid_argument("blocks: (nb, 5)");
+             if (group.size() != size_t(N) && group.size() != 0)
+               throw std::invalid_argument("group size");
+             if (drop.size() != size_t(E.nm)) throw std::invalid_argument("drop size");
+             std::vector<int> gr(group.data(), group.data() + group.size());
+             std::vector<char> dr(drop.data(), drop.data() + drop.size());
+             std::vector<long> pm(nv);
+             std::vector<int> cp(size_t(N) + 1), ri(nv);
+             block_csc(N, blocks.data(), long(blocks.size() / 5), nv, cp.data(), ri.data(),
+                       pm.data());
+             S->init(&E, index2, N, cp.data(), ri.data(), pm.data(), nv,
                      gr.empty() ? nullptr : gr.data(), dr.data());
            },
            nb::keep_alive<1, 2>())

@@ -54,7 +54,7 @@ struct Stepper {
   Engine* E;
   bool index2;
   int N = 0;                         // size of the linear system
-  std::vector<long> perm;            // value index -> CSC position
+  std::vector<int> perm;             // value index -> CSC position (nnz fits an int: colptr)
   std::vector<long> zero_at, one_at; // CSC positions of dropped equations: zero, or 1 (diagonal)
   std::vector<char> dropm;           // (nm,) dropped multiplier equations
   SparseLU lu;

@@ -19,23 +19,21 @@ TRAITS = dict(conservative=True, constraint=False, objective=False)
 def tables(s, lay) -> dict:
     """Every node with mass or inertia is a body (``node_com``: centre of mass in the node's
     material frame)."""
-    ids = [i for i in range(s.M) if s.node_mass[i] > 0 or np.any(s.node_J[i] != 0)]
-    M = np.zeros((len(ids), 6, 6))
-    mc = np.zeros((len(ids), 3))
-    for e, i in enumerate(ids):
-        m, c = s.node_mass[i], s.node_com[i]
-        C = lie.hat3(c)
-        M[e, :3, :3] = m * np.eye(3)
-        M[e, :3, 3:] = -m * C
-        M[e, 3:, :3] = m * C
-        M[e, 3:, 3:] = s.node_J[i] - m * C @ C
-        mc[e] = m * c
-    for i in ids:
-        lay.velocity_block(i, i)
-    return dict(frame=np.array(ids, np.int64), M=M, mc=mc,
-                m=np.array([s.node_mass[i] for i in ids], float),
-                off=np.array([lay.frame_block(i, i) for i in ids], np.int64))
-
+    ids = np.flatnonzero((np.asarray(s.node_mass) > 0)
+                         | np.any(np.asarray(s.node_J).reshape(s.M, 9) != 0, axis=1))
+    n = len(ids)
+    m, c = np.asarray(s.node_mass, float)[ids], np.asarray(s.node_com, float)[ids]
+    C = lie.hat3(c).reshape(n, 3, 3)
+    M = np.zeros((n, 6, 6))
+    M[:, :3, :3] = m[:, None, None] * np.eye(3)
+    M[:, :3, 3:] = -m[:, None, None] * C
+    M[:, 3:, :3] = m[:, None, None] * C
+    M[:, 3:, 3:] = np.asarray(s.node_J)[ids] - (m[:, None, None] * C) @ C
+    mc = m[:, None] * c
+    lay.velocity_blocks(ids, ids)
+    fg = lay.frame_groups(ids)
+    return dict(frame=ids.astype(np.int64), M=M, mc=mc.reshape(n, 3), m=m.astype(float),
+                off=lay.blocks(fg, fg).astype(np.int64))
 
 def examples(rng):
     """A free body with its node off the centre of mass, spinning and moving, under gravity."""

@@ -22,38 +22,31 @@ def tables(s, lay) -> dict:
     M, m = s.M, s.m
     ja, jb = s.joint_a.astype(np.int64), s.joint_b.astype(np.int64)
     jf = M + np.arange(m, dtype=np.int64)
-    out = {key: [] for key in ("ca", "cb", "cj", "ac", "bc", "jc", "aj")}
-    for j in range(m):
-        a, b, f = ja[j], jb[j], jf[j]
-        c = lay.mult_group(j)
-        out["ca"].append(lay.block(c, lay.frame_group(a)))
-        out["cb"].append(lay.block(c, lay.frame_group(b)))
-        out["cj"].append(lay.block(c, lay.frame_group(f)))
-        out["ac"].append(lay.block(lay.frame_group(a), c))
-        out["bc"].append(lay.block(lay.frame_group(b), c))
-        out["jc"].append(lay.block(lay.frame_group(f), c))
-        out["aj"].append(lay.frame_block(a, f))
-        lay.block(c, c)  # diagonal: identity for dropped (redundant) equations
-        lay.constraint(j, (a, b, f))
+    c = lay.mult_groups(np.arange(m))
+    fa, fb, fj = lay.frame_groups(ja), lay.frame_groups(jb), lay.frame_groups(jf)
+    # per joint, in this order: ca, cb, cj, ac, bc, jc, aj and the diagonal (identity for
+    # dropped, redundant, equations)
+    off = lay.blocks(np.stack([c, c, c, fa, fb, fj, fa, c], axis=1),
+                     np.stack([fa, fb, fj, c, c, c, fj, c], axis=1))
+    lay.constraints(np.arange(m), np.stack([ja, jb, jf], axis=1))
     XA = np.ascontiguousarray(s.joint_XA, float).reshape(m, 4, 4)
     XB = np.ascontiguousarray(s.joint_XB, float).reshape(m, 4, 4)
     eye = np.eye(4)
     t = dict(fa=ja, fb=jb, fj=jf, mult=s.joint_multadr.astype(np.int64), XA=XA, XB=XB,
              PA=lie.adjoint_inv(XA) if m else np.zeros((0, 6, 6)),
              PB=lie.adjoint_inv(XB) if m else np.zeros((0, 6, 6)),
-             offset=np.array([not (np.allclose(XA[j], eye) and np.allclose(XB[j], eye))
-                              for j in range(m)], np.int64))
-    for key, val in out.items():
-        t["off_" + key] = np.array(val, np.int64)
+             offset=(~(np.isclose(XA, eye).all(axis=(1, 2))
+                       & np.isclose(XB, eye).all(axis=(1, 2)))).astype(np.int64))
+    for i, key in enumerate(("ca", "cb", "cj", "ac", "bc", "jc", "aj")):
+        t["off_" + key] = np.ascontiguousarray(off[:, i], np.int64)
     return t
 
 
 def index2_tables(s, lay, t: dict) -> None:
     """Blocks that only the stabilized index-2 matrix has: velocity-constraint rows."""
     for key, fr in (("xa", t["fa"]), ("xb", t["fb"]), ("xj", t["fj"])):
-        t["off_" + key] = np.array([lay.block(lay.xi_group(j), lay.frame_group(f))
-                                    for j, f in enumerate(fr)], np.int64)
-
+        t["off_" + key] = lay.blocks(lay.xi_groups(np.arange(len(fr))),
+                                     lay.frame_groups(fr)).astype(np.int64)
 
 def _unit(rng):
     v = rng.normal(size=3)

@@ -17,44 +17,48 @@ def tables(s, lay) -> dict:
     slots = {"tau": {}, "ref": {}, "rate": {}}
     for slot, _k, kind, j in s.inputs.joint_slots:
         slots[kind][j] = slot
-    ids = []
-    for j in range(s.m):
-        k = int(s.joint_k[j])
-        if not k:
-            continue
-        d = s.joint_dofadr[j] + np.arange(k)
-        if (np.any(s.dof_stiffness[d] != 0) or np.any(s.dof_damping[d] != 0)
-                or j in slots["tau"] or j in slots["ref"]):
-            ids.append(j)
+    m, M = s.m, s.M
+    jk = np.asarray(s.joint_k, np.int64)
+    withk = np.flatnonzero(jk > 0)
+    # every joint unknown: its joint and its index
+    jd_joint = np.repeat(withk, jk[withk])
+    jd_dof = np.repeat(np.asarray(s.joint_dofadr, np.int64)[withk], jk[withk]) + (
+        np.arange(len(jd_joint)) - np.repeat(np.cumsum(jk[withk]) - jk[withk], jk[withk]))
+    K, D = np.asarray(s.dof_stiffness)[jd_dof], np.asarray(s.dof_damping)[jd_dof]
+    used = np.zeros(m, bool)
+    used[jd_joint[(K != 0) | (D != 0)]] = True
+    used[np.array(list(slots["tau"]) + list(slots["ref"]), np.int64)] = True
+    used &= jk > 0
+    ids = np.flatnonzero(used)
     n = len(ids)
-    M = s.M
+    sel = used[jd_joint]  # the unknowns of the joints in ids, in order
+    e_of = np.cumsum(used) - 1
+    row, col = e_of[jd_joint[sel]], (np.arange(len(jd_joint)) - np.repeat(
+        np.cumsum(jk[withk]) - jk[withk], jk[withk]))[sel]
 
     def pad(name):
-        arr = getattr(s, name)
-        return np.array([np.pad(arr[s.joint_dofadr[j] + np.arange(s.joint_k[j])],
-                                (0, 6 - s.joint_k[j])) for j in ids], float).reshape(n, 6)
+        out = np.zeros((n, 6))
+        out[row, col] = np.asarray(getattr(s, name), float)[jd_dof[sel]]
+        return out
 
-    A = np.zeros((n, 6, 6))
+    A = np.ascontiguousarray(lay.frame_A[M + ids])
     Apinv = np.zeros((n, 6, 6))
-    nonab = np.zeros(n, np.int64)
-    for e, j in enumerate(ids):
-        k = int(s.joint_k[j])
-        A[e] = lay.frame_A[M + j]
-        Apinv[e, :k, :] = np.linalg.pinv(A[e][:, :k])
-        d = s.joint_dofadr[j] + np.arange(k)
-        nonab[e] = int((not s.joint_abelian[j]) and np.any(s.dof_stiffness[d] != 0))
-        lay.velocity_block(M + j, M + j)
-        if nonab[e]:
-            lay.log_needed(M + j)
-    return dict(frame=np.array([M + j for j in ids], np.int64), K=pad("dof_stiffness"),
+    for k in np.unique(jk[ids]):
+        e = np.flatnonzero(jk[ids] == k)
+        Apinv[e, :k, :] = np.linalg.pinv(A[e][:, :, :k])
+    stiff = np.zeros(m, bool)
+    stiff[jd_joint[K != 0]] = True
+    nonab = ((~np.asarray(s.joint_abelian, bool)[ids]) & stiff[ids]).astype(np.int64)
+    lay.velocity_blocks(M + ids, M + ids)
+    lay.log_needed(M + ids[nonab > 0])
+    fg = lay.frame_groups(M + ids)
+    return dict(frame=(M + ids).astype(np.int64), K=pad("dof_stiffness"),
                 ref=pad("dof_reference"), C=pad("dof_damping"), kp=pad("dof_kp"),
                 kd=pad("dof_kd"),
-                tau=np.array([slots["tau"].get(j, -1) for j in ids], np.int64),
-                pref=np.array([slots["ref"].get(j, -1) for j in ids], np.int64),
-                prate=np.array([slots["rate"].get(j, -1) for j in ids], np.int64),
-                nonab=nonab, Apinv=Apinv, A=A,
-                off=np.array([lay.frame_block(M + j, M + j) for j in ids], np.int64))
-
+                tau=np.array([slots["tau"].get(j, -1) for j in ids.tolist()], np.int64),
+                pref=np.array([slots["ref"].get(j, -1) for j in ids.tolist()], np.int64),
+                prate=np.array([slots["rate"].get(j, -1) for j in ids.tolist()], np.int64),
+                nonab=nonab, Apinv=Apinv, A=A, off=lay.blocks(fg, fg).astype(np.int64))
 
 def _unit(rng):
     v = rng.normal(size=3)

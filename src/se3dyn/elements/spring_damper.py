@@ -21,13 +21,10 @@ def tables(s, lay) -> dict:
              cb=np.array([x[3] for x in sp], float).reshape(len(sp), 3),
              k=np.array([x[4] for x in sp], float), d=np.array([x[5] for x in sp], float),
              L0=np.array([x[6] for x in sp], float))
-    for key, (p, q) in (("aa", (fa, fa)), ("ab", (fa, fb)), ("ba", (fb, fa)), ("bb", (fb, fb))):
-        t["off_" + key] = np.array([lay.frame_block(x, y) for x, y in zip(p, q, strict=True)],
-                                   np.int64)
-    for a, b in zip(fa, fb, strict=True):
-        for x in (a, b):
-            for y in (a, b):
-                lay.velocity_block(x, y)
+    ga, gb = lay.frame_groups(fa), lay.frame_groups(fb)
+    for key, (p, q) in (("aa", (ga, ga)), ("ab", (ga, gb)), ("ba", (gb, ga)), ("bb", (gb, gb))):
+        t["off_" + key] = lay.blocks(p, q).astype(np.int64)
+    lay.velocity_blocks(np.stack([fa, fa, fb, fb], axis=1), np.stack([fa, fb, fa, fb], axis=1))
     return t
 
 
