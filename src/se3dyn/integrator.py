@@ -122,8 +122,8 @@ class State:
                                their multipliers stay zero (see :func:`GeneralizedAlpha.init`)
     h_last : float             size of the step that produced this state (0 initially)
     solver : SolverMemory or None
-        The linear solver's memory after the step that produced this state; None: none (the
-        next step factorises afresh)
+        The linear solver's memory after the step that produced this state; None: the model's
+        own (the pivot sequence of its generic matrix, which a new workspace starts with)
     """
 
     t: float

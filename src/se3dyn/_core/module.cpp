@@ -310,13 +310,14 @@ NB_MODULE(_engine, m) {
            })
       .def("serials",
            [](const Stepper& S) {
-             // (serial number of the solver memory, whether it holds one)
-             return nb::make_tuple(S.ref_serial, S.have_ref);
+             // (serial number of the solver memory, whether it holds one to keep)
+             return nb::make_tuple(S.ref_serial, S.have_ref && !S.ref_probe);
            })
       .def("memory",
            [](const Stepper& S) -> nb::object {
              // a copy of the solver memory (the values of the last full factorisation) or None
-             if (!S.have_ref) return nb::none();
+             // (none, or the generic matrix's: a function of the model)
+             if (!S.have_ref || S.ref_probe) return nb::none();
              double* d = new double[S.ref_vals.size()];
              std::copy(S.ref_vals.begin(), S.ref_vals.end(), d);
              nb::capsule owner(d, [](void* p) noexcept { delete[] static_cast<double*>(p); });

@@ -19,8 +19,10 @@
 // (the Python State, its SolverMemory included), so that a run restarted from a State, in this
 // process or another one, continues bit for bit: the ordering and the patterns of the sparse LU
 // come from a generic matrix of the model (probe()), not from the values the run happened to
-// start with, and refactorisations reuse the pivot sequence of the last full factorisation,
-// whose matrix values are the solver's memory.
+// start with, and refactorisations reuse the pivot sequence of the last full factorisation:
+// first that of the generic matrix (a function of the model: nothing to keep), after a
+// refactorisation failed (a pivot fallen too small) that of a run's matrix, whose values are
+// then the solver's memory.
 #pragma once
 #include <cmath>
 #include <cstdint>
@@ -61,9 +63,10 @@ struct Stepper {
   std::vector<double> vals, csc, rhs, r, phi, psi;
   std::vector<double> energy = std::vector<double>(N_ENERGY);  // (N_ENERGY,) of the last iterate
   // solver memory (see the header): the matrix values of the last full factorisation, the
-  // reference of the refactorisations' pivot sequence, and a serial number of it (Python side)
+  // reference of the refactorisations' pivot sequence (none kept while it is the generic
+  // matrix's, ref_probe), and a serial number of it (Python side)
   std::vector<double> ref_vals;
-  bool have_ref = false;
+  bool have_ref = false, ref_probe = false;
   long ref_serial = 0;
 
   void init(Engine* e, bool idx2, int n_sys, const int* colptr, const int* rowind,
@@ -103,6 +106,20 @@ struct Stepper {
     for (long p = 0; p < nnz; ++p) keep[p] = csc[p] != 0.0;  // NaN counts as nonzero
     lu.analyze(N, colptr, rowind, group, csc.data());
     lu.set_keep(keep.data());
+    probe_reference();
+  }
+
+  // The first reference of the refactorisations: a full factorisation of the generic matrix
+  // (the solver memory is then the model's own: nothing to keep in a State)
+  int probe_reference() {
+    probe();
+    to_csc(vals.data());
+    int code = lu.factor(csc.data());
+    have_ref = code == 0;
+    ref_probe = have_ref;
+    ref_vals.clear();
+    ++ref_serial;
+    return code;
   }
 
   // The iteration matrix at a pseudo-random state of the model (frames, increments, velocities,
@@ -154,26 +171,27 @@ struct Stepper {
     if (code != 0) {
       code = lu.factor(csc.data());
       have_ref = code == 0;
+      ref_probe = false;
       if (have_ref) ref_vals = vals;
       ++ref_serial;
     }
     return code;
   }
 
-  // Restore the solver memory: a full factorisation of `ref` (nullptr: none, the next
-  // factorisation is a full one). Returns 0, or the LU's nonzero status.
+  // Restore the solver memory: a full factorisation of `ref`, or (nullptr) of the generic
+  // matrix, as a new stepper starts. Returns 0, or the LU's nonzero status.
   int restore(const double* ref) {
+    if (!ref) return probe_reference();
     have_ref = false;
-    ++ref_serial;
-    if (!ref) return 0;
     std::copy(ref, ref + vals.size(), vals.begin());
     return factor();
   }
 
-  // Whether this stepper's memory is `ref` (nullptr: none)
+  // Whether this stepper's memory is `ref` (nullptr: the generic matrix's)
   bool holds(const double* ref) const {
-    if ((ref != nullptr) != have_ref) return false;
-    return !ref || std::memcmp(ref, ref_vals.data(), vals.size() * sizeof(double)) == 0;
+    if (!have_ref) return false;
+    if (!ref) return ref_probe;
+    return !ref_probe && std::memcmp(ref, ref_vals.data(), vals.size() * sizeof(double)) == 0;
   }
 
   struct Params {
