@@ -473,6 +473,12 @@ class Workspace:
         self.engine = _core().Engine(self.layout.tables)
         self._steppers: dict = {}
 
+    def reset(self) -> None:
+        """Forget the steppers: the next step factorises afresh (new pivot sequence), as in a
+        new workspace. Done at every checkpoint of a run, so that a run continued from the
+        checkpoint in another process computes with the same pivots (bit for bit)."""
+        self._steppers.clear()
+
     def stepper(self, index2: bool, dropped: np.ndarray, keep: bool = True):
         """The compiled Newton stepper for one formulation and one set of dropped (redundant)
         equations, its sparse LU analysed on first use; ``keep=False``: not kept for later
