@@ -319,7 +319,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         first): ``rows`` is a :class:`Results` of the new rows (its own arrays), ``checkpoint``
         a :class:`Checkpoint` from which the run continues bit for bit, or None when none was
         reached since the last call. Blocks come about every 0.1-0.2 s of wall time. The
-        streaming interface of :class:`se3dyn.h5.ResultsWriter` (``writer.rows``).
+        streaming interface of :class:`se3dyn.h5.ResultsWriter` (``writer.add_rows``).
     store : bool
         Keep every stored row in the returned results (default). False for streamed runs:
         rows are only passed on to ``on_output`` / ``on_rows`` and memory stays flat however
@@ -442,6 +442,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         h = min(first_step, opt["h_max"])
     i = k0
     cpe = output_every * math.ceil(CHECKPOINT_EVERY / output_every)  # checkpoint interval
+    if k0 % cpe == 0:  # the start is a checkpoint too (a run continued from it starts afresh)
+        ws.reset()
+        rec.pending = Checkpoint(st, k0, h, 0, 0, 1)
 
     def fail(exc: SimulationError):
         stats.update(steps=i - k0, failed=True, wall_time=time.perf_counter() - wall0,
