@@ -173,6 +173,11 @@ class ResultsWriter:
         self._blocks: list[dict] = []  # rows in file layout, not yet written
         self._buf_bytes = 0
         self._row_bytes = 8 * (1 + self.M * 24 + 3 * self.nk + self.nm + 9)
+        self._chunk = int(max(16, min(256, (1 << 20) // max(self._row_bytes, 1))))
+        # chunk cache per dataset: rows are written in order, whole blocks at a time, so two
+        # chunks of the widest dataset are all it needs (HDF5 2.0's default of 8 MiB per
+        # dataset would grow a writer of the 17 datasets by some 140 MB as the run goes)
+        self._cache = 2 * self._chunk * 8 * max(9 * self.M, self.nk, self.nm, 1)
         self._last_flush = time.monotonic()
         self._lock = _FileLock(self.path)
         try:
@@ -191,7 +196,7 @@ class ResultsWriter:
                         model_text = save_model(model)
                     except ModelError:
                         model_text = ""
-            f = h5py.File(self.path, "w", libver="latest")
+            f = h5py.File(self.path, "w", libver="latest", rdcc_nbytes=self._cache)
             self.file = f
             try:
                 self._create(f, s, k, cols, model_text, settings)
@@ -230,7 +235,7 @@ class ResultsWriter:
             raise ResultsFileError(path, "no such file")
         _clear_status_flags(path)  # a run killed with kill -9 left the file flagged open
         try:
-            f = h5py.File(path, "r+", libver="latest")
+            f = h5py.File(path, "r+", libver="latest", rdcc_nbytes=self._cache)
         except OSError as exc:
             raise ResultsFileError(path, f"cannot be opened for writing ({exc})") from None
         try:
@@ -284,7 +289,6 @@ class ResultsWriter:
         f.attrs["settings"] = json.dumps(settings or {}, default=str, sort_keys=True)
         f.attrs["complete"] = False
         M, nk, nm = self.M, self.nk, self.nm
-        self._chunk = int(max(16, min(256, (1 << 20) // max(self._row_bytes, 1))))
         self._ds: dict[str, h5py.Dataset] = {}
 
         def mk(name, shape, dtype=np.float64, units=""):
