@@ -164,6 +164,10 @@ def cmd_run(args) -> int:
         raise _Usage(f"{args.model}: {exc}") from None
     if args.resume is not None:
         writer, cfg, path = _resume(args, s, text)
+        if writer is None:
+            print(f"{path}: the run is complete to t_end = {cfg['t_end']:g} s already; give a "
+                  "later --t-end to continue it")
+            return 0
         cp = writer.checkpoint
     else:
         cfg = dict(settings)
@@ -247,12 +251,13 @@ def cmd_run(args) -> int:
 
 def _resume(args, s, text: str):
     """The writer reopened on ``--resume RESULTS``, the stored settings (``--t-end`` applied)
-    and the path; usage errors for everything that cannot continue bit for bit."""
+    and the path (writer None: nothing to do); usage errors for everything that cannot
+    continue bit for bit."""
     import json
 
     import h5py
 
-    from se3dyn.h5 import ResultsFileError, ResultsWriter
+    from se3dyn.h5 import ResultsFileError, ResultsWriter, repair
 
     path = Path(args.resume)
     other = [k for k in _OVERRIDES if k != "t_end" and getattr(args, k) is not None]
@@ -263,31 +268,39 @@ def _resume(args, s, text: str):
         raise _Usage(f"--resume {path}: continues that file; --out and --overwrite do not "
                      "apply")
     try:
-        writer = ResultsWriter.resume(path, s)
-    except ResultsFileError as exc:
-        raise _Usage(f"{exc}") from None
-    try:
+        repair(path)  # left by kill -9: readable again (not while a writer holds it)
         with h5py.File(path, "r", libver="latest", swmr=True) as f:
             stored = f.attrs.get("model", "")
             stored = stored.decode() if isinstance(stored, bytes) else str(stored)
             cfg = json.loads(f.attrs.get("settings", "{}"))
-        if stored != text:
-            raise _Usage(f"--resume {path}: {args.model} is not the model stored in it (the "
-                         "texts differ); give the model file the run was started with")
-        t_end = float(cfg["t_end"])
-        if args.t_end is not None:
-            if cfg.get("tol") is not None and args.t_end != t_end:
-                raise _Usage(f"--resume {path}: an adaptive run (tol) continues to its own "
-                             f"t_end = {t_end:g} s only (its step control depends on the "
-                             "length of the run)")
-            cfg["t_end"] = args.t_end
-        t_cp = writer.checkpoint.state.t
-        if not cfg["t_end"] > t_cp:
-            raise _Usage(f"--resume {path}: t_end = {cfg['t_end']:g} s is not after the "
-                         f"checkpoint at t = {t_cp:g} s")
-    except BaseException:
-        writer.close()
-        raise
+            complete = bool(f.attrs.get("complete", False))
+            t_last = float(f["time"][-1]) if f["time"].shape[0] else -math.inf
+    except ResultsFileError as exc:
+        raise _Usage(str(exc)) from None
+    except (OSError, KeyError, ValueError) as exc:
+        raise _Usage(f"--resume {path}: not a readable se3dyn results file ({exc})") from None
+    if stored != text:
+        raise _Usage(f"--resume {path}: {args.model} is not the model stored in it (the texts "
+                     "differ); give the model file the run was started with")
+    if "t_end" not in cfg or "step" not in cfg:
+        raise _Usage(f"--resume {path}: no simulation settings stored in it")
+    t_end = float(cfg["t_end"])
+    if args.t_end is not None and args.t_end != t_end:
+        if cfg.get("tol") is not None:
+            raise _Usage(f"--resume {path}: an adaptive run (tol) continues to its own t_end = "
+                         f"{t_end:g} s only (its step control depends on the length of the "
+                         "run)")
+        if args.t_end < t_last:
+            raise _Usage(f"--resume {path}: t_end = {args.t_end:g} s is before the end of its "
+                         f"rows (t = {t_last:g} s); --resume continues a run, it does not cut "
+                         "it")
+        cfg["t_end"] = args.t_end
+    elif complete and t_last >= t_end:
+        return None, cfg, path
+    try:
+        writer = ResultsWriter.resume(path, s)
+    except ResultsFileError as exc:
+        raise _Usage(f"{exc}") from None
     return writer, cfg, path
 
 

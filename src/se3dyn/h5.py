@@ -233,7 +233,8 @@ class ResultsWriter:
         path = self.path
         if not os.path.isfile(path):
             raise ResultsFileError(path, "no such file")
-        _clear_status_flags(path)  # a run killed with kill -9 left the file flagged open
+        # a run killed with kill -9 left the file flagged open (this writer holds the lock)
+        _clear_status_flags(path, check_lock=False)
         try:
             f = h5py.File(path, "r+", libver="latest", rdcc_nbytes=self._cache)
         except OSError as exc:
@@ -694,15 +695,16 @@ def _lookup3(data: bytes, initval: int = 0) -> int:
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 
-def _clear_status_flags(path: str) -> bool:
+def _clear_status_flags(path: str, check_lock: bool = True) -> bool:
     """Clear the superblock's file-consistency flags that a writer killed while the file was
     open (kill -9, a crash) leaves set, as ``h5clear -s`` does; True if they were set.
 
     A file with these flags opens only as a SWMR reader, so ordinary HDF5 tools refuse it.
     Only superblocks of version 2 and 3 (``libver="latest"``, as se3dyn writes) carry them;
-    the superblock checksum (lookup3) is rewritten. Never done while a writer holds the file.
+    the superblock checksum (lookup3) is rewritten. Never done while a writer holds the file
+    (``check_lock=False``: the caller holds its lock).
     """
-    if _writer_alive(path):
+    if check_lock and _writer_alive(path):
         return False
     with open(path, "r+b") as fh:
         head = fh.read(12)

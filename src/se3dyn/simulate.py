@@ -112,15 +112,18 @@ class _Recorder:
 
     def _resize(self, rows: int) -> None:
         for name in self._FIELDS:
-            arr = getattr(self, name)
-            shape = (rows,) + arr.shape[1:]
+            shape = (rows,) + getattr(self, name).shape[1:]
             try:
-                arr.resize(shape)  # in place (realloc), zero-filled; refused if referenced
+                # in place (realloc), zero-filled; refused while anything else references the
+                # array (so no local name for it here)
+                getattr(self, name).resize(shape)
             except ValueError:
+                old = getattr(self, name)
                 new = np.zeros(shape)
-                k = min(rows, len(arr))
-                new[:k] = arr[:k]
+                k = min(rows, len(old))
+                new[:k] = old[:k]
                 setattr(self, name, new)
+                del old
 
     def _grow(self):
         n = len(self.t)
