@@ -108,8 +108,9 @@ def _check_one(path: str, rank_max: int) -> None:
 class _Progress:
     """A one-line progress bar on stderr: time reached, steps/s, ETA (terminal only)."""
 
-    def __init__(self, t0: float, t1: float, enabled: bool):
+    def __init__(self, t0: float, t1: float, enabled: bool, i0: int = 0):
         self.t0, self.t1 = t0, t1
+        self.i0 = i0  # steps before this run (resumed runs)
         self.enabled = enabled
         self.start = time.perf_counter()
         self.last = 0.0
@@ -123,7 +124,7 @@ class _Progress:
         self.last = now
         frac = (t - self.t0) / (self.t1 - self.t0)
         el = now - self.start
-        rate = i / el if el > 0 else 0.0
+        rate = (i - self.i0) / el if el > 0 else 0.0
         eta = el * (1 - frac) / frac if frac > 0 else math.inf
         bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
         sys.stderr.write(f"\r  t = {t:10.4f} / {self.t1:g} s [{bar}] {rate:8.1f} steps/s "
@@ -193,7 +194,7 @@ def cmd_run(args) -> int:
         cp = None
     quiet = args.quiet or not sys.stderr.isatty()
     t_from = cp.state.t if cp is not None else float(cfg.get("t_start", 0.0))
-    prog = _Progress(t_from, float(cfg["t_end"]), not quiet)
+    prog = _Progress(t_from, float(cfg["t_end"]), not quiet, cp.steps if cp is not None else 0)
     print(f"se3dyn {sd.__version__}: {args.model} -> {path}"
           + (f" (resumed at t = {cp.state.t:g} s)" if cp is not None else ""))
     print(f"  {len(model.nodes)} nodes, {len(model.joints)} joints; {s.nq} unknowns, {s.nm} "

@@ -330,13 +330,17 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         ``stats`` the summary of all of them either way (``rows``, ``energy_balance_error``,
         ``max_energy``, ``max_constraint``, ``max_iterations``).
     initial_state : State or Checkpoint, optional
-        Continue from this state (e.g. ``stats["final_state"]`` of an earlier run, or a
-        :class:`Checkpoint`, whose ``h_next`` is then an adaptive run's first step) instead of the model's initial state, with the same settings:
-        ``t_start`` stays the start of the whole run (the fixed steps keep the times
-        ``t_start + k step``, so ``initial_state.t`` must be one of them; adaptive steps start
-        with ``step``). A run to t1 continued to t2 equals one run to t2 bit for bit when t1
-        is a step time (and, with ``output_every``, a multiple of it). The first row of the
-        results is ``initial_state``.
+        Continue from this state (``stats["final_state"]`` of an earlier run, or a
+        :class:`Checkpoint` from ``on_rows``, whose ``h_next`` is then an adaptive run's first
+        step) instead of the model's initial state, with the same settings: ``t_start`` stays
+        the start of the whole run (the fixed steps keep the times ``t_start + k step``, so
+        ``initial_state.t`` must be one of them). The first row of the results is
+        ``initial_state``. The continued run equals the uninterrupted one bit for bit when it
+        starts from a checkpoint: every ``CHECKPOINT_EVERY`` (1000) steps, rounded up to a
+        multiple of ``output_every`` (there the run's linear solver starts afresh), and the
+        start; a final state is one when the run ended on such a step at its regular time.
+        An adaptive run continues to its own ``t_end`` only (``tol`` and ``h_max`` are per
+        run length).
 
     Returns
     -------
@@ -402,16 +406,22 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                              tol_constraint=tol_constraint, max_iter=max_iter,
                              formulation=formulation, redundant=redundant, engine=engine,
                              newton=newton)
-    grid = None
+    grid = None  # the output times t_start + j output_step, the last moved to t_end
     gi = 1  # next grid time to fill
     if opt["output_step"] is not None:
         k = max(1, math.ceil(span / opt["output_step"] - 1e-9))
-        grid = np.minimum(t_start + opt["output_step"] * np.arange(k + 1), t_end)
-        grid[-1] = t_end
-        capacity = len(grid)
+        dt_out = opt["output_step"]
+
+        def grid(j: int) -> float:  # computed when needed: nothing allocated per row
+            return t_end if j >= k else min(t_start + dt_out * j, t_end)
+
+        n_grid = k + 1
+        capacity = n_grid
         if initial_state is not None:
-            gi = int(np.searchsorted(grid, initial_state.t + 1e-12 * span, side="right"))
-            capacity = len(grid) - gi + 1
+            gi = min(n_grid, max(1, int((initial_state.t - t_start) / dt_out) - 1))
+            while gi < n_grid and grid(gi) <= initial_state.t + 1e-12 * span:
+                gi += 1
+            capacity = n_grid - gi + 1
     elif adaptive:
         capacity = 1024
     else:
@@ -530,8 +540,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         stored = False
         if grid is not None:
             stored = True  # every grid time up to t1 is filled
-            while gi < len(grid) and grid[gi] <= t1 + 1e-12 * span:
-                tg = grid[gi]
+            while gi < n_grid and grid(gi) <= t1 + 1e-12 * span:
+                tg = grid(gi)
                 if abs(tg - t1) <= 1e-12 * span:
                     out = new
                 else:
@@ -602,8 +612,6 @@ def _check_size(s: System, span: float, step: float, output_every: int,
     if not adaptive and not n <= MAX_STEPS:
         raise ModelError("simulate", "step", f"at most {MAX_STEPS:.0e} steps", step,
                          f"{what} = {n:.3g} steps; use a larger step")
-    if not store:
-        return
     rows = span / output_step + 1 if output_step is not None else (
         None if adaptive else n / output_every + 2)
     if rows is None:
@@ -612,8 +620,10 @@ def _check_size(s: System, span: float, step: float, output_every: int,
         raise ModelError("simulate", "output_step" if output_step is not None else
                          "output_every", f"at most {MAX_STEPS:.0e} stored rows", rows,
                          "store fewer rows: a larger output_step or output_every")
+    if not store:
+        return
     per_row = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
-    need = rows * per_row  # (the copy returned in Results doubles it at the end)
+    need = rows * per_row
     avail = _available_memory()
     if avail is not None and need > avail:
         raise ModelError(
