@@ -141,6 +141,26 @@ class _Terminated(BaseException):
     """SIGTERM: handled like Ctrl-C (results file closed), exit code 143."""
 
 
+#: Signals received (SIGINT, SIGTERM). An exception raised by the handler while Python runs a
+#: weakref callback or a __del__ is lost ("Exception ignored in ..."): `run` checks this list
+#: between chunks of steps and stops then.
+_STOP: list[int] = []
+
+
+def _on_signal(signum, frame):
+    import signal
+
+    _STOP.append(signum)
+    raise KeyboardInterrupt() if signum == signal.SIGINT else _Terminated()
+
+
+def _check_stop() -> None:
+    import signal
+
+    if _STOP:
+        raise KeyboardInterrupt() if _STOP[-1] == signal.SIGINT else _Terminated()
+
+
 def _shield():
     """Ignore SIGINT and SIGTERM while the results file is being closed."""
     import signal
@@ -208,7 +228,11 @@ def cmd_run(args) -> int:
     resume_hint = f"continue with: se3dyn run {args.model} --resume {path}"
     with writer:
         try:
-            res = sd.simulate(s, progress=prog, on_rows=writer.add_rows, store=False,
+            def progress(t: float, i: int) -> None:
+                _check_stop()
+                prog(t, i)
+
+            res = sd.simulate(s, progress=progress, on_rows=writer.add_rows, store=False,
                               initial_state=cp, **cfg)
         except SimulationError as exc:
             failed = exc
@@ -572,15 +596,24 @@ def main(argv: list[str] | None = None) -> int:
     import signal
     import threading
 
+    saved = None
     if threading.current_thread() is threading.main_thread():
         # se3dyn/__init__.py made Ctrl-C during start-up quiet; from here on it raises
-        # KeyboardInterrupt, handled below and by `run` (results file closed)
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        # KeyboardInterrupt, and SIGTERM _Terminated, handled below and by `run` (results file
+        # closed); the caller's handlers are restored on return
+        saved = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+        _STOP.clear()
+        signal.signal(signal.SIGINT, _on_signal)
+        signal.signal(signal.SIGTERM, _on_signal)
+    try:
+        return _main(argv)
+    finally:
+        if saved is not None:
+            signal.signal(signal.SIGINT, saved[0])
+            signal.signal(signal.SIGTERM, saved[1])
 
-        def terminated(signum, frame):
-            raise _Terminated()
 
-        signal.signal(signal.SIGTERM, terminated)
+def _main(argv: list[str] | None) -> int:
     try:
         parser = build_parser()
         args, extra = parser.parse_known_args(argv)
