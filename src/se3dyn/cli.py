@@ -141,17 +141,20 @@ class _Terminated(BaseException):
     """SIGTERM: handled like Ctrl-C (results file closed), exit code 143."""
 
 
-#: Signals received (SIGINT, SIGTERM). An exception raised by the handler while Python runs a
-#: weakref callback or a __del__ is lost ("Exception ignored in ..."): `run` checks this list
-#: between chunks of steps and stops then.
+#: Signals received (SIGINT, SIGTERM). While `run` simulates, the handler only records them
+#: and the run stops at its next progress report (between chunks of steps, about 0.1 s): an
+#: exception raised by a handler while Python runs a weakref callback or a __del__ would be
+#: lost, with a traceback printed ("Exception ignored in ...").
 _STOP: list[int] = []
+_DEFER = [False]
 
 
 def _on_signal(signum, frame):
     import signal
 
     _STOP.append(signum)
-    raise KeyboardInterrupt() if signum == signal.SIGINT else _Terminated()
+    if not _DEFER[0]:
+        raise KeyboardInterrupt() if signum == signal.SIGINT else _Terminated()
 
 
 def _check_stop() -> None:
@@ -232,8 +235,13 @@ def cmd_run(args) -> int:
                 _check_stop()
                 prog(t, i)
 
-            res = sd.simulate(s, progress=progress, on_rows=writer.add_rows, store=False,
-                              initial_state=cp, **cfg)
+            _DEFER[0] = True
+            try:
+                res = sd.simulate(s, progress=progress, on_rows=writer.add_rows, store=False,
+                                  initial_state=cp, **cfg)
+            finally:
+                _DEFER[0] = False
+            _check_stop()
         except SimulationError as exc:
             failed = exc
             res = exc.result
