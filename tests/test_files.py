@@ -404,3 +404,29 @@ def test_resume_refuses_what_it_cannot_continue_in_one_line(tmp_path):
     p = run("run", PENDULUM, "--resume", path, "--t-end", "2")
     assert p.returncode == 2 and "no checkpoint" in p.stderr
     assert not Path(str(path) + ".lock").exists()
+
+
+def test_a_half_written_checkpoint_is_passed_over(tmp_path):
+    """kill -9 in the middle of a flush can leave the newest restart slot half written: its
+    CRC fails and the run resumes from the other slot, still bit for bit."""
+    m = sd.examples.slider_crank()
+    s = sd.compile_model(m)
+    path = tmp_path / "r.h5"
+    with ResultsWriter(path, s, flush_interval=0.0) as w:  # a flush (and slot) per block
+        sd.simulate(s, 3.0, 1e-3, on_rows=w.add_rows, store=False)
+    with h5py.File(path, "r+") as f:
+        slots = f["restart/state"]
+        newest = int(np.argmax(slots[:, 0]))
+        older = slots[1 - newest]
+        assert older[0] == slots[newest, 0] - 1  # both slots in use
+        bad = slots[newest]
+        bad[20] += 1.0  # a value of the state
+        slots[newest] = bad
+    w = ResultsWriter.resume(path, s)
+    assert w.checkpoint.steps == int(older[2]) and w.rows == int(older[1])
+    with w:
+        sd.simulate(s, 3.0, 1e-3, initial_state=w.checkpoint, on_rows=w.add_rows, store=False)
+    full = sd.simulate(s, 3.0, 1e-3)
+    back = read_results(path)
+    for f in FIELDS:
+        assert np.array_equal(getattr(back, f), getattr(full, f)), f

@@ -7,7 +7,7 @@ the core package never imports it (``import se3dyn`` works without h5py).
 >>> from se3dyn.h5 import ResultsWriter, read_results
 >>> model = sd.examples.slider_crank()
 >>> with ResultsWriter("out.h5", sd.compile_model(model)) as w:     # doctest: +SKIP
-...     res = sd.simulate(model, 5.0, 1e-2, on_output=w.append)
+...     res = sd.simulate(model, 5.0, 1e-2, on_rows=w.add_rows, store=False)
 ...     w.close(res.stats)
 >>> res2 = read_results("out.h5")                                   # doctest: +SKIP
 
@@ -536,11 +536,13 @@ def _pack_slot(s, cp, rows: int, seq: int, base_its: int) -> np.ndarray:
 
 
 def _read_checkpoint(f: h5py.File, s):
-    """The newest valid restart slot: ((State, rows, steps, newton_iterations, rejected,
-    h_next), sequence), or None. A slot half written when the writer was killed fails its
-    CRC and the other one is used."""
+    """The newest valid restart slot whose rows are all in the file: ((State, rows, steps,
+    newton_iterations, rejected, h_next), sequence), or None. A slot half written when the
+    writer was killed fails its CRC, and one whose rows did not reach the disk is passed
+    over: the other one is used."""
     from se3dyn.integrator import State
 
+    present = min(f[name].shape[0] for name in _SERIES)
     slots = f["restart/state"][()]
     best = None
     for slot in slots:
@@ -550,6 +552,8 @@ def _read_checkpoint(f: h5py.File, s):
         crc = head[6]
         head[6] = 0.0
         if zlib.crc32(np.concatenate([head, payload]).tobytes()) != crc:
+            continue
+        if int(head[1]) > present:
             continue
         if best is None or head[0] > best[0][0]:
             best = (head, payload)
