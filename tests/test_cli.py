@@ -80,6 +80,22 @@ def test_check_reports_the_paper_sizes_and_one_degree_of_freedom():
     assert "no redundant constraints" in p.stdout
 
 
+def test_check_counts_beams_and_their_elements(tmp_path):
+    f = tmp_path / "cantilever.yaml"
+    f.write_text("""se3dyn: 1
+nodes:
+  root: {fixed: true}
+  tip: {position: [1, 0, 0]}
+beams:
+  rod: {a: root, b: tip, elements: 8, EA: 1.0e6, GA: 5.0e5, GJ: 50.0, EI: 80.0,
+        mass_per_length: 1.0, rotary_inertia: [0.002, 0.001, 0.001]}
+""")
+    p = run("check", str(f))
+    assert p.returncode == 0, p.stderr
+    assert "beams: 1 with 8 elements in all (7 of the nodes created by them)" in p.stdout
+    assert "9 nodes (8 free" in p.stdout
+
+
 def test_check_names_the_three_redundant_equations_of_a_spatial_four_bar(tmp_path):
     # a planar four-bar with four spatial hinges: 3 bodies (18) - 4 x 5 hinge equations (20)
     # = -2 by Gruebler's count, yet it moves with mobility 1: 3 equations are redundant.

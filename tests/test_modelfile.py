@@ -90,6 +90,16 @@ def assert_models_equal(m1: sd.Model, m2: sd.Model):
         assert a.node == b.node
         _tf_eq(a.force, b.force, f"load {a.name} force")
         _tf_eq(a.torque, b.torque, f"load {a.name} torque")
+        _eq(a.at, b.at, f"load {a.name} at")
+        assert (a.force_frame, a.torque_frame) == (b.force_frame, b.torque_frame), a.name
+    for kind in ("springs", "bushings"):
+        assert [e.name for e in getattr(m1, kind)] == [e.name for e in getattr(m2, kind)]
+        for a, b in zip(getattr(m1, kind), getattr(m2, kind), strict=True):
+            assert (a.node_a, a.node_b) == (b.node_a, b.node_b), f"{kind} {a.name}"
+            fields = (("at_a", "at_b", "stiffness", "damping", "length") if kind == "springs"
+                      else ("at", "stiffness", "damping", "orientation", "deformation"))
+            for f in fields:
+                _eq(getattr(a, f), getattr(b, f), f"{kind} {a.name} {f}")
 
 
 def _rot(axis, angle):
@@ -149,6 +159,14 @@ def everything_model() -> sd.Model:
             torque=sd.Ramp([0.0, 0.1, 0.0], duration=0.5))
     mb.load("constant", "b3", force=(0.0, 0.0, 1.0))
     mb.load("stepper", "tensor", torque=sd.Step([1.0, 0.0, 0.0], start=1.0))
+    mb.spring_damper("spring", "ground", "tensor", at_a=(0.1, 0.2, 0.3), stiffness=3.0,
+                     damping=0.1, length=0.5)
+    K = np.array([[4.0, 0.5, 0, 0, 0.1, 0], [0.5, 3.0, 0, 0, 0, 0], [0, 0, 2.0, 0, 0, 0],
+                  [0, 0, 0, 1.0, 0, 0], [0.1, 0, 0, 0, 1.5, 0], [0, 0, 0, 0, 0, 0.5]])
+    mb.bushing("mount", "ground", "tensor", at=(-1.0, 0.4, 1.9), stiffness=K,
+               damping=(0.1, 0.2, 0.3, 0.01, 0.02, 0.03))
+    mb.bushing("diag", "b5", "arm", stiffness=(1, 2, 3, 4, 5, 6), orientation=R,
+               deformation=(0.01, 0.0, -0.02, 0.1, 0.2, 0.0))
     return mb.build()
 
 
@@ -327,6 +345,20 @@ CASES = [
      ["joint 'pivot'", "control.kdd", "did you mean 'kd'"]),
     ("negative-damping", _sub("axis: [0, 1, 0]", "axis: [0, 1, 0], damping: -1"), 8,
      ["joint 'pivot'", "damping"]),
+    ("bushing-short-stiffness", BASE + "bushings:\n  mount: {a: ground, b: bob, stiffness: "
+     "[1, 2, 3]}\n", 10, ["bushing 'mount'", "stiffness", "6 numbers"]),
+    ("bushing-asymmetric-stiffness", BASE + "bushings:\n  mount:\n    a: ground\n    b: bob\n"
+     "    stiffness: [" + ", ".join("[" + ", ".join("1" if c >= r else "0" for c in range(6))
+                                    + "]" for r in range(6)) + "]\n", 13,
+     ["bushing 'mount'", "'stiffness'", "symmetric"]),
+    ("bushing-indefinite-damping", BASE + "bushings:\n  mount: {a: ground, b: bob, stiffness: 1,"
+     " damping: [" + ", ".join("[" + ", ".join("1" if c != r else "0" for c in range(6)) + "]"
+                                for r in range(6)) + "]}\n", 10,
+     ["bushing 'mount'", "'damping'", "positive semi-definite"]),
+    ("bushing-missing-stiffness", BASE + "bushings:\n  mount: {a: ground, b: bob}\n", 10,
+     ["bushing 'mount'", "stiffness", "required"]),
+    ("bushing-unknown-node", BASE + "bushings:\n  mount: {a: ground, b: bobb, stiffness: 1}\n",
+     10, ["bushing 'mount'", "'b'", "did you mean 'bob'"]),
     ("simulation-type", BASE + "simulation: {t_end: 1, max_iter: 2.5}\n", 9,
      ["simulation", "max_iter", "integer"]),
     ("simulation-unknown", BASE + "simulation: {t_end: 1, stp: 0.1}\n", 9,

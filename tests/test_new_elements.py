@@ -209,3 +209,19 @@ def test_pd_law_tracks_a_moving_target_using_its_rate():
     sol = solve_ivp(rhs, (0.0, 2.0), [0.0, -A * w], t_eval=res.t, rtol=1e-11, atol=1e-13)
     theta_ref = sol.y[0] + A * np.sin(w * res.t)
     assert np.abs(res.joint_coordinates("h")[:, 0] - theta_ref).max() < 2e-5
+
+
+def test_newton_converges_while_a_damped_body_comes_to_rest():
+    """Forces vanish with the motion: the relative residual then meets the round-off of the
+    forces computed from positions (K times the round-off of the frames); Newton stops at the
+    round-off of the positions instead of failing (it failed at t = 50 s before)."""
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("m", mass=2.0, inertia=(1e-2, 2e-2, 3e-2), velocity=(0.3, 0.1, 0.0),
+            angular_velocity=(0.5, 0.2, 0.1))
+    mb.bushing("b", "g", "m", stiffness=40.0, damping=4.0)
+    res = sd.simulate(mb.build(), t_end=60.0, step=1e-2, rho_inf=0.9)
+    assert not res.stats["failed"]
+    # every mode decays at least as exp(-c t / (2 m)) = exp(-60): at rest, at its node
+    assert np.abs(res.v[-1]).max() < 1e-20
+    assert np.abs(res.node_position("m")[-1]).max() < 1e-20

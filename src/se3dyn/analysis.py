@@ -203,3 +203,57 @@ def equation_name(s: System, row: int) -> str:
     """``joint 'J' constraint c (component)`` for a multiplier index."""
     j, c = divmod(int(row), 6)
     return f"joint '{s.joint_names[j]}' constraint {c} ({_COMPONENT[c]})"
+
+
+def massless_motions(s: System, rtol: float = 1e-10) -> list[str]:
+    """Items (nodes, joint coordinates) that can move with neither inertia nor constraint to
+    determine their motion: the iteration matrix ``[M B^T; B 0]`` of the initial accelerations
+    (Eqs. (36)-(37)) is then singular and a simulation stops at t0 (a ground node not marked
+    fixed, a massless chain left free).
+
+    Parameters
+    ----------
+    s : System
+    rtol : float
+        Singular values below ``rtol`` times the largest count as zero.
+
+    Returns
+    -------
+    list of str
+        The items (``node 'name'``, ``joint 'name'``) in the motions found (the null space of
+        ``[M; B]``: velocities with no kinetic energy that every joint allows), largest share
+        first; empty when there are none.
+    """
+    from se3dyn.system import evaluate, step_inputs
+
+    nq = s.nq
+    if nq == 0:
+        return []
+    z = np.zeros(nq)
+    ev = evaluate(s, s.node_H0, s.joint_H0, z, z, z, z, np.zeros(s.nm), step_inputs(s, 0.0),
+                  (1.0, 0.0, 0.0), accel=True)
+    from se3dyn.system import pattern_entries
+
+    N, rows, cols = pattern_entries(s, False)
+    A = np.zeros((N, N))
+    np.add.at(A, (rows, cols), ev.values)
+    M, B = A[:nq, :nq], A[nq:, :nq]
+    dropped = redundant_equations(s) if s.nm else np.zeros(0, np.int64)
+    keep = np.setdiff1d(np.arange(s.nm), dropped)
+    S = np.vstack([M, B[keep]])
+    _, sv, Vt = np.linalg.svd(S, full_matrices=True)
+    top = sv[0] if sv.size and sv[0] > 0 else 1.0
+    rank = int(np.sum(sv > rtol * top))
+    null = Vt[rank:]
+    if not len(null):
+        return []
+    share = np.sqrt((null ** 2).sum(axis=0))  # (nq,) weight of each unknown in the null space
+    order = np.argsort(-share)
+    out: list[str] = []
+    for q in order:
+        if share[q] < 1e-6 * share.max():
+            break
+        item = s.items[q]
+        if item not in out:
+            out.append(item)
+    return out

@@ -11,6 +11,9 @@ A channel is one scalar time history, shape (n,), named by a path (see ``docs/re
     joint/<joint>/alpha/<i>                         rad or m (per coordinate)
     joint/<joint>/velocity/<i>                      rad/s or m/s
     joint/<joint>/multiplier/<i>                    N (i mod 6 < 3), N m (otherwise)
+    beam/<beam>/<e>/force/N|V2|V3|T|M2|M3           N, N m  (section forces of element e)
+    beam/<beam>/<e>/strain/e1|g2|g3|k1|k2|k3        -, 1/m  (eps - eps0, section frame)
+    beam/<beam>/<e>/energy                          J       (elastic energy of element e)
     energy/kinetic|potential|spring|total|balance|work_actuators|work_loads|dissipation   J
     solver/iterations|residual|constraint           -
 
@@ -37,6 +40,8 @@ _ENERGY = ("kinetic", "potential", "spring", "total", "balance", "work_actuators
            "work_loads", "dissipation")
 _SOLVER = ("iterations", "residual", "constraint")
 _ROT = tuple(f"R{i}{j}" for i in (1, 2, 3) for j in (1, 2, 3))
+_BEAM = {"force": ("N", "V2", "V3", "T", "M2", "M3"),
+         "strain": ("e1", "g2", "g3", "k1", "k2", "k3")}
 
 
 def escape_name(name: str) -> str:
@@ -83,9 +88,34 @@ def list_channels(res: Results) -> list[str]:
         out += [f"{e}/alpha/{c}" for c in range(k)]
         out += [f"{e}/velocity/{c}" for c in range(k)]
         out += [f"{e}/multiplier/{c}" for c in range(nmult)]
+    for b in getattr(s, "beams", ()):
+        e = f"beam/{escape_name(b['beam'])}/{b['index']}"
+        for q, comps in _BEAM.items():
+            out += [f"{e}/{q}/{c}" for c in comps]
+        out.append(f"{e}/energy")
     out += [f"energy/{x}" for x in _ENERGY]
     out += [f"solver/{x}" for x in _SOLVER]
     return out
+
+
+def _beam_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
+    from se3dyn.elements.beam import section_forces
+
+    s = res.system
+    beam = unescape_name(parts[1])
+    els = [i for i, b in enumerate(getattr(s, "beams", ())) if b["beam"] == beam]
+    if not els:
+        raise _unknown(res, name, f"no beam {beam!r}")
+    e = _index(res, name, parts[2], len(els))
+    if parts[3:] == ["energy"]:
+        q, c = "energy", None
+    elif len(parts) == 5 and parts[3] in _BEAM and parts[4] in _BEAM[parts[3]]:
+        q, c = parts[3], _BEAM[parts[3]].index(parts[4])
+    else:
+        raise _unknown(res, name)
+    out = section_forces(s, np.asarray(res.H), vq=np.asarray(res.v))
+    x = out[q][:, els[e]]
+    return (x if c is None else x[:, c]).copy()
 
 
 def _unknown(res: Results, name: str, why: str = "") -> KeyError:
@@ -140,6 +170,8 @@ def get_channel(res: Results, name: str) -> np.ndarray:
                     and rest[0] in ("material", "inertial") and rest[1] in _AXES):
                 f = res.node_velocity if q == "velocity" else res.node_acceleration
                 return f(node, frame=rest[0])[:, _AXES.index(rest[1])]
+        if len(parts) in (4, 5) and parts[0] == "beam":
+            return _beam_channel(res, name, parts)
         if len(parts) == 4 and parts[0] == "joint":
             joint = unescape_name(parts[1])
             try:
@@ -180,6 +212,14 @@ def channel_unit(name: str, res: Results | None = None) -> str:
             return "rad/s" if rot else "m/s"
         if q == "acceleration":
             return "rad/s^2" if rot else "m/s^2"
+    if parts[0] == "beam" and len(parts) >= 4:
+        if parts[3] == "energy":
+            return "J"
+        last = parts[-1]
+        if parts[3] == "force":
+            return "N m" if last in ("T", "M2", "M3") else "N"
+        if parts[3] == "strain":
+            return "1/m" if last.startswith("k") else ""
     if parts[0] == "joint" and len(parts) == 4:
         q = parts[2]
         if q == "multiplier":

@@ -82,6 +82,17 @@ def _check_one(path: str, rank_max: int) -> None:
     print(f"{path}: ok")
     print(f"  model '{model.name}': {len(model.nodes)} nodes ({n_free} free, {bodies} with mass),"
           f" {len(model.joints)} joints, {len(model.loads)} loads")
+    from se3dyn.modelfile import ELEMENT_SECTIONS
+
+    others = [f"{len(getattr(model, es.key))} {es.key}" for es in ELEMENT_SECTIONS
+              if es.key not in ("joints", "loads", "beams") and getattr(model, es.key, ())]
+    if others:  # force elements of the other element types (model attribute = file section)
+        print("  force elements: " + ", ".join(others))
+    if model.beams:
+        n_el = sum(b.elements for b in model.beams)
+        n_in = sum(len(b.nodes) - 2 for b in model.beams)
+        print(f"  beams: {len(model.beams)} with {n_el} elements in all ({n_in} of the nodes "
+              "created by them)")
     kinds: dict[str, int] = {}
     for j in model.joints:
         kinds[j.type] = kinds.get(j.type, 0) + 1
@@ -100,8 +111,46 @@ def _check_one(path: str, rank_max: int) -> None:
                   + "; ".join(r.redundant))
         else:
             print("  no redundant constraints")
+        from se3dyn.analysis import massless_motions
+
+        free = massless_motions(s)
+        if free:
+            raise _Usage(f"{path}: {', '.join(free[:4])}"
+                         + (f" and {len(free) - 4} more" if len(free) > 4 else "")
+                         + " can move with no mass and no joint determining the motion: a "
+                         "simulation would stop at t = 0 (a node meant as ground needs "
+                         "'fixed: true'; a massless node needs joints that fix its motion)")
     if settings:
         print("  simulation settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()))
+    _check_start(path, s, settings)
+
+
+def _check_start(path: str, s, settings: dict) -> None:
+    """What `run` would refuse at t = 0: the settings, the initial accelerations (a singular
+    iteration matrix) and, with initial_velocities 'strict', inconsistent velocities; and
+    the initial velocities that would be projected."""
+    from se3dyn.errors import ModelError, SimulationError
+    from se3dyn.integrator import GeneralizedAlpha, initial_velocity_changes
+    from se3dyn.simulate import check_settings
+
+    if "t_end" in settings and "step" in settings:
+        try:
+            check_settings(s, **settings)
+        except ModelError as exc:
+            raise _Usage(f"{path}: simulation settings: {exc}") from None
+    opts = {k: settings[k] for k in ("formulation", "redundant", "initial_velocities")
+            if k in settings}
+    try:
+        st = GeneralizedAlpha(**opts).init(s, float(settings.get("t_start", 0.0)))
+    except (ModelError, SimulationError) as exc:
+        raise _Usage(f"{path}: at t = 0: {exc}") from None
+    ch = initial_velocity_changes(s, st)
+    if ch:
+        worst = max(ch, key=lambda c: max(c["dv"], c["dw"]))
+        print(f"  initial velocities the joints do not allow will be projected ({len(ch)} "
+              f"nodes; largest change: node {worst['node']!r}, velocity {worst['dv']:.3g} m/s, "
+              f"angular velocity {worst['dw']:.3g} rad/s); initial_velocities: strict refuses "
+              "them")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -176,8 +225,10 @@ def _shield():
 
 def cmd_run(args) -> int:
     """Simulate a model file, stream the results to an HDF5 file, print a summary."""
+    import warnings
+
     import se3dyn as sd
-    from se3dyn.errors import ModelError, SimulationError
+    from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
     from se3dyn.h5 import ResultsFileError, ResultsWriter
 
     model, settings = _load(args.model)
@@ -237,8 +288,10 @@ def cmd_run(args) -> int:
 
             _DEFER[0] = True
             try:
-                res = sd.simulate(s, progress=progress, on_rows=writer.add_rows, store=False,
-                                  initial_state=cp, **cfg)
+                with warnings.catch_warnings():  # (the summary below reports them)
+                    warnings.simplefilter("ignore", Se3dynWarning)
+                    res = sd.simulate(s, progress=progress, on_rows=writer.add_rows,
+                                      store=False, initial_state=cp, **cfg)
             finally:
                 _DEFER[0] = False
             _check_stop()
@@ -276,8 +329,9 @@ def cmd_run(args) -> int:
     st = res.stats
     print(f"  {stats['steps']} steps, {stats['newton_iterations']} Newton iterations "
           f"(max {st['max_iterations']} per step), wall time {wall:.2f} s")
-    print(f"  energy balance error {st['energy_balance_error']:.3e} J (of max energy "
-          f"{st['max_energy']:.3e} J); max constraint violation {st['max_constraint']:.2e}")
+    for line in run_report(st):
+        print("  " + line)
+    print(f"  max constraint violation {st['max_constraint']:.2e}")
     print(f"  results: {path} ({writer.rows} rows)")
     return 0
 
@@ -518,7 +572,31 @@ def _positive(kind):
     return conv
 
 
-_OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step")
+_OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step",
+              "initial_velocities")
+
+
+def run_report(stats: dict) -> list[str]:
+    """Summary lines on what a run's results may hide: the initial velocities changed to
+    satisfy the joints, and the energy balance error against the energy in play."""
+    out = []
+    ch = stats.get("initial_velocity_changes") or []
+    if ch:
+        worst = max(ch, key=lambda c: max(c["dv"], c["dw"]))
+        out.append(f"initial velocities projected onto the joints' velocity constraints "
+                   f"({len(ch)} nodes; largest change: node {worst['node']!r}, velocity "
+                   f"{worst['dv']:.3g} m/s, angular velocity {worst['dw']:.3g} rad/s); kinetic "
+                   f"energy {stats['initial_kinetic_energy_given']:.6g} J given, "
+                   f"{stats['initial_kinetic_energy_used']:.6g} J used "
+                   "(--initial-velocities strict refuses them)")
+    if "energy_balance_error" in stats:
+        err, scale = stats["energy_balance_error"], stats["energy_scale"]
+        rel = f"{100 * err / scale:.3g} % of" if scale > 0 else "with no"
+        warn = "  WARNING: large; the step is probably too large for the motion" if (
+            err > 0.1 * scale and err > 1e-12) else ""
+        out.append(f"energy balance error {err:.3e} J ({rel} the energy in play, "
+                   f"{scale:.3e} J){warn}")
+    return out
 
 
 def _add_overrides(p: argparse.ArgumentParser) -> None:
@@ -532,6 +610,9 @@ def _add_overrides(p: argparse.ArgumentParser) -> None:
                    help="adaptive steps: position error tolerance over the run (m, rad)")
     p.add_argument("--output-step", type=_positive("pos"),
                    help="store results every OUTPUT_STEP seconds (dense output)")
+    p.add_argument("--initial-velocities", choices=("project", "strict"),
+                   help="initial velocities the joints do not allow: project them (default; "
+                        "reported) or refuse them")
 
 
 def _overrides(args) -> dict:

@@ -46,6 +46,11 @@ class UnknownNameError(Se3dynError, KeyError):
         return str(self.args[0]) if self.args else "unknown name"
 
 
+class Se3dynWarning(UserWarning):
+    """Results that may mislead: initial velocities changed to satisfy the joints, an energy
+    balance error large against the energy exchanged (the message says what and how much)."""
+
+
 class SimulationError(Se3dynError, RuntimeError):
     """A simulation that could not proceed; ``result`` holds everything computed so far."""
 

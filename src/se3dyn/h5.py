@@ -264,6 +264,7 @@ class ResultsWriter:
                     ds.resize(rows, axis=0)
             self.rows = rows
             self._slots = f["restart/state"]
+            self._memory = f["restart/solver"]
             for key in list(f["stats"].attrs):
                 del f["stats"].attrs[key]
             f.attrs["complete"] = False
@@ -344,6 +345,9 @@ class ResultsWriter:
                                        fillvalue=np.nan)
         r.attrs["header"] = ", ".join(_SLOT_HEADER)
         r.attrs["state"] = _STATE_DOC
+        self._memory = r.create_dataset("solver", shape=(2, 0), maxshape=(2, None),
+                                        chunks=(2, 4096), dtype=np.float64, fillvalue=np.nan)
+        self._memory.attrs["content"] = _MEMORY_DOC
 
     # -----------------------------------------------------------------------------------------
     def append(self, state, scalars: dict) -> None:
@@ -454,8 +458,15 @@ class ResultsWriter:
             cp, rows = self._pending_cp
             self._pending_cp = None
             self._seq += 1
-            self._slots[self._seq % 2] = _pack_slot(self.system, cp, rows, self._seq,
-                                                    self.base_iterations)
+            slot, memory = _pack_slot(self.system, cp, rows, self._seq, self.base_iterations)
+            if memory is not None:  # the linear solver's memory first: the slot validates it
+                ds = self._memory
+                if ds.shape[1] < len(memory):
+                    ds.resize(len(memory), axis=1)
+                row = np.full(ds.shape[1], np.nan)
+                row[:len(memory)] = memory
+                ds[self._seq % 2] = row
+            self._slots[self._seq % 2] = slot
             self.checkpoint = cp
 
     def flush(self) -> None:
@@ -511,28 +522,37 @@ _SERIES = ("nodes/position", "nodes/rotation", "nodes/velocity", "nodes/accelera
 
 _STATE_DOC = ("t, h_last, work_act, work_ext, dissipated, power (3), number of dropped "
               "equations nr, dropped (nm, first nr used), H (M x 16), HJ (m x 16), v, vd, a "
-              "(nq each), lam (nm), alpha (nq)")
+              "(nq each), lam (nm), alpha (nq), nv (the values of the linear solver's memory "
+              "in /restart/solver, -1: none)")
+_MEMORY_DOC = ("State.solver.ref of the checkpoint in the slot of the same index of "
+               "/restart/state (its first nv values): the iteration matrix of the last full "
+               "sparse LU factorisation, whose pivot sequence the next steps reuse")
 
 
 def _state_length(s) -> int:
     M, m, nq, nm = len(s.node_names), len(s.joint_names), int(s.nq), int(s.nm)
-    return 9 + nm + 16 * (M + m) + 4 * nq + nm
+    return 9 + nm + 16 * (M + m) + 4 * nq + nm + 1
 
 
-def _pack_slot(s, cp, rows: int, seq: int, base_its: int) -> np.ndarray:
-    """One restart slot: the header and the checkpoint's complete integration state."""
+def _pack_slot(s, cp, rows: int, seq: int, base_its: int):
+    """One restart slot (the header and the checkpoint's complete integration state) and the
+    values of the linear solver's memory (None: none); the CRC covers both."""
     st = cp.state
     nm = int(s.nm)
     dropped = np.zeros(nm)
     dropped[:len(st.dropped)] = st.dropped
+    mem = getattr(st, "solver", None)
+    memory = None if mem is None else np.asarray(mem.ref, dtype=np.float64)
     payload = np.concatenate([
         [st.t, st.h_last, st.work_act, st.work_ext, st.dissipated], np.asarray(st.power),
         [len(st.dropped)], dropped, np.asarray(st.H).ravel(), np.asarray(st.HJ).ravel(),
-        st.v, st.vd, st.a, st.lam, st.alpha]).astype(np.float64)
+        st.v, st.vd, st.a, st.lam, st.alpha,
+        [-1 if memory is None else len(memory)]]).astype(np.float64)
     head = np.array([seq, rows, cp.steps, base_its + cp.newton_iterations, cp.rejected,
                      cp.h_next, 0.0, len(payload)], dtype=np.float64)
-    head[6] = zlib.crc32(np.concatenate([head, payload]).tobytes())
-    return np.concatenate([head, payload])
+    parts = [head, payload] + ([] if memory is None else [memory])
+    head[6] = zlib.crc32(np.concatenate(parts).tobytes())
+    return np.concatenate([head, payload]), memory
 
 
 def _read_checkpoint(f: h5py.File, s):
@@ -544,22 +564,28 @@ def _read_checkpoint(f: h5py.File, s):
 
     present = min(f[name].shape[0] for name in _SERIES)
     slots = f["restart/state"][()]
+    memories = f["restart/solver"][()] if "restart/solver" in f else np.zeros((2, 0))
     best = None
-    for slot in slots:
+    for k, slot in enumerate(slots):
         head, payload = slot[:len(_SLOT_HEADER)].copy(), slot[len(_SLOT_HEADER):]
         if not np.all(np.isfinite(head)) or int(head[7]) != len(payload):
             continue
+        nv = int(payload[-1]) if np.isfinite(payload[-1]) else -2
+        if nv < -1 or nv > memories.shape[1]:
+            continue
+        memory = None if nv < 0 else memories[k, :nv].copy()
         crc = head[6]
         head[6] = 0.0
-        if zlib.crc32(np.concatenate([head, payload]).tobytes()) != crc:
+        parts = [head, payload] + ([] if memory is None else [memory])
+        if zlib.crc32(np.concatenate(parts).tobytes()) != crc:
             continue
         if int(head[1]) > present:
             continue
         if best is None or head[0] > best[0][0]:
-            best = (head, payload)
+            best = (head, payload, memory)
     if best is None:
         return None
-    head, p = best
+    head, p, memory = best
     M, m, nq, nm = len(s.node_names), len(s.joint_names), int(s.nq), int(s.nm)
     pos = [0]
 
@@ -576,9 +602,14 @@ def _read_checkpoint(f: h5py.File, s):
     HJ = take(16 * m).reshape(m, 4, 4)
     v, vd, a = take(nq), take(nq), take(nq)
     lam, alpha = take(nm), take(nq)
+    extra = {}
+    if memory is not None:
+        from se3dyn.integrator import SolverMemory
+
+        extra["solver"] = SolverMemory(ref=memory)
     st = State(t=float(t), H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
                work_act=float(w_act), work_ext=float(w_ext), dissipated=float(diss),
-               power=power, dropped=dropped, h_last=float(h_last))
+               power=power, dropped=dropped, h_last=float(h_last), **extra)
     return ((st, int(head[1]), int(head[2]), int(head[3]), int(head[4]), float(head[5])),
             int(head[0]))
 

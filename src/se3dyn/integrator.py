@@ -26,19 +26,80 @@ from se3dyn import lie
 from se3dyn.errors import ModelError, NewtonError, SimulationError
 from se3dyn.system import LinearSolver, System, evaluate, input_table, step_inputs
 
-__all__ = ["State", "StepInfo", "GeneralizedAlpha", "step_inputs", "input_table", "energies",
-           "interpolate"]
+__all__ = ["State", "SolverMemory", "StepInfo", "GeneralizedAlpha", "step_inputs",
+           "input_table", "energies", "interpolate", "initial_velocity_changes"]
 
 #: modified Newton: refactorise when more than KMAX further iterations are predicted (a
 #: factorisation costs about five iterations on the benchmark models; 5-12 perform alike)
 KMAX = 8.0
 
 
-def _stepper(s: System, index2: bool, dropped: np.ndarray, ws=None, keep: bool = True):
-    """The compiled Newton stepper of a workspace (the system's default one)."""
+@dataclass(frozen=True, eq=False)
+class SolverMemory:
+    """What the linear solver of the Newton iterations carries from a step to the next, so that
+    a restart from a :class:`State`, in this process or another, continues bit for bit
+    (``se3dyn/_core/newton.hpp``).
+
+    Attributes
+    ----------
+    ref : ndarray (nv,)
+        Values of the iteration matrix (in the engine's value order) of the last full sparse LU
+        factorisation, whose pivot sequence the refactorisations of the following steps reuse.
+    """
+
+    ref: np.ndarray
+
+    def __post_init__(self):
+        self.ref.flags.writeable = False
+
+
+def _velocity_changes(s: System, v: np.ndarray) -> list[dict]:
+    """The free nodes with mass whose velocities in ``v`` (nq,) differ from the model's initial
+    ones by more than round-off (1e-9 of the largest velocity, linear and angular apart)."""
+    given = s.node_v0[s.node_free]
+    used = np.asarray(v)[s.node_dofidx]
+    d = used - given
+    out = []
+    if not len(given):
+        return out
+    sv = max(float(np.abs(given[:, :3]).max()), float(np.abs(used[:, :3]).max()), 1e-300)
+    sw = max(float(np.abs(given[:, 3:]).max()), float(np.abs(used[:, 3:]).max()), 1e-300)
+    for i, node in enumerate(s.node_free):
+        if not (s.node_mass[node] > 0 or np.any(s.node_J[node] != 0)):
+            continue  # massless: its velocities are the joints' to determine, not the user's
+        dv, dw = float(np.linalg.norm(d[i, :3])), float(np.linalg.norm(d[i, 3:]))
+        if dv > 1e-9 * sv or dw > 1e-9 * sw:
+            R = s.node_H0[node, :3, :3]  # material -> inertial components at t0
+            out.append(dict(node=s.node_names[node], dv=dv, dw=dw,
+                            given=np.concatenate([R @ given[i, :3], R @ given[i, 3:]]),
+                            used=np.concatenate([R @ used[i, :3], R @ used[i, 3:]])))
+    return out
+
+
+def initial_velocity_changes(s: System, st: State) -> list[dict]:
+    """What :meth:`GeneralizedAlpha.init` changed in the model's initial velocities to satisfy
+    the velocity constraints of the joints.
+
+    Returns
+    -------
+    list of dict, one per changed node: ``node`` (name), ``dv`` and ``dw`` (norms of the change
+    of the velocity, m/s, and of the angular velocity, rad/s), ``given`` and ``used`` (6,) the
+    model's and the state's velocity and angular velocity in the inertial frame. Empty when the
+    velocities were consistent.
+    """
+    return _velocity_changes(s, st.v)
+
+
+def _ws(s: System, ws=None):
+    """The workspace ``ws`` or the system's default one."""
     from se3dyn.system import workspace
 
-    return (ws or workspace(s)).stepper(index2, dropped, keep)
+    return ws or workspace(s)
+
+
+def _stepper(s: System, index2: bool, dropped: np.ndarray, ws=None, keep: bool = True):
+    """The compiled Newton stepper of a workspace (the system's default one)."""
+    return _ws(s, ws).stepper(index2, dropped, keep)
 
 
 @dataclass(frozen=True)
@@ -60,6 +121,9 @@ class State:
     dropped : ndarray (nr,)    redundant constraint equations left out (multiplier indices);
                                their multipliers stay zero (see :func:`GeneralizedAlpha.init`)
     h_last : float             size of the step that produced this state (0 initially)
+    solver : SolverMemory or None
+        The linear solver's memory after the step that produced this state; None: none (the
+        next step factorises afresh)
     """
 
     t: float
@@ -76,6 +140,7 @@ class State:
     power: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
     dropped: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
     h_last: float = 0.0
+    solver: SolverMemory | None = None
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -155,6 +220,13 @@ class GeneralizedAlpha:
     engine : {"auto", "compiled", "numpy"}
         Kept for compatibility: every evaluation and Newton iteration runs in the compiled
         engine (``se3dyn/_core``, C++ built at install); there is no second implementation.
+    initial_velocities : {"project", "strict"}
+        Initial velocities that violate the velocity constraints of the joints (a body given
+        only part of its motion, a velocity out of a hinge's plane): ``"project"`` (default)
+        makes them consistent, keeping consistent body velocities exactly (see
+        :meth:`init`; :func:`initial_velocity_changes` and ``simulate``'s stats and warning
+        report every change); ``"strict"`` refuses them with a :class:`ModelError` naming the
+        nodes.
     newton : {"modified", "full"}
         ``"modified"`` (default) factorises the iteration matrix at the
         predictor of each step and keeps it over the iterations while Newton contracts fast
@@ -171,6 +243,7 @@ class GeneralizedAlpha:
     redundant: str = "drop"
     engine: str = "auto"
     newton: str = "modified"
+    initial_velocities: str = "project"
 
     def __post_init__(self):
         r = self.rho_inf
@@ -191,6 +264,9 @@ class GeneralizedAlpha:
             raise ModelError("integrator", "redundant", "'drop' or 'error'", self.redundant)
         if self.newton not in ("modified", "full"):
             raise ModelError("integrator", "newton", "'modified' or 'full'", self.newton)
+        if self.initial_velocities not in ("project", "strict"):
+            raise ModelError("integrator", "initial_velocities", "'project' or 'strict'",
+                             self.initial_velocities)
         if self.engine not in ("auto", "compiled", "numpy"):
             raise ModelError("integrator", "engine", "'auto', 'compiled' or 'numpy'",
                              self.engine)
@@ -254,6 +330,18 @@ class GeneralizedAlpha:
                       ws=ws)
         if nm and np.any(v != 0):
             v = self._project_velocity(s, LinearSolver(s, drop=dropped), ev.values, v)
+            if self.initial_velocities == "strict":
+                changed = _velocity_changes(s, v)
+                if changed:
+                    c = changed[0]
+                    raise ModelError(
+                        f"node {c['node']!r}", "velocity",
+                        "initial velocities that satisfy the velocity constraints of the joints",
+                        f"velocity changed by {c['dv']:.3g} m/s and angular velocity by "
+                        f"{c['dw']:.3g} rad/s to satisfy them"
+                        + (f" ({len(changed) - 1} more nodes)" if len(changed) > 1 else ""),
+                        hint="give consistent velocities, or initial_velocities='project' "
+                             "to have them projected (reported)")
             ev = evaluate(s, H, HJ, zero, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0),
                           accel=True, ws=ws)
         # [M Phi_q^T; Phi_q 0][vd; lam] = [-r; arhs] with the acceleration-level constraints
@@ -261,7 +349,9 @@ class GeneralizedAlpha:
         rhs = np.concatenate([-ev.r, ev.arhs])
         rhs[nq + dropped] = 0.0
         # the index-3 layout; kept only when the steps use it too
-        code = _stepper(s, False, dropped, ws, keep=not self.index2).solve_values(ev.values, rhs)
+        keep = not self.index2
+        stp = _stepper(s, False, dropped, ws, keep=keep)
+        code = stp.solve_values(ev.values, rhs)
         if code != 0 or not np.all(np.isfinite(rhs)):
             raise SimulationError(
                 f"t={t0:.6g} (initial accelerations): the iteration matrix is singular; typical "
@@ -271,7 +361,7 @@ class GeneralizedAlpha:
         # powers at t0 (velocity-level: vd does not enter)
         return State(t=t0, H=H, HJ=HJ, v=v, vd=rhs[:nq].copy(), a=rhs[:nq].copy(),
                      lam=rhs[nq:].copy(), alpha=np.zeros(nq), power=ev.energy[3:6].copy(),
-                     dropped=dropped)
+                     dropped=dropped, solver=_ws(s, ws).memory(stp) if keep else None)
 
     @staticmethod
     def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,
@@ -333,6 +423,8 @@ class GeneralizedAlpha:
         if st.h_last > 0 and h != st.h_last:
             a_n = st.vd + (h / st.h_last) * (st.a - st.vd)
         stp = _stepper(s, self.index2, st.dropped, ws)
+        w = _ws(s, ws)
+        w.adopt(stp, st.solver)
         F = s.M + s.m
         Hall = np.ascontiguousarray(np.concatenate([st.H, st.HJ]).reshape(F, 4, 4))
         Hout = np.empty_like(Hall)
@@ -340,7 +432,7 @@ class GeneralizedAlpha:
         alpha, v, vd, a, n = (np.zeros(nq) for _ in range(5))
         lam = np.zeros(nm)
         c = np.ascontiguousarray
-        status, it, er, ep, nfac = stp.step(
+        status, it, er, ep, nfac, en = stp.step(
             Hall, c(st.alpha, float), c(st.v, float), c(st.vd, float), c(a_n, float),
             c(st.lam, float), inputs["u"], float(h), am, af, g, b, self.tol_residual,
             self.tol_constraint * s.length_scale, float(s.length_scale), self.max_iter,
@@ -363,8 +455,9 @@ class GeneralizedAlpha:
         # (beta - 1/6) h^2 (a_{n+1} - a_n)
         err = (b - 1.0 / 6.0) * h * h * (a - a_n)
         new = State(t=t1, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
-                    dropped=st.dropped, h_last=h)
-        e = energies(s, new, inputs, ws)
+                    dropped=st.dropped, h_last=h, solver=w.memory(stp))
+        # energies and powers of the converged iterate (the compiled loop's too)
+        e = dict(kinetic=en[0], potential=en[1], spring=en[2], power=np.array(en[3:6]))
         p = e["power"]
         # trapezoidal accumulation of the powers (second order, like the integrator)
         new = dataclasses.replace(new, power=p,

@@ -180,19 +180,6 @@ def _null_space(Jsc: np.ndarray, rcond: float = _RCOND) -> tuple[int, np.ndarray
     return r, Vt[r:].T
 
 
-def _energies(s: System, H: np.ndarray, v: np.ndarray, alpha: np.ndarray) -> tuple:
-    """Kinetic (Eq. (47)), gravity potential and spring (Eq. (62)) energies of a state."""
-    vb = v[s.node_dofidx]
-    mass = s.node_mass[s.node_free]
-    J = s.node_J[s.node_free]
-    kin = 0.5 * float(np.sum(mass * np.einsum("ni,ni->n", vb[:, :3], vb[:, :3]))
-                      + np.einsum("ni,nij,nj->", vb[:, 3:], J, vb[:, 3:]))
-    pot = -float(np.sum(s.node_mass * (H[:, :3, 3] @ s.gravity)))
-    e = alpha - s.dof_reference
-    spring = 0.5 * float(np.sum(s.dof_stiffness * e * e))
-    return kin, pot, spring
-
-
 # ---------------------------------------------------------------------------------------------
 class _Accessors:
     """Accessors by node and joint name on arrays with a leading axis (one row per configuration).
@@ -287,6 +274,12 @@ def _model_at(s: System, H: np.ndarray, alpha: np.ndarray, v: np.ndarray) -> Mod
     ``X_B' = H_B^-1 H(I, at')`` we have ``H_B X_B = H_B X_B' H(Q_B, 0)`` and the joint basis
     rotated by ``Q_B`` (like the axes of joints between node frames) describes the same
     constraint; ``X_A' = H_A^-1 H(I, at')`` then follows from ``H_B X_B = H_A X_A H_J``.
+
+    Points given in the inertial frame of the initial configuration follow their nodes: centres
+    of mass, points of application of loads, the points of spring-dampers (same free length).
+    Bushings get
+    the frame attached to node a in H as their point and orientation and the relative motion
+    reached as their initial deformation: same attached frames, same loading.
     """
     model = s.model
     nodes = []
@@ -305,8 +298,9 @@ def _model_at(s: System, H: np.ndarray, alpha: np.ndarray, v: np.ndarray) -> Mod
             d = s.node_dofadr[i]
             vel = np.concatenate([R @ v[d:d + 3], R @ v[d + 3:d + 6]])
         J = Qi @ n.inertia @ Qi.T
+        com = None if n.com is None else R @ s.node_com[i] + H[i, :3, 3]
         nodes.append(dataclasses.replace(n, position=H[i, :3, 3].copy(), orientation=R,
-                                         inertia=0.5 * (J + J.T), velocity=vel))
+                                         inertia=0.5 * (J + J.T), velocity=vel, com=com))
     joints = []
     for jj, j in enumerate(model.joints):
         Qb = Q[j.node_b]
@@ -332,7 +326,32 @@ def _model_at(s: System, H: np.ndarray, alpha: np.ndarray, v: np.ndarray) -> Mod
                 upd["control"] = dataclasses.replace(
                     j.control, target=_shift_tf(j.control.target, a, item, "control.target"))
         joints.append(dataclasses.replace(j, **upd))
-    return dataclasses.replace(model, nodes=tuple(nodes), joints=tuple(joints))
+    Hr = lie.make_frame(np.array([n.orientation for n in nodes]).reshape(len(nodes), 3, 3),
+                        np.array([n.position for n in nodes]).reshape(len(nodes), 3))
+    nidx = {n.name: i for i, n in enumerate(model.nodes)}
+    loads = []
+    for ld in model.loads:  # points of application where they are in H
+        at = ld.at
+        if at is not None:
+            i = nidx[ld.node]
+            at = Hr[i, :3, :3] @ (s.node_H0[i, :3, :3].T @ (at - s.node_H0[i, :3, 3])) \
+                + Hr[i, :3, 3]
+        loads.append(dataclasses.replace(ld, at=at))
+    springs = tuple(dataclasses.replace(sp, at_a=Hr[a, :3, :3] @ ca + Hr[a, :3, 3],
+                                        at_b=Hr[b, :3, :3] @ cb + Hr[b, :3, 3])
+                    for sp, (a, b, ca, cb, *_) in zip(model.springs, s.springs, strict=True))
+    bushings = []
+    if model.bushings:
+        from se3dyn.elements import bushing
+
+        fa, fb, Xa, Xb = bushing.frames(s)
+        for e, bu in enumerate(model.bushings):
+            Ha, Hb = Hr[fa[e]] @ Xa[e], Hr[fb[e]] @ Xb[e]
+            bushings.append(dataclasses.replace(
+                bu, at=Ha[:3, 3].copy(), orientation=Ha[:3, :3].copy(),
+                deformation=lie.log_se3(lie.inverse(Ha) @ Hb)))
+    return dataclasses.replace(model, nodes=tuple(nodes), joints=tuple(joints),
+                               loads=tuple(loads), springs=springs, bushings=tuple(bushings))
 
 
 # =============================================================================================
@@ -801,7 +820,8 @@ class KinematicsResult(_Accessors):
     efforts : dict                 driver name -> ndarray (n, k): the force/torque an actuator in
                                    that joint must exert (actuator sign of Eq. (66): power
                                    ``effort . alpha_dot``)
-    kinetic, potential, spring : ndarray (n,)   energies (Eq. (47), gravity, Eq. (62))
+    kinetic, potential, spring : ndarray (n,)   energies (Eq. (47), gravity, elastic: Eq. (62)
+                                   and the elastic elements, e.g. spring-dampers, bushings)
     iterations : ndarray (n,) int  Newton iterations for the positions
     """
 
@@ -1108,7 +1128,9 @@ def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol:
         out_v[i], out_vd[i] = v, vd
         out_lam[i] = sol[:nm]
         out_mu[i] = sol[nm:]
-        energy[i] = _energies(s, H, v, evd.alpha)
+        # kinetic (Eq. (47)), gravity potential, elastic energy of every element (joint
+        # springs Eq. (62), spring-dampers, bushings), by the element kernels
+        energy[i] = evd.energy[:3]
     efforts = {}
     off = 0
     for name, dofs, _ in drv:

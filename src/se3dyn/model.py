@@ -3,8 +3,10 @@
 A model is what the user describes, with names, not numbers: nodes (frames with optional mass and
 inertia, Sec. 2 and 6), kinematic joints between two nodes (``H_B = H_A H_J``, Eq. (7), or, with
 an attachment point ``at``, ``H_B X_B = H_A X_A H_J``) with their force elements (springs
-Eq. (62), dampers Eq. (64), actuators Eq. (66), PD control laws), nodal loads (Eq. (66)) and
-gravity. :func:`se3dyn.system.compile_model` turns it into arrays.
+Eq. (62), dampers Eq. (64), actuators Eq. (66), PD control laws), nodal loads (Eq. (66)),
+point spring-dampers, geometrically exact beams (chains of SE(3) beam elements between nodes,
+:meth:`ModelBuilder.beam`, :mod:`se3dyn.elements.beam`) and gravity.
+:func:`se3dyn.system.compile_model` turns it into arrays.
 
 Initial configuration (Sec. 5.2): node frames are ``H(R0, x0)`` with ``R0`` the identity unless
 an ``orientation`` is given; joint transformations start at ``H_J0 = H_A0^-1 H_B0`` so that the
@@ -33,8 +35,8 @@ from se3dyn.joints import JOINT_TYPES, is_abelian, unit_vector
 from se3dyn.timefunc import Component, TimeFunction, as_timefunc
 from se3dyn.visuals import VisualSpec, make_visual
 
-__all__ = ["NodeSpec", "JointSpec", "LoadSpec", "SpringDamperSpec", "PD", "Model",
-           "ModelBuilder", "VisualSpec"]
+__all__ = ["NodeSpec", "JointSpec", "LoadSpec", "SpringDamperSpec", "BushingSpec", "BeamSpec",
+           "PD", "Model", "ModelBuilder", "VisualSpec"]
 
 
 @dataclass(frozen=True)
@@ -186,6 +188,80 @@ class SpringDamperSpec:
 
 
 @dataclass(frozen=True)
+class BushingSpec:
+    """A bushing: stiffness and damping on the relative motion of two frames attached to two
+    nodes at the point ``at``, ``d = log(H_a'^-1 H_b')`` (see :mod:`se3dyn.elements.bushing`).
+
+    Attributes
+    ----------
+    name, node_a, node_b : str
+    at : ndarray (3,)
+        The bushing point in the inertial frame of the initial configuration: the origin of the
+        frame attached to node a at t0 (and of the one attached to node b, without
+        ``deformation``).
+    stiffness, damping : ndarray (6, 6)
+        Symmetric positive semi-definite K and D on ``(d_U, d_Omega)``, translation first, in
+        the axes of the attached frames: N/m, N/rad, N m/rad (K); N s/m, N s/rad, N m s/rad (D).
+    orientation : ndarray (3, 3)
+        Rotation of the frame attached to node a at t0 (columns: the bushing axes in the
+        inertial frame); the identity by default.
+    deformation : ndarray (6,)
+        Relative motion d at t0 (a preloaded bushing): the frame attached to node b is
+        ``H(orientation, at) exp(deformation)`` at t0; zero by default.
+    """
+
+    name: str
+    node_a: str
+    node_b: str
+    at: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    orientation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    deformation: np.ndarray = field(default_factory=lambda: np.zeros(6))
+
+
+@dataclass(frozen=True)
+class BeamSpec:
+    """A geometrically exact beam on SE(3): a chain of two-node elements between its nodes
+    (element ``e`` joins ``nodes[e]`` and ``nodes[e + 1]``), see :mod:`se3dyn.elements.beam`.
+
+    Attributes
+    ----------
+    name : str
+    nodes : tuple of str, length n + 1
+        The nodes along the beam (the first and last given by the user, the others created by
+        the builder and named ``f"{name}/{i}"``).
+    reference : ndarray, shape (n + 1, 4, 4)
+        Stress-free section frames (inertial frame): axis 1 along the beam, axes 2 and 3 the
+        principal axes of the section.
+    offsets : ndarray, shape (n + 1, 4, 4)
+        Constant section frames in the material frames of the nodes, ``X_i = H_i0^-1 H_ref,i``
+        (the identity for the nodes the builder creates).
+    stiffness : ndarray, shape (6, 6)
+        Section stiffness (translation first): ``diag(EA, GA2, GA3, GJ, EI2, EI3)``.
+    damping : ndarray, shape (6, 6)
+        Section damping on the strain rates (``f = K eps + D deps/dt``).
+    mass_per_length : float
+        kg/m.
+    rotary_inertia : ndarray, shape (3,)
+        Rotary inertia of the section per unit length about axes 1, 2, 3 (kg m).
+    """
+
+    name: str
+    nodes: tuple[str, ...]
+    reference: np.ndarray
+    offsets: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    mass_per_length: float
+    rotary_inertia: np.ndarray
+
+    @property
+    def elements(self) -> int:
+        return len(self.nodes) - 1
+
+
+@dataclass(frozen=True)
 class Model:
     """A validated, immutable model. Build it with :class:`ModelBuilder`."""
 
@@ -198,6 +274,8 @@ class Model:
     springs: tuple[SpringDamperSpec, ...] = ()
     #: shapes drawn by the viewer (never used by the physics), see :mod:`se3dyn.visuals`
     visuals: tuple[VisualSpec, ...] = ()
+    beams: tuple[BeamSpec, ...] = ()
+    bushings: tuple[BushingSpec, ...] = ()
 
     def node(self, name: str) -> NodeSpec:
         """The node called ``name`` (KeyError listing valid names otherwise)."""
@@ -284,6 +362,40 @@ def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.nd
     return _bounded(a, item, fld, v)
 
 
+def _sym6(v: Any, item: str, fld: str) -> np.ndarray:
+    """A symmetric positive semi-definite 6 x 6 matrix from one number (all six diagonal
+    values), 6 diagonal values or a 6 x 6 matrix."""
+    expected = ("a non-negative number, 6 non-negative diagonal values or a symmetric positive "
+                "semi-definite 6 x 6 matrix")
+    try:
+        if isinstance(v, bool | str | bytes) or v is None:
+            raise TypeError(v)
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(item, fld, expected, v) from None
+    if a.shape not in ((), (6,), (6, 6)):
+        raise ModelError(item, fld, expected, v, f"got an array of shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ModelError(item, fld, "finite values (" + expected + ")", v)
+    _bounded(a, item, fld, v)
+    if a.ndim < 2:
+        if np.any(a < 0):
+            raise ModelError(item, fld, "non-negative diagonal values", v,
+                             "a negative stiffness or damping creates energy")
+        return np.diag(np.broadcast_to(a, (6,))).astype(float)
+    tol = 1e-12 * max(1.0, float(np.abs(a).max()))
+    if np.abs(a - a.T).max() > tol:
+        i, j = np.unravel_index(int(np.argmax(np.abs(a - a.T))), a.shape)
+        raise ModelError(item, fld, "a symmetric 6 x 6 matrix", v,
+                         f"entries [{i}][{j}] = {a[i, j]:g} and [{j}][{i}] = {a[j, i]:g} differ")
+    a = 0.5 * (a + a.T)
+    ev = np.linalg.eigvalsh(a)
+    if ev[0] < -1e-12 * max(1.0, float(np.abs(ev).max())):
+        raise ModelError(item, fld, "a positive semi-definite 6 x 6 matrix", v,
+                         f"eigenvalue {ev[0]:g} < 0: the element would create energy")
+    return a
+
+
 def _rotation(v: Any, item: str, fld: str) -> np.ndarray:
     try:
         R = np.asarray(v, dtype=float)
@@ -322,8 +434,10 @@ class ModelBuilder:
         self._joints: dict[str, JointSpec] = {}
         self._loads: dict[str, LoadSpec] = {}
         self._springs: dict[str, SpringDamperSpec] = {}
+        self._bushings: dict[str, BushingSpec] = {}
         self._composites: dict[str, tuple[str, ...]] = {}
         self._visuals: dict[str, VisualSpec] = {}
+        self._beams: dict[str, BeamSpec] = {}
 
     # -----------------------------------------------------------------------------------------
     def node(self, name: str, position: Any = (0.0, 0.0, 0.0), *, orientation: Any = None,
@@ -728,6 +842,278 @@ class ModelBuilder:
                                                vals["stiffness"], vals["damping"], L0)
 
     # -----------------------------------------------------------------------------------------
+    def beam(self, name: str, node_a: str, node_b: str, *, elements: int | None = None,
+             EA: Any, GA: Any, GJ: Any, EI: Any, mass_per_length: Any = 0.0,
+             rotary_inertia: Any = None, damping: Any = 0.0, axis2: Any = None,
+             frames: Any = None, initial_velocity: str = "rest") -> None:
+        """Add a geometrically exact beam between two existing nodes, meshed into two-node SE(3)
+        elements (Sonneville, Cardona & Bruls, Comput. Methods Appl. Mech. Engrg. 268 (2014)
+        451-474, doi:10.1016/j.cma.2013.10.008; see :mod:`se3dyn.elements.beam`).
+
+        The builder creates the intermediate nodes ``f"{name}/1"`` ... ``f"{name}/{n-1}"``
+        (their frames are the section frames: axis 1 along the beam). Joints, springs and loads
+        attach to any of them. The end nodes keep their own frames: the beam acts on section
+        frames rigidly attached to them.
+
+        Parameters
+        ----------
+        name : str
+            Unique beam name.
+        node_a, node_b : str
+            The existing end nodes (either may be fixed, not both).
+        elements : int, optional
+            Number of elements n (>= 1); 1 by default, or the number of ``frames`` minus one.
+        EA, GJ : float
+            Axial and torsional stiffness (N, N m^2), > 0.
+        GA, EI : float or (float, float)
+            Shear stiffness along section axes 2, 3 (N) and bending stiffness about them
+            (N m^2): one number for an isotropic section, or a pair. See :mod:`se3dyn.sections`
+            for the values of common sections.
+        mass_per_length : float
+            kg/m, >= 0; lumped: each element puts half its mass and rotary inertia on each of
+            its nodes.
+        rotary_inertia : array_like (3,), optional
+            Rotary inertia of the section per unit length about axes 1, 2, 3 (kg m), positive
+            when ``mass_per_length > 0`` (``density * (I2 + I3, I2, I3)``).
+        damping : float or array_like (6,)
+            Damping on the strain rates, ``f = K eps + D deps/dt``: a number beta (s) for the
+            stiffness-proportional ``D = beta K``, or the diagonal of D (6 numbers, >= 0).
+        axis2 : array_like (3,), optional
+            Straight beam: direction of section axis 2 (orthogonalised against the beam axis);
+            by default ``z x axis1`` (horizontal; the global y axis for a vertical beam).
+        frames : array_like (n + 1, 4, 4), optional
+            A curved or pre-twisted beam: its stress-free section frames, node A to node B
+            (homogeneous 4 x 4, inertial frame, axis 1 along the beam); the first and last
+            positions must be those of node_a and node_b. Consecutive frames must be less
+            than pi apart in rotation. Replaces the straight segment and ``axis2``.
+        initial_velocity : {"rest", "rigid"}
+            Initial velocity of the intermediate nodes: at rest, or moving rigidly with node_a
+            (``v = v_a + w_a x (x - x_a)``, ``w = w_a``, inertial frame); the end nodes keep
+            theirs.
+        """
+        _check_name("beam", name)
+        item = f"beam {name!r}"
+        if name in self._beams:
+            raise ModelError(item, "name", "a unique beam name", name, "defined twice")
+        for fld, nd in (("node_a", node_a), ("node_b", node_b)):
+            if not isinstance(nd, str) or nd not in self._nodes:
+                raise ModelError(item, fld, "the name of a defined node", nd,
+                                 _unknown("node", nd, list(self._nodes))
+                                 if isinstance(nd, str) else None)
+        if node_a == node_b:
+            raise ModelError(item, "node_b", "a node other than node_a", node_b)
+        na, nb = self._nodes[node_a], self._nodes[node_b]
+        if elements is not None and (not isinstance(elements, int | np.integer)
+                                     or isinstance(elements, bool) or elements < 1
+                                     or elements > 100000):
+            raise ModelError(item, "elements", "an integer >= 1", elements)
+
+        def nums(fld, v, sizes, what, positive):
+            """v as an array of one of ``sizes`` (a single number fills the first size)."""
+            try:
+                if isinstance(v, bool | str):
+                    raise TypeError(v)
+                a = np.asarray(v, dtype=float)
+            except (TypeError, ValueError):
+                raise ModelError(item, fld, what, v) from None
+            if a.ndim == 0 and sizes[0] > 1:
+                a = np.full(sizes[0], float(a))
+            ok = ((a.ndim == 0 and sizes[0] == 1)
+                  or (a.ndim == 1 and a.shape[0] in sizes and a.shape[0] > 1))
+            if (not ok or not np.all(np.isfinite(a)) or np.any(np.abs(a) > MAX_ABS)
+                    or np.any(a <= 0 if positive else a < 0)):
+                raise ModelError(item, fld, what, v)
+            return a
+
+        ea = float(nums("EA", EA, (1,), "a positive number (N)", True))
+        gj = float(nums("GJ", GJ, (1,), "a positive number (N m^2)", True))
+        ga = nums("GA", GA, (2,), "a positive number or a pair (GA2, GA3) (N)", True)
+        ei = nums("EI", EI, (2,), "a positive number or a pair (EI2, EI3) (N m^2)", True)
+        Kd = np.array([ea, ga[0], ga[1], gj, ei[0], ei[1]])
+        try:
+            mpl = float(mass_per_length)
+        except (TypeError, ValueError):
+            raise ModelError(item, "mass_per_length", "a non-negative number (kg/m)",
+                             mass_per_length) from None
+        if (isinstance(mass_per_length, bool) or not math.isfinite(mpl) or mpl < 0
+                or mpl > MAX_ABS):
+            raise ModelError(item, "mass_per_length", "a non-negative number (kg/m)",
+                             mass_per_length)
+        rot = (np.zeros(3) if rotary_inertia is None
+               else nums("rotary_inertia", rotary_inertia, (3,), "three non-negative values "
+                         "(kg m) about section axes 1, 2, 3", False))
+        if mpl > 0 and np.any(rot <= 0):
+            raise ModelError(item, "rotary_inertia", "three positive values (kg m) for a beam "
+                             "with mass", rotary_inertia, "density * (I2 + I3, I2, I3); the "
+                             "helpers of se3dyn.sections give them")
+        if mpl == 0 and np.any(rot != 0):
+            raise ModelError(item, "rotary_inertia", "no rotary inertia without a mass",
+                             rotary_inertia, "give mass_per_length")
+        if rot[0] > (rot[1] + rot[2]) * (1 + 1e-9) or rot[1] > (rot[0] + rot[2]) * (1 + 1e-9) \
+                or rot[2] > (rot[0] + rot[1]) * (1 + 1e-9):
+            raise ModelError(item, "rotary_inertia", "moments satisfying the triangle "
+                             "inequality (as density * (I2 + I3, I2, I3) does)", rotary_inertia)
+        Dd = nums("damping", damping, (1, 6), "a non-negative number beta (s, D = beta K) or "
+                  "the 6 non-negative diagonal entries of D", False)
+        Dd = Dd * Kd if Dd.ndim == 0 else Dd
+        if frames is None:
+            n = 1 if elements is None else int(elements)
+            xa, xb = na.position, nb.position
+            Lc = float(np.linalg.norm(xb - xa))
+            if Lc == 0:
+                raise ModelError(item, "node_b", "a node at another position than node_a",
+                                 node_b, "the beam has zero length")
+            e1 = (xb - xa) / Lc
+            if axis2 is None:
+                a2 = np.cross([0.0, 0.0, 1.0], e1)
+                if np.linalg.norm(a2) < 1e-6:
+                    a2 = np.array([0.0, 1.0, 0.0])
+            else:
+                a2 = _vec(axis2, 3, item, "axis2")
+            a2 = a2 - (a2 @ e1) * e1
+            if np.linalg.norm(a2) < 1e-9 * max(1.0, float(np.linalg.norm(a2 + e1))):
+                raise ModelError(item, "axis2", "a direction not parallel to the beam", axis2)
+            e2 = a2 / np.linalg.norm(a2)
+            R = np.column_stack([e1, e2, np.cross(e1, e2)])
+            F = np.broadcast_to(np.eye(4), (n + 1, 4, 4)).copy()
+            F[:, :3, :3] = R
+            F[:, :3, 3] = xa + np.linspace(0.0, 1.0, n + 1)[:, None] * (xb - xa)
+        else:
+            if axis2 is not None:
+                raise ModelError(item, "axis2", "no axis2 with frames (the frames give the "
+                                 "section axes)", axis2)
+            try:
+                F = np.array(frames, dtype=float)
+            except (TypeError, ValueError):
+                raise ModelError(item, "frames", "an array of 4x4 frames, shape (n + 1, 4, 4)",
+                                 frames) from None
+            if F.ndim != 3 or F.shape[1:] != (4, 4) or len(F) < 2 or not np.all(np.isfinite(F)):
+                raise ModelError(item, "frames", "an array of 4x4 frames, shape (n + 1, 4, 4)",
+                                 frames)
+            n = len(F) - 1
+            if elements is not None and elements != n:
+                raise ModelError(item, "elements", f"{n} (the number of frames minus one) or "
+                                 "nothing", elements)
+            for i in range(n + 1):
+                _rotation(F[i, :3, :3], item, f"frames[{i}]")
+                if np.any(F[i, 3] != [0, 0, 0, 1]):
+                    raise ModelError(item, f"frames[{i}]", "a homogeneous frame (last row "
+                                     "0, 0, 0, 1)", F[i])
+            scale = max(1.0, float(np.abs(F[:, :3, 3]).max()))
+            for i, nd in ((0, na), (n, nb)):
+                if np.linalg.norm(F[i, :3, 3] - nd.position) > 1e-9 * scale:
+                    raise ModelError(item, f"frames[{i}]", f"a frame at the position of node "
+                                     f"{nd.name!r} {nd.position.tolist()}", F[i, :3, 3])
+        from se3dyn import lie
+        for i in range(n):
+            d0 = lie.log_se3(lie.inverse(F[i]) @ F[i + 1])
+            ang = float(np.linalg.norm(d0[3:]))
+            if ang >= 0.95 * math.pi:
+                raise ModelError(item, "frames", "consecutive frames less than 0.95 pi apart "
+                                 "in rotation", f"{ang:.4g} rad between frames {i} and {i + 1}",
+                                 "use more elements")
+            if np.linalg.norm(d0[:3]) == 0:
+                raise ModelError(item, "frames", "consecutive frames at distinct positions",
+                                 f"element {i} has zero length")
+        names = [node_a] + [f"{name}/{i}" for i in range(1, n)] + [node_b]
+        for nm_ in names[1:-1]:
+            _check_name("node", nm_)
+            if nm_ in self._nodes:
+                raise ModelError(item, "name", f"a name whose intermediate node {nm_!r} is "
+                                 "free", name, "a node of that name exists")
+        if initial_velocity not in ("rest", "rigid"):
+            raise ModelError(item, "initial_velocity", "'rest' or 'rigid'", initial_velocity)
+        if na.fixed and nb.fixed and n == 1:
+            raise ModelError(item, "node_b", "at least one free node", node_b,
+                             "both nodes are fixed: the element does nothing")
+        X = np.broadcast_to(np.eye(4), (n + 1, 4, 4)).copy()
+        for i, nd in ((0, na), (n, nb)):
+            H0 = np.eye(4)
+            H0[:3, :3], H0[:3, 3] = nd.orientation, nd.position
+            X[i] = lie.inverse(H0) @ F[i]
+            X[i, :3, 3] = 0.0  # the node sits on the beam end
+        for i in range(1, n):
+            vel = np.zeros(6)
+            if initial_velocity == "rigid":
+                wa = na.velocity[3:]
+                vel = np.concatenate([na.velocity[:3] + np.cross(wa, F[i, :3, 3] - na.position),
+                                      wa])
+            self._nodes[names[i]] = NodeSpec(names[i], F[i, :3, 3].copy(), F[i, :3, :3].copy(),
+                                             0.0, np.zeros((3, 3)), False, vel)
+        self._beams[name] = BeamSpec(name, tuple(names), F, X, np.diag(Kd), np.diag(Dd), mpl,
+                                     rot)
+
+    # -----------------------------------------------------------------------------------------
+    def bushing(self, name: str, node_a: str, node_b: str, *, at: Any = None, stiffness: Any,
+                damping: Any = 0.0, orientation: Any = None, deformation: Any = None) -> None:
+        """Add a bushing: 6 x 6 stiffness and damping on the relative motion of two frames
+        attached to two nodes.
+
+        Both frames sit at the point ``at`` with the inertial orientation in the initial
+        configuration (``X = H0^-1 H(I, at)`` on each node, the convention of joints with
+        ``at``; ``H(orientation, at)`` with an ``orientation``) and move with their nodes;
+        their relative motion is the twist ``d = log(H_a'^-1 H_b')`` (6,), translation first,
+        zero initially (``deformation`` otherwise). The bushing stores the energy
+        ``d^T K d / 2`` and dissipates ``d_dot^T D d_dot``, with ``d_dot = T(d)^-1 w`` the rate
+        of the log coordinates (Eqs. (26)-(27)), ``w`` the relative velocity of the frames: the
+        wrench ``T(d)^-T (K d + D d_dot)`` acts on frame b', its opposite on frame a'. The
+        relative rotation angle must stay below pi (principal logarithm).
+
+        Examples
+        --------
+        >>> mb.bushing("mount", "ground", "engine", at=(0.3, 0.2, 0.0),
+        ...            stiffness=(2e5, 2e5, 3e5, 1e3, 1e3, 1e3), damping=200.0)  # doctest: +SKIP
+
+        Parameters
+        ----------
+        name : str
+            Unique name.
+        node_a, node_b : str
+            The nodes the frames are attached to (either may be fixed, not both).
+        at : array_like (3,), optional
+            The bushing point in the inertial frame of the initial configuration; the position
+            of ``node_b`` by default.
+        stiffness : float, array_like (6,) or (6, 6)
+            K on ``(d_U, d_Omega)`` in the axes of the attached frames (the inertial axes at
+            t0, or the columns of ``orientation``): six diagonal values
+            ``(kx, ky, kz, krx, kry, krz)`` (N/m, N m/rad), one value for all six, or a
+            symmetric positive semi-definite 6 x 6 matrix (coupling blocks in N/rad).
+        damping : float, array_like (6,) or (6, 6)
+            D on ``d_dot``, same forms (N s/m, N m s/rad); zero by default.
+        orientation : array_like (3, 3), optional
+            Rotation of the bushing frame at t0: its columns are the bushing axes in the
+            inertial frame (the identity by default).
+        deformation : array_like (6,), optional
+            Relative motion d at t0, in the bushing axes (a preloaded bushing; rotation angle
+            below pi): the frame attached to node b starts at ``H(orientation, at)
+            exp(deformation)``, the one attached to node a at ``H(orientation, at)``. Zero by
+            default: the bushing starts unloaded.
+        """
+        _check_name("bushing", name)
+        item = f"bushing {name!r}"
+        if name in self._bushings:
+            raise ModelError(item, "name", "a unique bushing name", name, "defined twice")
+        for fld, nd in (("node_a", node_a), ("node_b", node_b)):
+            if not isinstance(nd, str) or nd not in self._nodes:
+                raise ModelError(item, fld, "the name of a defined node", nd,
+                                 _unknown("node", nd, list(self._nodes))
+                                 if isinstance(nd, str) else None)
+        if node_a == node_b:
+            raise ModelError(item, "node_b", "a node other than node_a", node_b)
+        if self._nodes[node_a].fixed and self._nodes[node_b].fixed:
+            raise ModelError(item, "node_b", "at least one free node", node_b,
+                             "both nodes are fixed: the element does nothing")
+        p = self._nodes[node_b].position.copy() if at is None else _vec(at, 3, item, "at")
+        K = _sym6(stiffness, item, "stiffness")
+        D = _sym6(damping, item, "damping")
+        R = np.eye(3) if orientation is None else _rotation(orientation, item, "orientation")
+        d0 = np.zeros(6) if deformation is None else _vec(deformation, 6, item, "deformation")
+        if np.linalg.norm(d0[3:]) >= math.pi:
+            raise ModelError(item, "deformation", "a rotation part of norm below pi (the "
+                             "principal logarithm)", deformation)
+        self._bushings[name] = BushingSpec(name, node_a, node_b, p, K, D, R, d0)
+
+    # -----------------------------------------------------------------------------------------
     def visual(self, name: str, node: str, shape: str, *, size: Any = None, color: Any = None,
                offset: Any = None, orientation: Any = None, axis: Any = None,
                file: Any = None) -> None:
@@ -778,14 +1164,18 @@ class ModelBuilder:
         for j in self._joints.values():
             attached[j.node_a] += 1
             attached[j.node_b] += 1
+        for b in self._beams.values():
+            for nd in b.nodes:
+                attached[nd] += 1
         loaded = {ld.node for ld in self._loads.values()}
         for n in self._nodes.values():
             if not n.fixed and n.mass == 0 and attached[n.name] == 0:
-                raise ModelError(f"node {n.name!r}", "mass", "a mass, or a joint attaching it",
-                                 0.0, "a free massless node with no joint has no equation of "
+                raise ModelError(f"node {n.name!r}", "mass",
+                                 "a mass, or a joint or beam attaching it", 0.0, "a free massless node with no joint has no equation of "
                                  "motion" + (" (a load alone is not enough)" if n.name in loaded
                                              else ""))
         return Model(tuple(self._nodes.values()), tuple(self._joints.values()),
                      tuple(self._loads.values()), self._gravity.copy(), dict(self._composites),
                      self._name, tuple(self._springs.values()),
-                     visuals=tuple(self._visuals.values()))
+                     visuals=tuple(self._visuals.values()),
+                     bushings=tuple(self._bushings.values()), beams=tuple(self._beams.values()))

@@ -18,9 +18,12 @@ simulation settings, with names instead of numbers::
 >>> result = se3dyn.simulate(model, **settings)                   # doctest: +SKIP
 
 One source of truth: :data:`FIELDS` lists, per section, every field with its type, default and
-description. The loader validates against it, :func:`json_schema` turns it into a JSON Schema
-(draft 2020-12, ``docs/model-file.schema.json``) and :func:`markdown_reference` into the
-field-by-field reference of ``docs/model-file.md``.
+description; the sections of the element types (``joints``, ``loads``, ``springs``, ``bushings``,
+...) come from their modules in :mod:`se3dyn.elements` (``model_file(mf)`` returning an
+:class:`ElementSection`: fields, builder call, saver), in registry order. The loader
+validates against it, :func:`json_schema` turns it into a JSON Schema (draft 2020-12,
+``docs/model-file.schema.json``) and :func:`markdown_reference` into the field-by-field
+reference of ``docs/model-file.md``.
 
 Safety: files are parsed with a :class:`yaml.SafeLoader` subclass (nothing is ever evaluated as
 code); YAML tags, anchors and aliases are rejected (no "billion laughs"), and file size, nesting
@@ -36,6 +39,8 @@ import json
 import math
 import os
 import re
+import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -46,13 +51,14 @@ from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from se3dyn.errors import ModelError
 from se3dyn.joints import JOINT_TYPES
-from se3dyn.model import PD, Model, ModelBuilder
-from se3dyn.timefunc import Component, Constant, Ramp, Sine, Step, Table, TimeFunction
+from se3dyn.model import Model, ModelBuilder
+from se3dyn.timefunc import Constant, Ramp, Sine, Step, Table
 from se3dyn.visuals import SHAPES, visual_to_dict
 
 __all__ = [
     "FORMAT_VERSION", "FIELDS", "ModelFileError", "load_model", "loads_model", "save_model",
     "json_schema", "markdown_reference", "write_schema", "parse_model_data", "format_model_data",
+    "ElementSection", "ELEMENT_SECTIONS",
 ]
 
 #: The format version written by :func:`save_model` and the only one :func:`loads_model` reads.
@@ -459,6 +465,30 @@ class Mat(_Type):
 
 
 @dataclass(frozen=True)
+class MatList(_Type):
+    """A list of ``lo``..``hi`` matrices of ``rows`` x ``cols`` numbers (lists of rows)."""
+
+    rows: int = 4
+    cols: int = 4
+    lo: int = 2
+    hi: int = 100001
+
+    @property
+    def text(self) -> str:
+        return f"list of {self.rows} x {self.cols} matrices (lists of rows)"
+
+    def schema(self) -> dict:
+        return {"type": "array", "items": Mat(self.rows, self.rows, self.cols).schema(),
+                "minItems": self.lo, "maxItems": self.hi}
+
+    def convert(self, ctx, node, item, fld):
+        if not isinstance(node, SequenceNode) or not self.lo <= len(node.value) <= self.hi:
+            ctx.fail(node, item, fld, f"a {self.text}, {self.lo} or more")
+        m = Mat(self.rows, self.rows, self.cols)
+        return [m.convert(ctx, x, item, f"{fld}[{i}]") for i, x in enumerate(node.value)]
+
+
+@dataclass(frozen=True)
 class OneOf(_Type):
     """The first alternative whose YAML shape matches (scalar / list / list of lists)."""
 
@@ -611,12 +641,61 @@ class Field:
 
 _V3 = Vec(3)
 _M33 = Mat(3, 3, 3)
-_KVEC = OneOf((Num(), Vec(None, 1, 6)))
-_KVEC_NN = OneOf((Num(minimum=0), Vec(None, 1, 6)))
 _VALUE = OneOf((Num(), Vec(None, 1, 6)))
-_ACT_DOC = ("Actuator force/torque tau(t) on the relative coordinates (Eq. 66), k components "
-            "(a number applies to all). `actuator`, `torque` and `force` are aliases; give at "
-            "most one.")
+
+
+@dataclass(frozen=True)
+class ElementSection:
+    """The model-file section of an element type, declared by its module in
+    :mod:`se3dyn.elements` as ``model_file(mf) -> ElementSection`` (``mf``: this module, for
+    the field types). :data:`FIELDS`, the loader, :func:`save_model`, the JSON Schema and the
+    Markdown reference are generated from these, in the order of the element registry.
+
+    Attributes
+    ----------
+    key : str
+        The top-level field of the file, a mapping name -> entry (e.g. ``springs``).
+    kind : str
+        What an entry is: its section in :data:`FIELDS`, and the item in error messages
+        (e.g. ``spring_damper``).
+    doc : str
+        Description of the top-level field.
+    entry_doc : str
+        Description of one entry.
+    fields : tuple of Field
+        The fields of an entry.
+    add : callable (ModelBuilder, name, dict of field values) -> None
+        Adds one entry to the builder (raising :class:`~se3dyn.errors.ModelError`).
+    save : callable (Model) -> dict
+        name -> entry (plain data) of a model's elements of this type; empty for none.
+    subsections : tuple of (name, doc, fields)
+        Mappings inside an entry (:class:`Section` fields), e.g. a joint's ``control``.
+    nodes : callable (Model) -> set of str, optional
+        Names of the nodes the entries create themselves (a beam's intermediate nodes): left
+        out of the ``nodes:`` section when saving.
+    """
+
+    key: str
+    kind: str
+    doc: str
+    entry_doc: str
+    fields: tuple[Field, ...]
+    add: Callable[[ModelBuilder, str, dict], None]
+    save: Callable[[Model], dict]
+    subsections: tuple[tuple[str, str, tuple[Field, ...]], ...] = ()
+    nodes: Callable[[Model], set] | None = None
+
+
+def _element_sections() -> tuple[ElementSection, ...]:
+    from se3dyn.elements import REGISTRY
+
+    mf = sys.modules[__name__]
+    return tuple(mod.model_file(mf) for mod in REGISTRY.values()
+                 if hasattr(mod, "model_file"))
+
+
+#: The sections of the element types (registry order): ``model_file(mf)`` of their modules.
+ELEMENT_SECTIONS: tuple[ElementSection, ...] = _element_sections()
 
 #: The single source of truth of the format: section -> fields.
 FIELDS: dict[str, tuple[Field, ...]] = {
@@ -625,9 +704,7 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("name", Str(), "model", "Model name (used in results and files)."),
         Field("gravity", _V3, [0, 0, 0], "Gravity acceleration in the inertial frame (m/s^2)."),
         Field("nodes", Named("node"), None, "Nodes by name, in order (required).", True),
-        Field("joints", Named("joint"), {}, "Kinematic joints by name, in order."),
-        Field("loads", Named("load"), {}, "External loads by name."),
-        Field("springs", Named("spring_damper"), {}, "Point-to-point spring-dampers by name."),
+        *(Field(es.key, Named(es.kind), {}, es.doc) for es in ELEMENT_SECTIONS),
         Field("visuals", Named("visual"), {}, "Shapes drawn by the viewer, by name (pictures "
               "only, no effect on the motion)."),
         Field("simulation", Section("simulation"), {}, "Simulation settings, returned by "
@@ -652,61 +729,8 @@ FIELDS: dict[str, tuple[Field, ...]] = {
               "configuration (m), when the node is not at it (at a joint, at the fixed point of "
               "a top); `inertia` is then about the centre of mass. Absent: at the node."),
     ),
-    "joint": (
-        Field("type", Str(_JOINT_KEYS), None, "Joint type, see [joint types](#joint-types).",
-              True),
-        Field("a", Str(ref="node"), None, "Node A (H_B = H_A H_J, Eq. 7).", True),
-        Field("b", Str(ref="node"), None, "Node B.", True),
-        Field("axis", _V3, None, "Unit axis in the inertial frame of the initial configuration "
-              "(hinge, prismatic, cylindrical, screw)."),
-        Field("axes", Mat(2, 3, 3), None, "Spherical: 3 orthonormal rotation axes (identity "
-              "by default); planar: 2 in-plane axes; universal: the 2 hinge axes."),
-        Field("normal", _V3, None, "Planar joint: plane normal."),
-        Field("pitch", Num(), None, "Screw joint: translation per radian (m/rad)."),
-        Field("A", Mat(6, 6, None, flat=True), None, "General joint: 6 x k subalgebra basis, "
-              "columns (e_U, e_Omega)."),
-        Field("stiffness", _KVEC_NN, 0, "Spring K on the relative coordinates (Eq. 62)."),
-        Field("reference", _KVEC, 0, "Spring reference alpha0."),
-        Field("damping", _KVEC_NN, 0, "Damper C on the relative velocities (Eq. 64)."),
-        Field("actuator", TimeFunc(), None, _ACT_DOC),
-        Field("torque", TimeFunc(), None, "Alias of `actuator`."),
-        Field("force", TimeFunc(), None, "Alias of `actuator`."),
-        Field("control", Section("control"), None, "PD control law (abelian joints only)."),
-        Field("at", _V3, None, "Attachment point in the inertial frame of the initial "
-              "configuration (m): the joint connects frames fixed to `a` and `b` at this point "
-              "(inertial orientation at t0), H_B X_B = H_A X_A H_J with X = H0^-1 H(I, at), "
-              "instead of the node frames, so a body needs one node whatever its joints; "
-              "absent: between the node frames (Eq. 7)."),
-    ),
-    "control": (
-        Field("kp", _KVEC_NN, None, "Proportional gain(s) (required).", True),
-        Field("kd", _KVEC_NN, 0, "Derivative gain(s)."),
-        Field("target", TimeFunc(), 0, "Target relative coordinates alpha_ref(t)."),
-        Field("target_rate", TimeFunc(), "d target/dt", "Target rates (the derivative of "
-              "`target` when absent)."),
-    ),
-    "load": (
-        Field("node", Str(ref="node"), None, "Loaded node (a free node; required).", True),
-        Field("force", TimeFunc(), None, "Force (3 components), in the frame `force_frame`."),
-        Field("torque", TimeFunc(), None, "Torque (3 components), in the frame "
-              "`torque_frame`."),
-        Field("at", _V3, None, "Point of application of the force in the inertial frame of the "
-              "initial configuration (m); it moves with the body. Absent: the node."),
-        Field("force_frame", Str(("inertial", "body")), "inertial", "`inertial`: the force "
-              "keeps its direction in space; `body`: it turns with the body (follower load)."),
-        Field("torque_frame", Str(("inertial", "body")), "body", "Frame of the torque "
-              "(`body`: the material frame of the node, as in Eq. 66)."),
-    ),
-    "spring_damper": (
-        Field("a", Str(ref="node"), None, "Node A (required).", True),
-        Field("b", Str(ref="node"), None, "Node B (required).", True),
-        Field("at_a", _V3, "position of a", "Point attached to A, in the inertial frame of the "
-              "initial configuration (m)."),
-        Field("at_b", _V3, "position of b", "Point attached to B (m)."),
-        Field("stiffness", Num(minimum=0), None, "Stiffness (N/m) (required).", True),
-        Field("damping", Num(minimum=0), 0, "Damping (N s/m) on the rate of the distance."),
-        Field("length", Num(minimum=0), "initial distance", "Free length (m)."),
-    ),
+    **{name: fields for es in ELEMENT_SECTIONS
+       for name, fields in ((es.kind, es.fields), *((n, f) for n, _, f in es.subsections))},
     "visual": (
         Field("node", Str(ref="node"), None, "The node the shape moves with (required).", True),
         Field("shape", Str(tuple(SHAPES)), None, "Shape (required).", True),
@@ -748,6 +772,9 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("h_max", Num(exclusive_minimum=0), "duration / 10", "Largest adaptive step (s)."),
         Field("output_step", Num(exclusive_minimum=0), None, "Store results every output_step "
               "seconds (dense output), whatever the internal steps."),
+        Field("initial_velocities", Str(("project", "strict")), "project", "Initial "
+              "velocities the joints do not allow: projected onto the velocity constraints "
+              "(reported per node in the run summary and the results' stats), or refused."),
     ),
     "constant": (
         Field("value", _VALUE, None, "f(t) = value (required).", True),
@@ -782,17 +809,8 @@ _SECTION_DOC = {
     "model": "The top level of the file.",
     "node": "An entry of `nodes:` (key: the node name). A frame in SE(3) with optional rigid-"
             "body inertia.",
-    "joint": "An entry of `joints:` (key: the joint name). A kinematic joint H_B = H_A H_J "
-             "between nodes `a` and `b` (or between frames attached to them at the point "
-             "`at`), with its force elements. Vector force elements have "
-             "k components (k = number of relative coordinates of the type); a number applies "
-             "to all of them.",
-    "control": "The `control:` mapping of a joint: tau = -kp (alpha - target(t)) - kd "
-               "(alpha_dot - target_rate(t)).",
-    "load": "An entry of `loads:` (key: the load name).",
-    "spring_damper": "An entry of `springs:` (key: the name). Force stiffness (L - length) + "
-                     "damping dL/dt along the line of two points attached to nodes `a` and "
-                     "`b`.",
+    **{name: doc for es in ELEMENT_SECTIONS
+       for name, doc in ((es.kind, es.entry_doc), *((n, d) for n, d, _ in es.subsections))},
     "visual": "An entry of `visuals:` (key: the visual name). A shape drawn with a node by "
               "`se3dyn view` and `se3dyn export --gltf`, placed in the material frame of the "
               "node; it has no mass and no effect on the motion. A node with visuals is drawn "
@@ -1033,18 +1051,11 @@ def _build(ctx: _Ctx, top: _Obj) -> tuple[Model, dict]:
         mb = ModelBuilder(gravity=v.get("gravity", (0.0, 0.0, 0.0)), name=v.get("name", "model"))
     except ModelError as e:
         _rethrow(ctx, e, top, items)
-    def joint(name, kw):
-        if "control" in kw:
-            kw["control"] = PD(**kw["control"].values)
-        mb.joint(name, kw.pop("type"), kw.pop("a"), kw.pop("b"), **kw)
-
     # section -> (item kind in error messages, builder call with the entry's name and fields)
     sections = (
         ("nodes", "node", lambda name, kw: mb.node(name, **kw)),
-        ("joints", "joint", joint),
-        ("loads", "load", lambda name, kw: mb.load(name, kw.pop("node"), **kw)),
-        ("springs", "spring_damper",
-         lambda name, kw: mb.spring_damper(name, kw.pop("a"), kw.pop("b"), **kw)),
+        *((es.key, es.kind, lambda name, kw, es=es: es.add(mb, name, kw))
+          for es in ELEMENT_SECTIONS),
         ("visuals", "visual",
          lambda name, kw: mb.visual(name, kw.pop("node"), kw.pop("shape"), **kw)),
     )
@@ -1095,12 +1106,12 @@ def format_model_data(data: dict) -> str:
 # =================================================================================================
 # Saving
 # =================================================================================================
-def _py(x: Any) -> Any:
-    """Plain Python floats/lists for the YAML dumper."""
+def plain(x: Any) -> Any:
+    """Plain Python floats/lists for the YAML dumper (arrays, tuples, numpy scalars)."""
     if isinstance(x, np.ndarray):
         return x.astype(float).tolist()
     if isinstance(x, list | tuple):
-        return [_py(e) for e in x]
+        return [plain(e) for e in x]
     if isinstance(x, bool | np.bool_):
         return bool(x)
     if isinstance(x, int | float | np.integer | np.floating):
@@ -1108,27 +1119,24 @@ def _py(x: Any) -> Any:
     return x
 
 
-def _component_source(f: TimeFunction) -> TimeFunction | None:
-    """The k-vector function a universal joint's per-hinge component was cut from."""
-    return f.base if isinstance(f, Component) else None
-
-
-def _tf_out(f: Any, item: str, fld: str) -> Any:
+def time_function_data(f: Any, item: str, fld: str) -> Any:
+    """The model-file data of a built-in time function (ModelError for a Python callable,
+    naming ``item`` and ``fld``)."""
     if isinstance(f, Constant):
-        return _py(f.value)
+        return plain(f.value)
     if isinstance(f, Step):
-        d = {"value": _py(f.value), "start": float(f.start)}
+        d = {"value": plain(f.value), "start": float(f.start)}
         if math.isfinite(f.stop):
             d["stop"] = float(f.stop)
         return {"step": d}
     if isinstance(f, Ramp):
-        return {"ramp": {"value": _py(f.value), "start": float(f.start),
+        return {"ramp": {"value": plain(f.value), "start": float(f.start),
                          "duration": float(f.duration)}}
     if isinstance(f, Table):
-        return {"table": {"times": _py(f.times), "values": _py(f.values)}}
+        return {"table": {"times": plain(f.times), "values": plain(f.values)}}
     if isinstance(f, Sine):
-        return {"sine": {"amplitude": _py(f.amplitude), "frequency": float(f.frequency),
-                         "phase": float(f.phase), "offset": _py(f.offset)}}
+        return {"sine": {"amplitude": plain(f.amplitude), "frequency": float(f.frequency),
+                         "phase": float(f.phase), "offset": plain(f.offset)}}
     raise ModelError(item, fld, "a built-in time function (constant, step, ramp, table, sine) "
                      "to write a model file", getattr(f, "fn", f),
                      "a Python callable cannot be saved; replace it by a table or another "
@@ -1136,83 +1144,24 @@ def _tf_out(f: Any, item: str, fld: str) -> Any:
 
 
 def _node_out(n) -> dict:
-    d: dict[str, Any] = {"position": _py(n.position)}
+    d: dict[str, Any] = {"position": plain(n.position)}
     if not np.array_equal(n.orientation, np.eye(3)):
-        d["orientation"] = _py(n.orientation)
+        d["orientation"] = plain(n.orientation)
     if n.mass != 0:
         d["mass"] = float(n.mass)
     if np.any(n.inertia != 0):
         # the builder symmetrises full tensors; R J' R^T from principal axes may be asymmetric
         # in the last bit: write the symmetric part, which is what loading gives anyway
         J = 0.5 * (n.inertia + n.inertia.T)
-        d["inertia"] = _py(np.diag(J)) if np.array_equal(J, np.diag(np.diag(J))) else _py(J)
+        d["inertia"] = plain(np.diag(J)) if np.array_equal(J, np.diag(np.diag(J))) else plain(J)
     if n.fixed:
         d["fixed"] = True
     if np.any(n.velocity[:3] != 0):
-        d["velocity"] = _py(n.velocity[:3])
+        d["velocity"] = plain(n.velocity[:3])
     if np.any(n.velocity[3:] != 0):
-        d["angular_velocity"] = _py(n.velocity[3:])
+        d["angular_velocity"] = plain(n.velocity[3:])
     if n.com is not None:
-        d["com"] = _py(n.com)
-    return d
-
-
-def _act_key(type_: str) -> str:
-    return {"hinge": "torque", "spherical": "torque", "universal": "torque",
-            "prismatic": "force"}.get(type_, "actuator")
-
-
-def _joint_out(j, model: Model) -> dict:
-    item = f"joint {j.name!r}"
-    d: dict[str, Any] = {"type": j.type, "a": j.node_a, "b": j.node_b}
-    if j.at is not None:
-        d["at"] = _py(j.at)
-    for key, val in j.params.items():
-        if val is not None:
-            d[key] = _py(val) if key != "pitch" else float(val)
-    for key, arr in (("stiffness", j.stiffness), ("reference", j.reference),
-                     ("damping", j.damping)):
-        if np.any(arr != 0):
-            d[key] = _py(arr)
-    if j.actuator is not None:
-        k = _act_key(j.type)
-        d[k] = _tf_out(j.actuator, item, k)
-    if j.control is not None:
-        c = j.control
-        d["control"] = {"kp": _py(c.kp), "kd": _py(c.kd),
-                        "target": _tf_out(c.target, item, "control.target")}
-        if c.target_rate is not None:
-            d["control"]["target_rate"] = _tf_out(c.target_rate, item, "control.target_rate")
-    return d
-
-
-def _universal_out(name: str, parts: tuple[str, ...], model: Model) -> dict:
-    item = f"joint {name!r}"
-    j1, j2 = (model.joint(p) for p in parts)
-    d: dict[str, Any] = {"type": "universal", "a": j1.node_a, "b": j2.node_b}
-    if j1.at is not None:
-        d["at"] = _py(j1.at)
-    d["axes"] = [_py(j1.params["axis"]), _py(j2.params["axis"])]
-    for key in ("stiffness", "reference", "damping"):
-        a1, a2 = getattr(j1, key), getattr(j2, key)
-        if a1[0] != 0 or a2[0] != 0:
-            d[key] = [float(a1[0]), float(a2[0])]
-
-    def source(f, fld):
-        src = _component_source(f)
-        if src is None:
-            _tf_out(f, item, fld)  # raises for callables
-        return _tf_out(src, item, fld)
-
-    if j1.actuator is not None:
-        d["torque"] = source(j1.actuator, "torque")
-    if j1.control is not None:
-        c1, c2 = j1.control, j2.control
-        d["control"] = {"kp": [float(c1.kp[0]), float(c2.kp[0])],
-                        "kd": [float(c1.kd[0]), float(c2.kd[0])],
-                        "target": source(c1.target, "control.target")}
-        if c1.target_rate is not None:
-            d["control"]["target_rate"] = source(c1.target_rate, "control.target_rate")
+        d["com"] = plain(n.com)
     return d
 
 
@@ -1234,40 +1183,16 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
         load and the field; or when ``settings`` holds a key that is not a simulation field.
     """
     doc: dict[str, Any] = {"se3dyn": FORMAT_VERSION, "name": model.name,
-                           "gravity": _py(model.gravity)}
-    cross = {f"{c}:cross" for c in model.composites}
-    doc["nodes"] = {n.name: _node_out(n) for n in model.nodes if n.name not in cross}
-    joints: dict[str, Any] = {}
-    for j in model.joints:
-        if j.composite is not None:
-            if j.composite not in joints:
-                joints[j.composite] = _universal_out(j.composite, model.composites[j.composite],
-                                                     model)
-        else:
-            joints[j.name] = _joint_out(j, model)
-    if joints:
-        doc["joints"] = joints
-    loads: dict[str, Any] = {}
-    for ld in model.loads:
-        d: dict[str, Any] = {"node": ld.node}
-        if ld.force is not None:
-            d["force"] = _tf_out(ld.force, f"load {ld.name!r}", "force")
-        if ld.torque is not None:
-            d["torque"] = _tf_out(ld.torque, f"load {ld.name!r}", "torque")
-        if ld.at is not None:
-            d["at"] = _py(ld.at)
-        if ld.force_frame != "inertial":
-            d["force_frame"] = ld.force_frame
-        if ld.torque_frame != "body":
-            d["torque_frame"] = ld.torque_frame
-        loads[ld.name] = d
-    if loads:
-        doc["loads"] = loads
-    if model.springs:
-        doc["springs"] = {sp.name: {"a": sp.node_a, "b": sp.node_b, "at_a": _py(sp.at_a),
-                                    "at_b": _py(sp.at_b), "stiffness": float(sp.stiffness),
-                                    "damping": float(sp.damping), "length": float(sp.length)}
-                          for sp in model.springs}
+                           "gravity": plain(model.gravity)}
+    made = {f"{c}:cross" for c in model.composites}  # nodes their elements create
+    for es in ELEMENT_SECTIONS:
+        if es.nodes is not None:
+            made |= es.nodes(model)
+    doc["nodes"] = {n.name: _node_out(n) for n in model.nodes if n.name not in made}
+    for es in ELEMENT_SECTIONS:
+        entries = es.save(model)
+        if entries:
+            doc[es.key] = entries
     if model.visuals:
         doc["visuals"] = {v.name: visual_to_dict(v) for v in model.visuals}
     if settings:

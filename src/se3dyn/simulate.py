@@ -17,7 +17,7 @@ from se3dyn.model import Model
 from se3dyn.results import Results
 from se3dyn.system import System, Workspace, compile_model
 
-__all__ = ["simulate", "SCALARS"]
+__all__ = ["simulate", "check_settings", "energy_balance_check", "SCALARS"]
 
 
 #: Most steps of one fixed-step run (the compiled loop counts steps in 32-bit integers), and
@@ -60,9 +60,9 @@ class Checkpoint:
     rows: int = 0
 
 
-#: Steps between checkpoints (a multiple of output_every is taken): there the steppers start
-#: afresh (new LU pivot sequence, see :meth:`se3dyn.system.Workspace.reset`), so a run continued
-#: from a checkpoint, in any process, computes exactly what the uninterrupted run computes.
+#: Steps between checkpoints (a multiple of output_every is taken): states (with the linear
+#: solver's memory, ``State.solver``) from which a run continues, in any process, exactly as
+#: the uninterrupted run, and whose stored rows are exactly those of that run.
 CHECKPOINT_EVERY = 1000
 #: Bytes of rows held at most in memory by a streamed run (``store=False``) between blocks.
 _STREAM_BYTES = 4 << 20
@@ -174,6 +174,13 @@ class _Recorder:
         sm["energy"] = max(sm["energy"], float(np.abs(energy).max()))
         sm["constraint"] = max(sm["constraint"], float(c[:, 8].max()))
         sm["iterations"] = max(sm["iterations"], int(c[:, 6].max()))
+        # the energy in play (energy_balance_check): kinetic and elastic energy, and the
+        # changes of the gravity potential, the works and the dissipation
+        if sm.get("x0") is None:
+            sm["x0"] = c[0, [1, 3, 4, 5]].copy()
+        sm["scale"] = max(sm.get("scale", 0.0), float(np.abs(c[:, 0]).max()),
+                          float(np.abs(c[:, 2]).max()),
+                          float(np.abs(c[:, [1, 3, 4, 5]] - sm["x0"]).max()))
         self.summarized = hi
 
     def _block(self, lo: int, hi: int, stats: dict | None = None) -> Results:
@@ -221,8 +228,8 @@ class _Recorder:
         self._summarize()
         sm = self.summary
         return dict(rows=self.total, energy_balance_error=sm["balance"],
-                    max_energy=sm["energy"], max_constraint=sm["constraint"],
-                    max_iterations=sm["iterations"])
+                    energy_scale=sm.get("scale", 0.0), max_energy=sm["energy"],
+                    max_constraint=sm["constraint"], max_iterations=sm["iterations"])
 
     def results(self, stats: dict) -> Results:
         stats.update(self.stats())
@@ -256,6 +263,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
              redundant: str = "drop", tol: float | None = None, h_min: float | None = None,
              h_max: float | None = None, output_step: float | None = None,
              engine: str = "auto", newton: str = "modified",
+             initial_velocities: str = "project",
              progress: Callable[[float, int], None] | None = None,
              on_output: Callable[[State, dict], None] | None = None,
              on_rows: Callable[[Results, Checkpoint | None], None] | None = None,
@@ -310,6 +318,13 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     newton : {"modified", "full"}
         Reuse of the factorised iteration matrix by the compiled engine, see
         :class:`~se3dyn.integrator.GeneralizedAlpha`.
+    initial_velocities : {"project", "strict"}
+        Initial velocities the joints do not allow are projected (default): every change is
+        in ``stats["initial_velocity_changes"]`` (per node: the change of velocity and angular
+        velocity, the given and the used values) with the kinetic energy given and used, and
+        a :class:`~se3dyn.errors.Se3dynWarning` is issued when it exceeds 1e-6 of the
+        velocities; ``"strict"`` refuses them (:class:`~se3dyn.errors.ModelError` naming the
+        node).
     progress : callable(t, step_index), optional
         Called after every step.
     on_output : callable(state, scalars), optional
@@ -346,7 +361,13 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     -------
     Results
         ``stats`` holds steps, rejected steps, Newton iterations, smallest/largest step, the
-        summary over all rows (see ``store``) and ``final_state`` (the :class:`State` reached).
+        summary over all rows (see ``store``), ``final_state`` (the :class:`State` reached),
+        initial velocity changes (above), and ``energy_balance_error`` (J: the largest drift
+        of kinetic + potential + elastic energy - work of actuators and loads + dissipation)
+        beside ``energy_scale`` (J: the energy in play, see :func:`energy_balance_check`); a
+        :class:`~se3dyn.errors.Se3dynWarning` says so when the
+        error exceeds 10 % of the scale (a step too large for the motion, or ``rho_inf``
+        near 1 with the index-3 form).
 
     Raises
     ------
@@ -356,34 +377,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         names the time, the step, the norms and the worst item.
     """
     s = model if isinstance(model, System) else compile_model(model)
-    for fld, val in (("t_end", t_end), ("step", step), ("t_start", t_start)):
-        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
-                or not math.isfinite(float(val))):
-            raise ModelError("simulate", fld, "a finite number (s)", val)
-    t_end, step, t_start = float(t_end), float(step), float(t_start)
-    if not step > 0:
-        raise ModelError("simulate", "step", "a positive time step (s)", step)
-    if not t_end > t_start:
-        raise ModelError("simulate", "t_end", f"a time after t_start={t_start}", t_end)
-    if isinstance(output_every, numbers.Integral) and not isinstance(output_every, bool):
-        output_every = int(output_every)
-    if not (isinstance(output_every, int) and output_every >= 1):
-        raise ModelError("simulate", "output_every", "a positive integer", output_every)
-    span = t_end - t_start
-    opt = {}
-    for fld, val, default in (("tol", tol, None), ("h_min", h_min, 1e-12 * span),
-                              ("h_max", h_max, span / 10), ("output_step", output_step, None)):
-        if val is None:
-            opt[fld] = default
-            continue
-        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
-                or not (math.isfinite(float(val)) and float(val) > 0)):
-            raise ModelError("simulate", fld, "a positive number", val)
-        opt[fld] = float(val)
-    if opt["tol"] is not None and opt["tol"] < 1e-15:
-        raise ModelError("simulate", "tol", "a tolerance of at least 1e-15 (m, rad)", opt["tol"])
-    if opt["h_min"] > opt["h_max"]:
-        raise ModelError("simulate", "h_min", f"at most h_max={opt['h_max']:g}", opt["h_min"])
+    t_end, step, t_start, output_every, span, opt = _settings(
+        t_end, step, t_start, output_every, tol, h_min, h_max, output_step)
     for fld, val in (("progress", progress), ("on_output", on_output), ("on_rows", on_rows)):
         if val is not None and not callable(val):
             raise ModelError("simulate", fld, "a callable or None", val)
@@ -405,7 +400,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,
                              tol_constraint=tol_constraint, max_iter=max_iter,
                              formulation=formulation, redundant=redundant, engine=engine,
-                             newton=newton)
+                             newton=newton, initial_velocities=initial_velocities)
     grid = None  # the output times t_start + j output_step, the last moved to t_end
     gi = 1  # next grid time to fill
     if opt["output_step"] is not None:
@@ -439,6 +434,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         st = initial_state
     solver = integ.solver(s, st)
     e = energies(s, st, step_inputs(s, st.t), ws)
+    # (a continued run starts from a state, not from the model's velocities)
+    v_report = _velocity_report(s, st, e["kinetic"], ws) if initial_state is None else {}
     rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
     stats = dict(steps=0, rejected=0, newton_iterations=0, rho_inf=rho_inf, step=step,
                  t_start=t_start, t_end=t_end, tol_residual=tol_residual,
@@ -446,7 +443,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                  matrix_size=solver.N, formulation=formulation,
                  redundant=[equation_name(s, r) for r in st.dropped],
                  linear_solver="dense LU" if solver.dense else "sparse LU (SuperLU)",
-                 adaptive=adaptive, tol=opt["tol"], h_min_used=math.inf, h_max_used=0.0)
+                 adaptive=adaptive, tol=opt["tol"], h_min_used=math.inf, h_max_used=0.0,
+                 **v_report)
     if initial_state is not None:
         stats["resumed_at"] = st.t
     nsteps = 0 if adaptive else max(1, math.ceil(span / step - 1e-9))
@@ -455,8 +453,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         h = min(first_step, opt["h_max"])
     i = k0
     cpe = output_every * math.ceil(CHECKPOINT_EVERY / output_every)  # checkpoint interval
-    if k0 % cpe == 0:  # the start is a checkpoint too (a run continued from it starts afresh)
-        ws.reset()
+    if k0 % cpe == 0:  # the start is a checkpoint too
         rec.pending = Checkpoint(st, k0, h, 0, 0, 1)
 
     def fail(exc: SimulationError):
@@ -567,12 +564,13 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         cp = None
         if stored and regular and i % cpe == 0:
             cp = Checkpoint(st, i, h, stats["newton_iterations"], stats["rejected"], rec.total)
-            ws.reset()
         rec.emit(cp, force=st.t >= t_end or (not adaptive and i >= nsteps))
     rec.emit()
     stats.update(steps=i - k0, failed=False, wall_time=time.perf_counter() - wall0,
                  final_state=st)
-    return rec.results(stats)
+    res = rec.results(stats)
+    _energy_check(res)
+    return res
 
 
 def _check_initial_state(s: System, st, t_start: float, t_end: float, step: float,
@@ -633,6 +631,133 @@ def _check_size(s: System, span: float, step: float, output_every: int,
             "with output_every or output_step (CLI: --output-step), or use a larger step")
 
 
+def _settings(t_end, step, t_start, output_every, tol, h_min, h_max, output_step):
+    """The time settings of a run, checked (ModelError naming the field) and normalised:
+    (t_end, step, t_start, output_every, span, dict of tol, h_min, h_max, output_step)."""
+    for fld, val in (("t_end", t_end), ("step", step), ("t_start", t_start)):
+        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
+                or not math.isfinite(float(val))):
+            raise ModelError("simulate", fld, "a finite number (s)", val)
+    t_end, step, t_start = float(t_end), float(step), float(t_start)
+    if not step > 0:
+        raise ModelError("simulate", "step", "a positive time step (s)", step)
+    if not t_end > t_start:
+        raise ModelError("simulate", "t_end", f"a time after t_start={t_start}", t_end)
+    if isinstance(output_every, numbers.Integral) and not isinstance(output_every, bool):
+        output_every = int(output_every)
+    if not (isinstance(output_every, int) and output_every >= 1):
+        raise ModelError("simulate", "output_every", "a positive integer", output_every)
+    span = t_end - t_start
+    opt = {}
+    for fld, val, default in (("tol", tol, None), ("h_min", h_min, 1e-12 * span),
+                              ("h_max", h_max, span / 10), ("output_step", output_step, None)):
+        if val is None:
+            opt[fld] = default
+            continue
+        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
+                or not (math.isfinite(float(val)) and float(val) > 0)):
+            raise ModelError("simulate", fld, "a positive number", val)
+        opt[fld] = float(val)
+    if opt["tol"] is not None and opt["tol"] < 1e-15:
+        raise ModelError("simulate", "tol", "a tolerance of at least 1e-15 (m, rad)", opt["tol"])
+    if opt["h_min"] > opt["h_max"]:
+        raise ModelError("simulate", "h_min", f"at most h_max={opt['h_max']:g}", opt["h_min"])
+    return t_end, step, t_start, output_every, span, opt
+
+
+def check_settings(model: Model | System, **settings) -> None:
+    """Check simulation settings as :func:`simulate` would before its first step, without
+    running: unknown names, types and ranges (``t_start < t_end``, ``h_min <= h_max``,
+    ``rho_inf`` in [0, 1], ...), and the size of the run. Raises :class:`ModelError` naming
+    the field; ``se3dyn check`` calls it with the model file's settings."""
+    import inspect
+
+    try:
+        b = inspect.signature(simulate).bind(model, **settings)
+    except TypeError as exc:
+        raise ModelError("simulation", "settings", "names of simulate's parameters",
+                         ", ".join(settings), str(exc)) from None
+    b.apply_defaults()
+    a = b.arguments
+    s = model if isinstance(model, System) else compile_model(model)
+    t_end, step, t_start, output_every, span, opt = _settings(
+        a["t_end"], a["step"], a["t_start"], a["output_every"], a["tol"], a["h_min"],
+        a["h_max"], a["output_step"])
+    _check_size(s, span, step, output_every, opt["output_step"], opt["tol"] is not None)
+    GeneralizedAlpha(rho_inf=a["rho_inf"], tol_residual=a["tol_residual"],
+                     tol_constraint=a["tol_constraint"], max_iter=a["max_iter"],
+                     formulation=a["formulation"], redundant=a["redundant"],
+                     engine=a["engine"], newton=a["newton"],
+                     initial_velocities=a["initial_velocities"])
+
+
+def _velocity_report(s: System, st: State, kinetic: float, ws) -> dict:
+    """Stats entries on the initial velocities init changed (and a warning when they matter)."""
+    import warnings
+
+    from se3dyn.errors import Se3dynWarning
+    from se3dyn.integrator import initial_velocity_changes
+
+    changes = initial_velocity_changes(s, st)
+    if not changes:
+        return dict(initial_velocity_changes=[])
+    v0 = np.zeros(s.nq)
+    v0[s.node_dofidx] = s.node_v0[s.node_free]
+    given = energies(s, dataclasses.replace(st, v=v0), step_inputs(s, st.t), ws)["kinetic"]
+    rows = [dict(node=c["node"], dv=c["dv"], dw=c["dw"], given=c["given"].tolist(),
+                 used=c["used"].tolist()) for c in changes]
+    scale = max(float(np.abs(s.node_v0).max()), 1e-300)
+    worst = max(changes, key=lambda c: max(c["dv"], c["dw"]))
+    if max(worst["dv"], worst["dw"]) > 1e-6 * scale:
+        names = ", ".join(repr(c["node"]) for c in changes[:5]) + (
+            f" and {len(changes) - 5} more" if len(changes) > 5 else "")
+        warnings.warn(Se3dynWarning(
+            f"initial velocities projected onto the joints' velocity constraints: {names} "
+            f"changed (largest: node {worst['node']!r}, velocity by {worst['dv']:.3g} m/s, "
+            f"angular velocity by {worst['dw']:.3g} rad/s); kinetic energy {given:.6g} J "
+            f"given, {kinetic:.6g} J used (stats['initial_velocity_changes']; "
+            "initial_velocities='strict' refuses them)"), stacklevel=3)
+    return dict(initial_velocity_changes=rows, initial_kinetic_energy_given=float(given),
+                initial_kinetic_energy_used=float(kinetic))
+
+
+def energy_balance_check(res: Results) -> tuple[float, float]:
+    """The largest energy balance error of a run and the energy scale it compares with (J).
+
+    The error is the largest drift of kinetic + potential + elastic energy - work of actuators
+    and loads + dissipation from its initial value. The scale is the largest of the kinetic and
+    the elastic energy (absolute quantities) and of the changes of the gravity potential (its
+    zero is arbitrary), of the works and of the dissipation over the run: the energy in play (a
+    pendulum released from rest has no energy at t0, a free spinning body exchanges none).
+    """
+    eb = res.energy_balance
+    if not len(eb):
+        return 0.0, 0.0
+    err = float(np.abs(eb - eb[0]).max())
+    scale = max(float(np.abs(res.kinetic).max()), float(np.abs(res.spring).max()),
+                *(float(np.abs(x - x[0]).max()) for x in (
+                    res.potential, res.work_actuators, res.work_loads, res.dissipation)))
+    return err, scale
+
+
+def _energy_check(res: Results) -> None:
+    import warnings
+
+    from se3dyn.errors import Se3dynWarning
+
+    if "energy_scale" in res.stats:  # over every row, streamed ones included (_Recorder)
+        err, scale = res.stats["energy_balance_error"], res.stats["energy_scale"]
+    else:
+        err, scale = energy_balance_check(res)
+        res.stats.update(energy_balance_error=err, energy_scale=scale)
+    if err > 0.1 * scale and err > 1e-12:
+        warnings.warn(Se3dynWarning(
+            f"energy balance error {err:.3g} J is {100 * err / max(scale, 1e-300):.3g} % of "
+            f"the energy in play in the run ({scale:.3g} J): the step is probably too large "
+            "for the motion (the results may be far from the true motion; try a smaller step, "
+            "or rho_inf < 1 with the index-3 form)"), stacklevel=3)
+
+
 def _available_memory() -> float | None:
     """Available memory in bytes (Linux: MemAvailable), None when unknown."""
     try:
@@ -655,13 +780,13 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int,
     ``output_every``, starting at multiples of the block, so the stored rows are those of one
     table). Progress is reported and stored rows are passed on between chunks of steps that
     last about 0.1 s each (and fill at most the recorder's buffer in a streamed run); a chunk
-    ending at a multiple ``cpe`` of steps at its regular time ends with a :class:`Checkpoint`
-    (and the steppers start afresh)."""
+    ending at a multiple ``cpe`` of steps at its regular time ends with a :class:`Checkpoint`."""
     from se3dyn.integrator import KMAX, _stepper
     from se3dyn.system import input_table
 
     block = output_every * max(1, _BLOCK // output_every)
     stp = _stepper(s, integ.index2, st.dropped, ws)
+    ws.adopt(stp, st.solver)
     F = s.M + s.m
     H = np.ascontiguousarray(np.concatenate([st.H, st.HJ]).reshape(F, 4, 4), dtype=float)
     c = lambda x: np.array(x, dtype=float)  # noqa: E731
@@ -684,7 +809,8 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int,
         return State(t=float(acc[7]), H=H[:s.M].copy(), HJ=H[s.M:].copy(), v=v.copy(),
                      vd=vd.copy(), a=a.copy(), lam=lam.copy(), alpha=alpha.copy(),
                      work_act=float(acc[3]), work_ext=float(acc[4]), dissipated=float(acc[5]),
-                     power=acc[:3].copy(), dropped=st.dropped, h_last=float(acc[6]))
+                     power=acc[:3].copy(), dropped=st.dropped, h_last=float(acc[6]),
+                     solver=ws.memory(stp))
 
     while i < n_ok:
         if i >= b1:  # the next block of times and inputs
@@ -729,8 +855,6 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int,
         cp = None
         if status == 0 and i > k0 and i % cpe == 0 and (i < nsteps or regular_end):
             cp = Checkpoint(state(), i, stats["step"], stats["newton_iterations"], 0, rec.total)
-            ws.reset()
-            stp = _stepper(s, integ.index2, st.dropped, ws)
         rec.emit(cp)
         if progress is not None and i > k0:
             progress(float(tb[i - 1 - b0]), i)

@@ -143,6 +143,7 @@ class System(LayoutCounts):
     pattern: dict = field(repr=False)
     node_com: np.ndarray = None  # (M, 3) centre of mass in the node's material frame
     springs: tuple = ()  # point spring-dampers (node a, node b, c_a, c_b, k, d, L0)
+    beams: tuple = ()  # beam elements, see _beams
     inputs: object = None  # _Inputs: slots of the time-dependent inputs u
 
     @property
@@ -281,7 +282,8 @@ def compile_model(model: Model) -> System:
         dof_damping=dof_C, dof_kp=dof_kp, dof_kd=dof_kd, dof_is_joint=dof_is_joint,
         gravity=model.gravity.copy(), labels=tuple(labels), items=tuple(items),
         length_scale=max(L, 1.0), pattern={}, node_com=_node_com(nodes, H0),
-        springs=_springs(model, nidx, H0))
+        springs=_springs(model, nidx, H0), beams=_beams(model, nidx))
+    _lump_beam_masses(sysd, model, nidx)
     sysd["inputs"] = _Inputs(sysd, model)
     return System(**sysd)
 
@@ -305,6 +307,49 @@ def _springs(model: Model, nidx: dict, H0: np.ndarray) -> tuple:
         cb = H0[b, :3, :3].T @ (spec.at_b - H0[b, :3, 3])
         out.append((a, b, ca, cb, spec.stiffness, spec.damping, spec.length))
     return tuple(out)
+
+
+def _beams(model: Model, nidx: dict) -> tuple:
+    """Beam elements as dicts: node frames ``a, b``, section offsets ``XA, XB`` (4, 4), the
+    reference relative motion ``d0 = log(F_a^-1 F_b)`` (6,), the reference length
+    ``L = |d0_U|`` (the arc length of the reference screw motion), the section stiffness
+    ``K`` and damping ``D`` (6, 6), the beam's name and the element's index in it."""
+    out = []
+    for spec in model.beams:
+        F, X = spec.reference, spec.offsets
+        for e in range(spec.elements):
+            d0 = lie.log_se3(lie.inverse(F[e]) @ F[e + 1])
+            out.append(dict(a=nidx[spec.nodes[e]], b=nidx[spec.nodes[e + 1]], XA=X[e],
+                            XB=X[e + 1], d0=d0, L=float(np.linalg.norm(d0[:3])),
+                            K=spec.stiffness, D=spec.damping, beam=spec.name, index=e))
+    return tuple(out)
+
+
+def _lump_beam_masses(d: dict, model: Model, nidx: dict) -> None:
+    """Lumped beam mass: each element puts half its mass ``mu L`` and half its rotary inertia
+    ``L diag(rho I1, rho I2, rho I3)`` (section frame) on each of its two nodes, combined with the
+    node's own mass as one rigid body (centre of mass and inertia about it, parallel-axis rule)."""
+    if not any(b.mass_per_length > 0 for b in model.beams):
+        return
+    mass, J, com = d["node_mass"].copy(), d["node_J"].copy(), d["node_com"].copy()
+    for el in d["beams"]:
+        spec = next(b for b in model.beams if b.name == el["beam"])
+        if spec.mass_per_length == 0:
+            continue
+        m2 = 0.5 * spec.mass_per_length * el["L"]
+        Js = 0.5 * el["L"] * np.diag(spec.rotary_inertia)
+        for i, X in ((el["a"], el["XA"]), (el["b"], el["XB"])):
+            if d["node_fixed"][i]:
+                continue
+            R = X[:3, :3]
+            m1, c1 = mass[i], com[i]
+            m = m1 + m2
+            c = m1 * c1 / m
+            r1, r2 = c1 - c, -c
+            J[i] = (J[i] + m1 * (r1 @ r1 * np.eye(3) - np.outer(r1, r1)) + R @ Js @ R.T
+                    + m2 * (r2 @ r2 * np.eye(3) - np.outer(r2, r2)))
+            mass[i], com[i] = m, c
+    d["node_mass"], d["node_J"], d["node_com"] = mass, J, com
 
 
 class _Inputs:
@@ -472,12 +517,38 @@ class Workspace:
         self.layout = layout_of(s)
         self.engine = _core().Engine(self.layout.tables)
         self._steppers: dict = {}
+        self._memo: dict = {}  # id(stepper) -> (stepper, its serials, SolverMemory it holds)
 
-    def reset(self) -> None:
-        """Forget the steppers: the next step factorises afresh (new pivot sequence), as in a
-        new workspace. Done at every checkpoint of a run, so that a run continued from the
-        checkpoint in another process computes with the same pivots (bit for bit)."""
-        self._steppers.clear()
+    def memory(self, stp):
+        """The solver memory a stepper holds now (:class:`se3dyn.integrator.SolverMemory`, or
+        None): a new object only when it changed since last asked."""
+        from se3dyn.integrator import SolverMemory
+
+        ser = stp.serials()
+        c = self._memo.get(id(stp))
+        if c is not None and c[0] is stp and c[1] == ser:
+            return c[2]
+        ref = stp.memory()
+        mem = None if ref is None else SolverMemory(ref=ref)
+        self._memo[id(stp)] = (stp, ser, mem)
+        return mem
+
+    def adopt(self, stp, mem) -> None:
+        """Make a stepper hold the solver memory ``mem`` of a State (None: none), refactorising
+        when it holds another one (a restart, a step repeated from an earlier state), so that
+        the steps from that State give the numbers of the run that produced it, bit for bit."""
+        ser = stp.serials()
+        c = self._memo.get(id(stp))
+        if c is not None and c[0] is stp and c[1] == ser and c[2] is mem:
+            return
+        ref = None if mem is None else mem.ref
+        if not stp.holds(ref):
+            code = stp.restore(ref)
+            if code != 0:
+                raise SimulationError("restoring the linear solver's factors of the state failed "
+                                      f"(LU status {code}): the state does not belong to this "
+                                      "model or was altered")
+        self._memo[id(stp)] = (stp, stp.serials(), mem)
 
     def stepper(self, index2: bool, dropped: np.ndarray, keep: bool = True):
         """The compiled Newton stepper for one formulation and one set of dropped (redundant)

@@ -1,6 +1,7 @@
 // Python bindings of the compiled engine (nanobind): the element tables arrive once from
 // se3dyn.assembly as a dict of numpy arrays; evaluations and steps work on numpy arrays in place.
 #include <nanobind/nanobind.h>
+#include <nanobind/stl/optional.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
@@ -261,9 +262,40 @@ NB_MODULE(_engine, m) {
                                    ptr(a, nq, "a"), ptr(lam, nm, "lam"), ptr(n, nq, "n"));
             double* Ho = ptr(H, 16 * F, "H");
             for (int f = 0; f < F; ++f) frame_to4(E.S.H[f], Ho + 16 * f);
+            // energies and powers of the converged iterate (the new state), see N_ENERGY
+            nb::tuple en = nb::make_tuple(S.energy[0], S.energy[1], S.energy[2], S.energy[3],
+                                          S.energy[4], S.energy[5]);
             return nb::make_tuple(info.status, info.iterations, info.residual, info.constraint,
-                                  info.factorisations);
+                                  info.factorisations, en);
           })
+      .def("lu_stats",
+           [](const Stepper& S) {
+             // (n, nnz(L), nnz(U), multiply-adds of a refactorisation, supernodes) of the factors
+             return nb::make_tuple(S.N, S.lu.nnz_L(), S.lu.nnz_U(), S.lu.refactor_flops(),
+                                   S.lu.num_supernodes());
+           })
+      .def("serials",
+           [](const Stepper& S) {
+             // (serial number of the solver memory, whether it holds one)
+             return nb::make_tuple(S.ref_serial, S.have_ref);
+           })
+      .def("memory",
+           [](const Stepper& S) -> nb::object {
+             // a copy of the solver memory (the values of the last full factorisation) or None
+             if (!S.have_ref) return nb::none();
+             double* d = new double[S.ref_vals.size()];
+             std::copy(S.ref_vals.begin(), S.ref_vals.end(), d);
+             nb::capsule owner(d, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+             return nb::cast(nb::ndarray<nb::numpy, double>(d, {S.ref_vals.size()}, owner));
+           })
+      .def("holds",
+           [](const Stepper& S, std::optional<CArr> ref) {
+             return S.holds(ref ? cptr(*ref, S.vals.size(), "ref") : nullptr);
+           }, nb::arg("ref").none())
+      .def("restore",
+           [](Stepper& S, std::optional<CArr> ref) {
+             return S.restore(ref ? cptr(*ref, S.vals.size(), "ref") : nullptr);
+           }, nb::arg("ref").none())
       .def(
           "solve_values",
           [](Stepper& S, CArr vals, DArr rhs) {

@@ -11,13 +11,37 @@
 // and kept over the step's iterations while Newton contracts fast enough; it is refactorised at
 // the current iterate when the scaled residual or constraint error grows, when the contraction
 // rate reaches 0.9, or when more than kmax further iterations are predicted at that rate.
+// (Factors carried over to later steps were tried: the iteration matrix of a step one step
+// earlier contracts at rates of about 0.3 on the slider-crank and the 1000-link chain, so the
+// extra iterations cost what the saved factorisations did; docs/design.md.)
+//
+// Everything later numbers depend on is a function of the model and of the integration state
+// (the Python State, its SolverMemory included), so that a run restarted from a State, in this
+// process or another one, continues bit for bit: the ordering and the patterns of the sparse LU
+// come from a generic matrix of the model (probe()), not from the values the run happened to
+// start with, and refactorisations reuse the pivot sequence of the last full factorisation,
+// whose matrix values are the solver's memory.
 #pragma once
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "engine.hpp"
 
 namespace se3dyn {
+
+// max |x_i|, NaN if some x_i is NaN
+inline double amax_nan(const double* x, int n) {
+  double m = 0.0;
+  bool nan = false;
+  for (int i = 0; i < n; ++i) {
+    double a = std::fabs(x[i]);
+    m = a > m ? a : m;
+    nan |= a != a;
+  }
+  return nan ? std::numeric_limits<double>::quiet_NaN() : m;
+}
 
 enum StepStatus { CONVERGED = 0, NONFINITE = 1, MAXITER = 2, DIVERGING = 3, SINGULAR = 4 };
 
@@ -34,8 +58,13 @@ struct Stepper {
   std::vector<long> zero_at, one_at; // CSC positions of dropped equations: zero, or 1 (diagonal)
   std::vector<char> dropm;           // (nm,) dropped multiplier equations
   SparseLU lu;
-  bool analysed = false;
   std::vector<double> vals, csc, rhs, r, phi, psi;
+  std::vector<double> energy = std::vector<double>(N_ENERGY);  // (N_ENERGY,) of the last iterate
+  // solver memory (see the header): the matrix values of the last full factorisation, the
+  // reference of the refactorisations' pivot sequence, and a serial number of it (Python side)
+  std::vector<double> ref_vals;
+  bool have_ref = false;
+  long ref_serial = 0;
 
   void init(Engine* e, bool idx2, int n_sys, const int* colptr, const int* rowind,
             const long* perm_, long nv, const int* group, const char* drop) {
@@ -56,37 +85,101 @@ struct Stepper {
         int rw = rowind[p];
         if (dropped[rw] || dropped[c]) (rw == c ? one_at : zero_at).push_back(p);
       }
-    // pattern entries that are zero at every step (a third to two thirds of the engine's) are
-    // left out of the factors; a refactorisation that meets one of them nonzero reports it and
-    // the step factorises afresh (factor())
+    // pattern entries that are zero in every state (a third to two thirds of the engine's) are
+    // left out of the factors: those zero in a generic matrix of the model (probe())
     SparseLU::Options opt;
     opt.drop_zeros = true;
     lu.set_options(opt);
-    lu.analyze(N, colptr, rowind, group);
     vals.assign(nv, 0.0);
     csc.assign(nnz, 0.0);
     rhs.assign(N, 0.0);
     r.assign(E->nq, 0.0);
     phi.assign(E->nm, 0.0);
     psi.assign(E->nm, 0.0);
+    // the ordering and the entries kept in the factors' patterns from a generic matrix
+    probe();
+    to_csc(vals.data());
+    std::vector<char> keep(nnz);
+    for (long p = 0; p < nnz; ++p) keep[p] = csc[p] != 0.0;  // NaN counts as nonzero
+    lu.analyze(N, colptr, rowind, group, csc.data());
+    lu.set_keep(keep.data());
   }
 
-  int factor() {
-    for (size_t i = 0; i < vals.size(); ++i) csc[perm[i]] = vals[i];
+  // The iteration matrix at a pseudo-random state of the model (frames, increments, velocities,
+  // accelerations, multipliers, inputs drawn from a fixed sequence; generic coefficients): an
+  // entry of the pattern that is zero there is zero in every state (the kernels write exact
+  // zeros only where a term is absent), one that is nonzero there may be nonzero in some state.
+  void probe() {
+    Engine& G = *E;
+    uint64_t x = 0x9E3779B97F4A7C15ull;
+    auto rnd = [&x]() {  // splitmix64, uniform in [-1, 1)
+      x += 0x9E3779B97F4A7C15ull;
+      uint64_t z = x;
+      z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+      z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+      z ^= z >> 31;
+      return double(z >> 11) * (2.0 / 9007199254740992.0) - 1.0;
+    };
+    int F = G.T.F, nq = G.nq, nm = G.nm;
+    std::vector<double> H4(16L * F), an(nq), n(nq), v(nq), vd(nq), lam(nm), u(G.nu), al(nq);
+    for (int f = 0; f < F; ++f) {
+      double w[6];
+      for (double& c : w) c = 2.0 * rnd();
+      Frame Ef;
+      exp_se3(w, Ef);
+      frame_to4(Ef, &H4[16L * f]);
+    }
+    for (auto* a : {&an, &n, &v, &vd, &lam, &u})
+      for (double& c : *a) c = rnd();
+    for (double& c : n) c *= 0.3;
+    G.load_frames(H4.data());
+    bool stab = index2 && nm > 0;
+    Engine::Out o{r.data(), phi.data(), stab ? psi.data() : nullptr, al.data(), vals.data(),
+                  nullptr};
+    G.evaluate(an.data(), n.data(), v.data(), vd.data(), lam.data(), u.data(), 1.0, 0.7, 0.3,
+               stab, 0.6, false, o);
+  }
+
+  void to_csc(const double* x) {
+    for (size_t i = 0; i < vals.size(); ++i) csc[perm[i]] = x[i];
     for (long p : zero_at) csc[p] = 0.0;  // dropped (redundant) equations: identity rows/cols
     for (long p : one_at) csc[p] = 1.0;
-    int code = analysed ? lu.refactor(csc.data()) : 1;
+  }
+
+  // Factorise the matrix of `vals`: a refactorisation with the pivot sequence of the last full
+  // factorisation when it succeeds, else a full one, whose values become the reference
+  int factor() {
+    to_csc(vals.data());
+    int code = have_ref ? lu.refactor(csc.data()) : 1;
     if (code != 0) {
       code = lu.factor(csc.data());
-      analysed = code == 0;
+      have_ref = code == 0;
+      if (have_ref) ref_vals = vals;
+      ++ref_serial;
     }
     return code;
+  }
+
+  // Restore the solver memory: a full factorisation of `ref` (nullptr: none, the next
+  // factorisation is a full one). Returns 0, or the LU's nonzero status.
+  int restore(const double* ref) {
+    have_ref = false;
+    ++ref_serial;
+    if (!ref) return 0;
+    std::copy(ref, ref + vals.size(), vals.begin());
+    return factor();
+  }
+
+  // Whether this stepper's memory is `ref` (nullptr: none)
+  bool holds(const double* ref) const {
+    if ((ref != nullptr) != have_ref) return false;
+    return !ref || std::memcmp(ref, ref_vals.data(), vals.size() * sizeof(double)) == 0;
   }
 
   struct Params {
     double h, am, af, g, b, tol_r, ltol, lscale, kmax;
     int max_iter;
-    bool reuse;
+    bool reuse;  // modified Newton (else a factorisation at every iteration)
   };
 
   // State at t_n in (frames loaded in E->Hn, alpha_n, v_n, vd_n, a_n rescaled to h, lam_n),
@@ -113,17 +206,19 @@ struct Stepper {
     double er0 = 1.0, er = 0.0, ep = 0.0, dn_prev = 0.0;
     double ec_prev = std::numeric_limits<double>::infinity();
     bool refac = true;
-    auto measure = [&](double fs) {
-      fs = std::fmax(fs, 1e-300);
-      er = 0.0;
-      for (int i = 0; i < nq; ++i) er = std::fmax(er, std::fabs(r[i]));
-      er /= fs;
-      ep = 0.0;
-      for (int i = 0; i < nm; ++i) ep = std::fmax(ep, std::fabs(phi[i]));
-      if (stab)
-        for (int i = 0; i < nm; ++i) ep = std::fmax(ep, std::fabs(psi[i]) / gp);
+    auto measure = [&](double fs) {  // (a NaN anywhere makes er or ep NaN)
+      fs = fs > 1e-300 ? fs : 1e-300;
+      er = amax_nan(r.data(), nq) / fs;
+      ep = amax_nan(phi.data(), nm);
+      if (stab) {
+        double ps = amax_nan(psi.data(), nm) / gp;
+        ep = (ps > ep || ps != ps) ? ps : ep;
+      }
     };
-    Engine::Out o{r.data(), phi.data(), stab ? psi.data() : nullptr, alpha, nullptr, nullptr};
+    // every residual evaluation also gives the energies and powers of its iterate: those of
+    // the converged one are the new state's (no evaluation of its own)
+    Engine::Out o{r.data(), phi.data(), stab ? psi.data() : nullptr, alpha, nullptr,
+                  energy.data()};
     while (true) {
       bool with_matrix = refac || !P.reuse;  // the matrix is evaluated with the residual
       o.vals = with_matrix ? vals.data() : nullptr;
@@ -160,8 +255,9 @@ struct Stepper {
       double dnmax = 0.0, nmax = 0.0;
       for (int i = 0; i < nq; ++i) {
         n[i] += rhs[i];
-        dnmax = std::fmax(dnmax, std::fabs(rhs[i]));
-        nmax = std::fmax(nmax, std::fabs(n[i]));
+        double d = std::fabs(rhs[i]), m = std::fabs(n[i]);
+        dnmax = d > dnmax ? d : dnmax;
+        nmax = m > nmax ? m : nmax;
       }
       if (stab) G.subtract_BnT(rhs.data() + nq + nm, rhs.data());  // dm = dn - B_n^T xi
       for (int i = 0; i < nq; ++i) {
@@ -181,7 +277,9 @@ struct Stepper {
         }
       }
       dn_prev = dnmax;
-      if (ep <= P.ltol && dnmax <= 4e-16 * std::fmax(nmax, 1e-300)) {
+      // (round-off of the positions: of the increment, or of the model's length scale when the
+      // motion has come to rest and the forces with it)
+      if (ep <= P.ltol && dnmax <= 4e-16 * std::fmax(nmax, P.lscale)) {
         double fs2 = G.evaluate(alpha_n, n, v, vd, lam, u, cM, cC, cK, stab, cv, false, o);
         measure(fs2);
         break;
@@ -222,8 +320,7 @@ struct Stepper {
                 int output_every, Carry c, Rows& rows) {
     Engine& G = *E;
     int nq = G.nq, nm = G.nm, F = G.T.F, nu = G.nu;
-    std::vector<double> alpha(nq), v(nq), vd(nq), a(nq), lam(nm), n(nq), a_n(nq), zero(nq, 0.0);
-    std::vector<double> er(nq), ep(nm), ev(nm), en(N_ENERGY);
+    std::vector<double> alpha(nq), v(nq), vd(nq), a(nq), lam(nm), n(nq), a_n(nq);
     RunResult R;
     for (int i = i0; i < i1; ++i) {
       double t1 = times[i], h = t1 - c.acc[7], h_last = c.acc[6];
@@ -244,11 +341,7 @@ struct Stepper {
       R.residual = info.residual;
       R.constraint = info.constraint;
       for (int f = 0; f < F; ++f) frame_to4(G.S.H[f], c.H + 16 * f);
-      // energies and powers of the new state (its frames as the step start, n = 0)
-      G.load_frames(c.H);
-      Engine::Out o{er.data(), ep.data(), nullptr, alpha.data(), nullptr, en.data()};
-      G.evaluate(alpha.data(), zero.data(), v.data(), zero.data(), lam.data(), u, 0, 0, 0, false,
-                 0, false, o);
+      const std::vector<double>& en = energy;  // of the converged iterate: the new state's
       for (int k = 0; k < 3; ++k) {
         c.acc[3 + k] += 0.5 * h * (c.acc[k] + en[P_ACTUATOR + k]);
         c.acc[k] = en[P_ACTUATOR + k];

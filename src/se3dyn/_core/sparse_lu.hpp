@@ -485,6 +485,14 @@ class SparseLU {
   SparseLU() = default;
   explicit SparseLU(const Options& opt) : opt_(opt) {}
   void set_options(const Options& opt) { opt_ = opt; }
+  // drop_zeros: entries (CSC positions of analyze's pattern) that factor keeps in the patterns
+  // even when they are zero in the values it is given (e.g. those nonzero in some state of the
+  // problem, so that later refactorisations never meet a left-out entry turned nonzero); nullptr
+  // clears the mask.
+  void set_keep(const char* mask) {
+    if (mask) keep_.assign(mask, mask + (analyzed_ ? colptr_[n_] : 0));
+    else keep_.clear();
+  }
   const Options& options() const { return opt_; }
 
   // Pattern of an n x n matrix in CSC (colptr: n+1, rowind: nnz; rows sorted or not; duplicates
@@ -578,6 +586,7 @@ class SparseLU {
   int nb_ = 0;
   bool grouped_ = false;              // groups given: pivots inside the block are preferred
   bool ordered_with_values_ = false;  // the ordering has seen values (see order_with_values)
+  std::vector<char> keep_;            // set_keep
   std::vector<int> Q_, P_, pinv_;
   std::vector<int> Lp_, Li_, Up_, Ui_;
   std::vector<double> Lx_, Ux_, Ud_;
@@ -860,8 +869,9 @@ inline int SparseLU::factor(const double* values) {
     }
     // --- reach of the pattern of A(:, c) in the graph of L: xi[top..n), topological order
     int top = n;
+    const bool kp = !keep_.empty();
     for (int p = pa; p < pb; ++p) {
-      if (drop && std::fabs(values[p]) <= cth) continue;
+      if (drop && std::fabs(values[p]) <= cth && !(kp && keep_[p])) continue;
       const int i = rowind_[p];
       if (mark_[i] != k) top = dfs(i, k, top, xi, pstack);
     }
@@ -870,7 +880,7 @@ inline int SparseLU::factor(const double* values) {
     for (int p = pa; p < pb; ++p) {
       const double v = values[p];
       asum += std::fabs(v);
-      if (drop && std::fabs(v) <= cth) continue;
+      if (drop && std::fabs(v) <= cth && !(kp && keep_[p])) continue;
       x[rowind_[p]] += v;
       amax = std::max(amax, std::fabs(v));
     }
@@ -966,7 +976,7 @@ inline int SparseLU::factor(const double* values) {
       cth *= dtol;
     }
     for (int p = colptr_[c]; p < colptr_[c + 1]; ++p) {
-      if (drop && std::fabs(values[p]) <= cth) {
+      if (drop && std::fabs(values[p]) <= cth && !(!keep_.empty() && keep_[p])) {
         Rz_.push_back(p);
         continue;
       }

@@ -78,3 +78,150 @@ def examples(rng):
             mb.joint("j", typ, "a", "b", at=at, **kw)
             out.append(mb.build())
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# model file: the `joints:` section (with its `control:` mapping), see se3dyn.modelfile
+def model_file(mf):
+    """The ``joints:`` section of model files (:class:`se3dyn.modelfile.ElementSection`).
+
+    ``mf`` is :mod:`se3dyn.modelfile` (its field types), passed by it: the element library
+    never imports the YAML layer.
+    """
+    from se3dyn.joints import JOINT_TYPES
+
+    keys = tuple(sorted([*JOINT_TYPES, "universal"]))
+    v3 = mf.Vec(3)
+    kvec = mf.OneOf((mf.Num(), mf.Vec(None, 1, 6)))
+    kvec_nn = mf.OneOf((mf.Num(minimum=0), mf.Vec(None, 1, 6)))
+    act_doc = ("Actuator force/torque tau(t) on the relative coordinates (Eq. 66), k components "
+               "(a number applies to all). `actuator`, `torque` and `force` are aliases; give "
+               "at most one.")
+    F = mf.Field
+    fields = (
+        F("type", mf.Str(keys), None, "Joint type, see [joint types](#joint-types).", True),
+        F("a", mf.Str(ref="node"), None, "Node A (H_B = H_A H_J, Eq. 7).", True),
+        F("b", mf.Str(ref="node"), None, "Node B.", True),
+        F("axis", v3, None, "Unit axis in the inertial frame of the initial configuration "
+          "(hinge, prismatic, cylindrical, screw)."),
+        F("axes", mf.Mat(2, 3, 3), None, "Spherical: 3 orthonormal rotation axes (identity "
+          "by default); planar: 2 in-plane axes; universal: the 2 hinge axes."),
+        F("normal", v3, None, "Planar joint: plane normal."),
+        F("pitch", mf.Num(), None, "Screw joint: translation per radian (m/rad)."),
+        F("A", mf.Mat(6, 6, None, flat=True), None, "General joint: 6 x k subalgebra basis, "
+          "columns (e_U, e_Omega)."),
+        F("stiffness", kvec_nn, 0, "Spring K on the relative coordinates (Eq. 62)."),
+        F("reference", kvec, 0, "Spring reference alpha0."),
+        F("damping", kvec_nn, 0, "Damper C on the relative velocities (Eq. 64)."),
+        F("actuator", mf.TimeFunc(), None, act_doc),
+        F("torque", mf.TimeFunc(), None, "Alias of `actuator`."),
+        F("force", mf.TimeFunc(), None, "Alias of `actuator`."),
+        F("control", mf.Section("control"), None, "PD control law (abelian joints only)."),
+        F("at", v3, None, "Attachment point in the inertial frame of the initial "
+          "configuration (m): the joint connects frames fixed to `a` and `b` at this point "
+          "(inertial orientation at t0), H_B X_B = H_A X_A H_J with X = H0^-1 H(I, at), "
+          "instead of the node frames, so a body needs one node whatever its joints; "
+          "absent: between the node frames (Eq. 7)."),
+    )
+    control = (
+        F("kp", kvec_nn, None, "Proportional gain(s) (required).", True),
+        F("kd", kvec_nn, 0, "Derivative gain(s)."),
+        F("target", mf.TimeFunc(), 0, "Target relative coordinates alpha_ref(t)."),
+        F("target_rate", mf.TimeFunc(), "d target/dt", "Target rates (the derivative of "
+          "`target` when absent)."),
+    )
+
+    def add(mb, name, kw):
+        from se3dyn.model import PD
+
+        if "control" in kw:
+            kw["control"] = PD(**kw["control"].values)
+        mb.joint(name, kw.pop("type"), kw.pop("a"), kw.pop("b"), **kw)
+
+    return mf.ElementSection(
+        key="joints", kind="joint", doc="Kinematic joints by name, in order.",
+        entry_doc="An entry of `joints:` (key: the joint name). A kinematic joint H_B = H_A H_J "
+                  "between nodes `a` and `b` (or between frames attached to them at the point "
+                  "`at`), with its force elements. Vector force elements have "
+                  "k components (k = number of relative coordinates of the type); a number "
+                  "applies to all of them.",
+        fields=fields, add=add, save=lambda model: _save(mf, model),
+        subsections=(("control", "The `control:` mapping of a joint: tau = -kp (alpha - "
+                                 "target(t)) - kd (alpha_dot - target_rate(t)).", control),))
+
+
+def _act_key(type_: str) -> str:
+    return {"hinge": "torque", "spherical": "torque", "universal": "torque",
+            "prismatic": "force"}.get(type_, "actuator")
+
+
+def _joint_out(mf, j) -> dict:
+    item = f"joint {j.name!r}"
+    py, tf_out = mf.plain, mf.time_function_data
+    d = {"type": j.type, "a": j.node_a, "b": j.node_b}
+    if j.at is not None:
+        d["at"] = py(j.at)
+    for key, val in j.params.items():
+        if val is not None:
+            d[key] = py(val) if key != "pitch" else float(val)
+    for key, arr in (("stiffness", j.stiffness), ("reference", j.reference),
+                     ("damping", j.damping)):
+        if np.any(arr != 0):
+            d[key] = py(arr)
+    if j.actuator is not None:
+        k = _act_key(j.type)
+        d[k] = tf_out(j.actuator, item, k)
+    if j.control is not None:
+        c = j.control
+        d["control"] = {"kp": py(c.kp), "kd": py(c.kd),
+                        "target": tf_out(c.target, item, "control.target")}
+        if c.target_rate is not None:
+            d["control"]["target_rate"] = tf_out(c.target_rate, item, "control.target_rate")
+    return d
+
+
+def _universal_out(mf, name: str, parts: tuple[str, ...], model) -> dict:
+    from se3dyn.timefunc import Component
+
+    item = f"joint {name!r}"
+    py, tf_out = mf.plain, mf.time_function_data
+    j1, j2 = (model.joint(p) for p in parts)
+    d = {"type": "universal", "a": j1.node_a, "b": j2.node_b}
+    if j1.at is not None:
+        d["at"] = py(j1.at)
+    d["axes"] = [py(j1.params["axis"]), py(j2.params["axis"])]
+    for key in ("stiffness", "reference", "damping"):
+        a1, a2 = getattr(j1, key), getattr(j2, key)
+        if a1[0] != 0 or a2[0] != 0:
+            d[key] = [float(a1[0]), float(a2[0])]
+
+    def source(f, fld):
+        # the k-vector function a universal joint's per-hinge component was cut from
+        src = f.base if isinstance(f, Component) else None
+        if src is None:
+            tf_out(f, item, fld)  # raises for callables
+        return tf_out(src, item, fld)
+
+    if j1.actuator is not None:
+        d["torque"] = source(j1.actuator, "torque")
+    if j1.control is not None:
+        c1, c2 = j1.control, j2.control
+        d["control"] = {"kp": [float(c1.kp[0]), float(c2.kp[0])],
+                        "kd": [float(c1.kd[0]), float(c2.kd[0])],
+                        "target": source(c1.target, "control.target")}
+        if c1.target_rate is not None:
+            d["control"]["target_rate"] = source(c1.target_rate, "control.target_rate")
+    return d
+
+
+def _save(mf, model) -> dict:
+    """name -> entry of the ``joints:`` section (a universal joint once, by its name)."""
+    joints: dict = {}
+    for j in model.joints:
+        if j.composite is not None:
+            if j.composite not in joints:
+                joints[j.composite] = _universal_out(mf, j.composite,
+                                                     model.composites[j.composite], model)
+        else:
+            joints[j.name] = _joint_out(mf, j)
+    return joints

@@ -35,3 +35,45 @@ def examples(rng):
         mb.load(f"l{i}", "b", force=sd.Sine(tuple(rng.normal(size=3)), 0.7),
                 torque=tuple(rng.normal(size=3)), at=at, force_frame=ff, torque_frame=tf)
     return [mb.build()]
+
+
+def model_file(mf):
+    """The ``loads:`` section of model files (:class:`se3dyn.modelfile.ElementSection`);
+    ``mf`` is :mod:`se3dyn.modelfile` (its field types)."""
+    F = mf.Field
+    frames = mf.Str(("inertial", "body"))
+    fields = (
+        F("node", mf.Str(ref="node"), None, "Loaded node (a free node; required).", True),
+        F("force", mf.TimeFunc(), None, "Force (3 components), in the frame `force_frame`."),
+        F("torque", mf.TimeFunc(), None, "Torque (3 components), in the frame "
+          "`torque_frame`."),
+        F("at", mf.Vec(3), None, "Point of application of the force in the inertial frame of "
+          "the initial configuration (m); it moves with the body. Absent: the node."),
+        F("force_frame", frames, "inertial", "`inertial`: the force keeps its direction in "
+          "space; `body`: it turns with the body (follower load)."),
+        F("torque_frame", frames, "body", "Frame of the torque (`body`: the material frame of "
+          "the node, as in Eq. 66)."),
+    )
+
+    def save(model) -> dict:
+        out = {}
+        for ld in model.loads:
+            item = f"load {ld.name!r}"
+            d: dict = {"node": ld.node}
+            if ld.force is not None:
+                d["force"] = mf.time_function_data(ld.force, item, "force")
+            if ld.torque is not None:
+                d["torque"] = mf.time_function_data(ld.torque, item, "torque")
+            if ld.at is not None:
+                d["at"] = mf.plain(ld.at)
+            if ld.force_frame != "inertial":
+                d["force_frame"] = ld.force_frame
+            if ld.torque_frame != "body":
+                d["torque_frame"] = ld.torque_frame
+            out[ld.name] = d
+        return out
+
+    return mf.ElementSection(
+        key="loads", kind="load", doc="External loads by name.",
+        entry_doc="An entry of `loads:` (key: the load name).", fields=fields,
+        add=lambda mb, name, kw: mb.load(name, kw.pop("node"), **kw), save=save)

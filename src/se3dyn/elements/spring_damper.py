@@ -44,3 +44,34 @@ def examples(rng):
                      at_b=tuple(rng.normal(size=3)), stiffness=3.0, damping=0.4, length=0.7)
     mb.spring_damper("s2", "g", "a", at_b=(0.6, 0.1, 0.0), stiffness=2.0, damping=0.0)
     return [mb.build()]
+
+
+def model_file(mf):
+    """The ``springs:`` section of model files (:class:`se3dyn.modelfile.ElementSection`);
+    ``mf`` is :mod:`se3dyn.modelfile` (its field types)."""
+    F = mf.Field
+    v3 = mf.Vec(3)
+    fields = (
+        F("a", mf.Str(ref="node"), None, "Node A (required).", True),
+        F("b", mf.Str(ref="node"), None, "Node B (required).", True),
+        F("at_a", v3, "position of a", "Point attached to A, in the inertial frame of the "
+          "initial configuration (m)."),
+        F("at_b", v3, "position of b", "Point attached to B (m)."),
+        F("stiffness", mf.Num(minimum=0), None, "Stiffness (N/m) (required).", True),
+        F("damping", mf.Num(minimum=0), 0, "Damping (N s/m) on the rate of the distance."),
+        F("length", mf.Num(minimum=0), "initial distance", "Free length (m)."),
+    )
+
+    def save(model) -> dict:
+        return {sp.name: {"a": sp.node_a, "b": sp.node_b, "at_a": mf.plain(sp.at_a),
+                          "at_b": mf.plain(sp.at_b), "stiffness": float(sp.stiffness),
+                          "damping": float(sp.damping), "length": float(sp.length)}
+                for sp in model.springs}
+
+    return mf.ElementSection(
+        key="springs", kind="spring_damper", doc="Point-to-point spring-dampers by name.",
+        entry_doc="An entry of `springs:` (key: the name). Force stiffness (L - length) + "
+                  "damping dL/dt along the line of two points attached to nodes `a` and `b`.",
+        fields=fields,
+        add=lambda mb, name, kw: mb.spring_damper(name, kw.pop("a"), kw.pop("b"), **kw),
+        save=save)

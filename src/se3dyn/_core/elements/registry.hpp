@@ -5,11 +5,13 @@
 #include <stdexcept>
 #include <string>
 
+#include "beam.hpp"
 #include "body.hpp"
 #include "joint.hpp"
 #include "joint_force.hpp"
 #include "load.hpp"
 #include "spring_damper.hpp"
+#include "bushing.hpp"
 
 namespace se3dyn {
 
@@ -19,6 +21,8 @@ inline std::unique_ptr<ElementBatch> make_batch(const std::string& key) {
   if (key == "joint_force") return std::make_unique<JointForces>();
   if (key == "load") return std::make_unique<Loads>();
   if (key == "spring_damper") return std::make_unique<SpringDampers>();
+  if (key == "bushing") return std::make_unique<Bushings>();
+  if (key == "beam") return std::make_unique<Beams>();
   throw std::invalid_argument("no compiled kernel for the element type '" + key + "'");
 }
 
