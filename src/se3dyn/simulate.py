@@ -350,12 +350,14 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         step) instead of the model's initial state, with the same settings: ``t_start`` stays
         the start of the whole run (the fixed steps keep the times ``t_start + k step``, so
         ``initial_state.t`` must be one of them). The first row of the results is
-        ``initial_state``. The continued run equals the uninterrupted one bit for bit when it
-        starts from a checkpoint: every ``CHECKPOINT_EVERY`` (1000) steps, rounded up to a
-        multiple of ``output_every`` (there the run's linear solver starts afresh), and the
-        start; a final state is one when the run ended on such a step at its regular time.
-        An adaptive run continues to its own ``t_end`` only (``tol`` and ``h_max`` are per
-        run length).
+        ``initial_state``. The state carries the linear solver's memory (``State.solver``),
+        so the continued run computes exactly what the uninterrupted run computes from that
+        state on; its rows are the uninterrupted run's rows when it starts from a
+        :class:`Checkpoint` (every ``CHECKPOINT_EVERY`` = 1000 steps, rounded up to a multiple
+        of ``output_every``, and the start) or from a final state reached at a step time that
+        is a multiple of ``output_every`` (the last step of a run is shortened to land on
+        ``t_end`` otherwise). An adaptive run continues to its own ``t_end`` only (``tol``
+        and ``h_max`` are per run length).
 
     Returns
     -------
