@@ -1,11 +1,14 @@
 """The ``se3dyn`` command: check, run, plot and export multibody models and results.
 
 Exit codes: 0 success, 1 simulation failure (results computed so far are kept in the results
-file), 2 bad input or usage. Errors are one clear line on stderr, never a Python traceback.
+file), 2 bad input or usage, 130 / 143 interrupted by Ctrl-C / SIGTERM (the results file is
+closed; ``--resume`` continues it). Errors are one clear line on stderr, never a Python
+traceback.
 
     se3dyn check MODEL...
     se3dyn run MODEL [--t-end T] [--step H] [--rho-inf R] [--formulation F]
-                  [--tol TOL] [--output-step DT] [--out DIR] [--quiet]
+                  [--tol TOL] [--output-step DT] [--out DIR] [--overwrite] [--quiet]
+    se3dyn run MODEL --resume RESULTS [--t-end T] [--quiet]
     se3dyn sweep MODEL --vary PATH=SPEC... [--method M --samples N --seed S]
                   [--metric NAME=FUNC(EXPR)...] [--scheduler ADDR | --workers N] [--resume]
                   [run-time overrides as for run] --out DIR        (docs/sweep.md)
@@ -154,8 +157,9 @@ def _check_start(path: str, s, settings: dict) -> None:
 class _Progress:
     """A one-line progress bar on stderr: time reached, steps/s, ETA (terminal only)."""
 
-    def __init__(self, t0: float, t1: float, enabled: bool):
+    def __init__(self, t0: float, t1: float, enabled: bool, i0: int = 0):
         self.t0, self.t1 = t0, t1
+        self.i0 = i0  # steps before this run (resumed runs)
         self.enabled = enabled
         self.start = time.perf_counter()
         self.last = 0.0
@@ -169,7 +173,7 @@ class _Progress:
         self.last = now
         frac = (t - self.t0) / (self.t1 - self.t0)
         el = now - self.start
-        rate = i / el if el > 0 else 0.0
+        rate = (i - self.i0) / el if el > 0 else 0.0
         eta = el * (1 - frac) / frac if frac > 0 else math.inf
         bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
         sys.stderr.write(f"\r  t = {t:10.4f} / {self.t1:g} s [{bar}] {rate:8.1f} steps/s "
@@ -182,77 +186,209 @@ class _Progress:
             sys.stderr.flush()
 
 
+class _Terminated(BaseException):
+    """SIGTERM: handled like Ctrl-C (results file closed), exit code 143."""
+
+
+#: Signals received (SIGINT, SIGTERM). While `run` simulates, the handler only records them
+#: and the run stops at its next progress report (between chunks of steps, about 0.1 s): an
+#: exception raised by a handler while Python runs a weakref callback or a __del__ would be
+#: lost, with a traceback printed ("Exception ignored in ...").
+_STOP: list[int] = []
+_DEFER = [False]
+
+
+def _on_signal(signum, frame):
+    import signal
+
+    _STOP.append(signum)
+    if not _DEFER[0]:
+        raise KeyboardInterrupt() if signum == signal.SIGINT else _Terminated()
+
+
+def _check_stop() -> None:
+    import signal
+
+    if _STOP:
+        raise KeyboardInterrupt() if _STOP[-1] == signal.SIGINT else _Terminated()
+
+
+def _shield():
+    """Ignore SIGINT and SIGTERM while the results file is being closed."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
 def cmd_run(args) -> int:
     """Simulate a model file, stream the results to an HDF5 file, print a summary."""
     import warnings
 
     import se3dyn as sd
     from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
-    from se3dyn.h5 import ResultsWriter
+    from se3dyn.h5 import ResultsFileError, ResultsWriter
 
     model, settings = _load(args.model)
-    cfg = dict(settings)
-    cfg.update(_overrides(args))
-    for key in ("t_end", "step"):
-        if key not in cfg:
-            raise _Usage(f"{args.model}: no '{key}' in the file's simulation settings; give "
-                         f"--{key.replace('_', '-')}")
-    out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise _Usage(f"--out {out}: cannot create the folder ({exc.strerror})") from None
-    path = out / (Path(args.model).stem + ".h5")
+    text = Path(args.model).read_text(encoding="utf-8")  # stored as metadata, as given
     try:
         s = sd.compile_model(model)
     except ModelError as exc:
         raise _Usage(f"{args.model}: {exc}") from None
-    text = Path(args.model).read_text(encoding="utf-8")  # stored as metadata, as given
+    if args.resume is not None:
+        writer, cfg, path = _resume(args, s, text)
+        if writer is None:
+            print(f"{path}: the run is complete to t_end = {cfg['t_end']:g} s already; give a "
+                  "later --t-end to continue it")
+            return 0
+        cp = writer.checkpoint
+    else:
+        cfg = dict(settings)
+        cfg.update(_overrides(args))
+        for key in ("t_end", "step"):
+            if key not in cfg:
+                raise _Usage(f"{args.model}: no '{key}' in the file's simulation settings; "
+                             f"give --{key.replace('_', '-')}")
+        out = Path(args.out if args.out is not None else "out")
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _Usage(f"--out {out}: cannot create the folder ({exc.strerror})") from None
+        path = out / (Path(args.model).stem + ".h5")
+        try:
+            writer = ResultsWriter(path, s, model_text=text, settings=cfg,
+                                   overwrite=args.overwrite)
+        except ResultsFileError as exc:
+            if "exists" in exc.problem:
+                raise _Usage(f"{path}: a results file exists; give --overwrite to replace it, "
+                             f"or --resume {path} to continue its run") from None
+            raise _Usage(str(exc)) from None
+        cp = None
     quiet = args.quiet or not sys.stderr.isatty()
-    prog = _Progress(float(cfg.get("t_start", 0.0)), float(cfg["t_end"]), not quiet)
-    print(f"se3dyn {sd.__version__}: {args.model} -> {path}")
+    t_from = cp.state.t if cp is not None else float(cfg.get("t_start", 0.0))
+    prog = _Progress(t_from, float(cfg["t_end"]), not quiet, cp.steps if cp is not None else 0)
+    print(f"se3dyn {sd.__version__}: {args.model} -> {path}"
+          + (f" (resumed at t = {cp.state.t:g} s)" if cp is not None else ""))
     print(f"  {len(model.nodes)} nodes, {len(model.joints)} joints; {s.nq} unknowns, {s.nm} "
           f"multipliers; t_end = {cfg['t_end']} s, h = {cfg['step']} s, "
           f"rho_inf = {cfg.get('rho_inf', 0.9)}, {cfg.get('formulation', 'index2')}")
     t0 = time.perf_counter()
     failed = None
-    with ResultsWriter(path, s, model_text=text, settings=cfg) as writer:
+    res = None
+    base_steps = cp.steps if cp is not None else 0
+    base_its = writer.base_iterations
+    resume_hint = f"continue with: se3dyn run {args.model} --resume {path}"
+    with writer:
         try:
-            with warnings.catch_warnings():  # (the summary below reports them)
-                warnings.simplefilter("ignore", Se3dynWarning)
-                res = sd.simulate(s, progress=prog, on_output=writer.append, **cfg)
+            def progress(t: float, i: int) -> None:
+                _check_stop()
+                prog(t, i)
+
+            _DEFER[0] = True
+            try:
+                with warnings.catch_warnings():  # (the summary below reports them)
+                    warnings.simplefilter("ignore", Se3dynWarning)
+                    res = sd.simulate(s, progress=progress, on_rows=writer.add_rows,
+                                      store=False, initial_state=cp, **cfg)
+            finally:
+                _DEFER[0] = False
+            _check_stop()
         except SimulationError as exc:
             failed = exc
             res = exc.result
         except ModelError as exc:  # refused before any step: no results file is left
             prog.done()
+            _shield()
             writer.close(stats={"failed": True, "message": str(exc)})
-            path.unlink(missing_ok=True)
+            if cp is None:
+                path.unlink(missing_ok=True)
             raise _Usage(f"{args.model}: simulation settings: {exc}") from None
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, _Terminated) as exc:
+            _shield()
             prog.done()
-            writer.close(stats={"failed": True, "message": "interrupted"})
-            _err(f"interrupted; results so far kept in {path}")
-            return 130
+            what = "interrupted" if isinstance(exc, KeyboardInterrupt) else "terminated"
+            writer.close(stats={"failed": True, "message": what})
+            _err(f"{what}; results so far kept in {path} ({resume_hint})")
+            return 130 if isinstance(exc, KeyboardInterrupt) else 143
+        _shield()
         prog.done()
         stats = dict(res.stats) if res is not None else {}
         stats.pop("final_state", None)
+        stats["steps"] = base_steps + int(stats.get("steps", 0))
+        stats["newton_iterations"] = base_its + int(stats.get("newton_iterations", 0))
         if failed is not None:
             stats.update(failed=True, message=str(failed))
-        writer.close(stats=stats)
+        writer.close(stats=stats, settings=cfg)
     wall = time.perf_counter() - t0
     if failed is not None:
-        n = 0 if res is None else len(res.t) - 1
         _err(f"{failed}")
-        print(f"  simulation failed; {n} steps kept in {path}", file=sys.stderr)
+        print(f"  simulation failed; {writer.rows} rows kept in {path}", file=sys.stderr)
         return 1
-    print(f"  {res.stats['steps']} steps, {res.stats['newton_iterations']} Newton iterations "
-          f"(max {int(res.iterations.max())} per step), wall time {wall:.2f} s")
-    for line in run_report(res.stats):
+    st = res.stats
+    print(f"  {stats['steps']} steps, {stats['newton_iterations']} Newton iterations "
+          f"(max {st['max_iterations']} per step), wall time {wall:.2f} s")
+    for line in run_report(st):
         print("  " + line)
-    print(f"  max constraint violation {res.constraint.max():.2e}")
-    print(f"  results: {path}")
+    print(f"  max constraint violation {st['max_constraint']:.2e}")
+    print(f"  results: {path} ({writer.rows} rows)")
     return 0
+
+
+def _resume(args, s, text: str):
+    """The writer reopened on ``--resume RESULTS``, the stored settings (``--t-end`` applied)
+    and the path (writer None: nothing to do); usage errors for everything that cannot
+    continue bit for bit."""
+    import json
+
+    import h5py
+
+    from se3dyn.h5 import ResultsFileError, ResultsWriter, repair
+
+    path = Path(args.resume)
+    other = [k for k in _OVERRIDES if k != "t_end" and getattr(args, k) is not None]
+    if other:
+        raise _Usage(f"--resume {path}: the run continues with its stored settings; only "
+                     f"--t-end may be given (not --{other[0].replace('_', '-')})")
+    if args.out is not None or args.overwrite:
+        raise _Usage(f"--resume {path}: continues that file; --out and --overwrite do not "
+                     "apply")
+    try:
+        repair(path)  # left by kill -9: readable again (not while a writer holds it)
+        with h5py.File(path, "r", libver="latest", swmr=True) as f:
+            stored = f.attrs.get("model", "")
+            stored = stored.decode() if isinstance(stored, bytes) else str(stored)
+            cfg = json.loads(f.attrs.get("settings", "{}"))
+            complete = bool(f.attrs.get("complete", False))
+            t_last = float(f["time"][-1]) if f["time"].shape[0] else -math.inf
+    except ResultsFileError as exc:
+        raise _Usage(str(exc)) from None
+    except (OSError, KeyError, ValueError) as exc:
+        raise _Usage(f"--resume {path}: not a readable se3dyn results file ({exc})") from None
+    if stored != text:
+        raise _Usage(f"--resume {path}: {args.model} is not the model stored in it (the texts "
+                     "differ); give the model file the run was started with")
+    if "t_end" not in cfg or "step" not in cfg:
+        raise _Usage(f"--resume {path}: no simulation settings stored in it")
+    t_end = float(cfg["t_end"])
+    if args.t_end is not None and args.t_end != t_end:
+        if cfg.get("tol") is not None:
+            raise _Usage(f"--resume {path}: an adaptive run (tol) continues to its own t_end = "
+                         f"{t_end:g} s only (its step control depends on the length of the "
+                         "run)")
+        if args.t_end < t_last:
+            raise _Usage(f"--resume {path}: t_end = {args.t_end:g} s is before the end of its "
+                         f"rows (t = {t_last:g} s); --resume continues a run, it does not cut "
+                         "it")
+        cfg["t_end"] = args.t_end
+    elif complete and t_last >= t_end:
+        return None, cfg, path
+    try:
+        writer = ResultsWriter.resume(path, s)
+    except ResultsFileError as exc:
+        raise _Usage(f"{exc}") from None
+    return writer, cfg, path
 
 
 def cmd_sweep(args) -> int:
@@ -273,7 +409,7 @@ def _read(path: str):
     if not Path(path).is_file():
         raise _Usage(f"{path}: no such results file")
     try:
-        return read_results(path)
+        res = read_results(path)
     except (OSError, ValueError, KeyError) as exc:
         raise _Usage(f"{path}: not a readable se3dyn results file ({exc})") from None
     except Exception as exc:  # the reader's own error class
@@ -282,6 +418,10 @@ def _read(path: str):
         if isinstance(exc, Se3dynError):
             raise _Usage(str(exc)) from None
         raise
+    if res.stats.get("repaired"):
+        print(f"se3dyn: repaired {path}: it was left open by a run that was killed; "
+              f"{len(res.t)} rows kept up to t = {res.t[-1]:g} s", file=sys.stderr)
+    return res
 
 
 def _channels(res, names: list[str]) -> list[tuple[str, np.ndarray]]:
@@ -494,7 +634,14 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="simulate a model file and write the results file")
     r.add_argument("model")
     _add_overrides(r)
-    r.add_argument("--out", default="out", help="folder of the results file (default: out)")
+    r.add_argument("--out", help="folder of the results file (default: out); the file is "
+                   "named after the model (MODEL.h5)")
+    r.add_argument("--overwrite", action="store_true",
+                   help="replace an existing results file (refused otherwise)")
+    r.add_argument("--resume", metavar="RESULTS",
+                   help="continue the run of this results file (finished, failed, interrupted "
+                   "or killed) from its last checkpoint, bit for bit as one uninterrupted run; "
+                   "with --t-end, further than it was planned")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=cmd_run)
     sw = sub.add_parser("sweep", help="parameter study: many runs on dask.distributed")
@@ -538,10 +685,24 @@ def main(argv: list[str] | None = None) -> int:
     import signal
     import threading
 
+    saved = None
     if threading.current_thread() is threading.main_thread():
         # se3dyn/__init__.py made Ctrl-C during start-up quiet; from here on it raises
-        # KeyboardInterrupt, handled below and by `run` (results file closed)
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        # KeyboardInterrupt, and SIGTERM _Terminated, handled below and by `run` (results file
+        # closed); the caller's handlers are restored on return
+        saved = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+        _STOP.clear()
+        signal.signal(signal.SIGINT, _on_signal)
+        signal.signal(signal.SIGTERM, _on_signal)
+    try:
+        return _main(argv)
+    finally:
+        if saved is not None:
+            signal.signal(signal.SIGINT, saved[0])
+            signal.signal(signal.SIGTERM, saved[1])
+
+
+def _main(argv: list[str] | None) -> int:
     try:
         parser = build_parser()
         args, extra = parser.parse_known_args(argv)
@@ -558,6 +719,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         _err("interrupted")
         return 130
+    except _Terminated:
+        _err("terminated")
+        return 143
     except BrokenPipeError:  # output piped into a command that stopped reading (e.g. head)
         import os
 

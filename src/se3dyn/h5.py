@@ -7,16 +7,19 @@ the core package never imports it (``import se3dyn`` works without h5py).
 >>> from se3dyn.h5 import ResultsWriter, read_results
 >>> model = sd.examples.slider_crank()
 >>> with ResultsWriter("out.h5", sd.compile_model(model)) as w:     # doctest: +SKIP
-...     res = sd.simulate(model, 5.0, 1e-2, on_output=w.append)
+...     res = sd.simulate(model, 5.0, 1e-2, on_rows=w.add_rows, store=False)
 ...     w.close(res.stats)
 >>> res2 = read_results("out.h5")                                   # doctest: +SKIP
 
-Robustness: rows are buffered in memory and written, then ``flush()``-ed, at least every
-``flush_interval`` seconds of wall time. The file is created with ``libver="latest"`` and put in
-SWMR (single-writer / multiple-reader) mode once all datasets exist, so its metadata on disk is
-always consistent: a writer killed with ``kill -9`` leaves a readable file holding every row up
-to the last flush (``complete`` is then False). :func:`read_results` opens such files directly
-(it falls back to a SWMR read when the HDF5 library reports the file as still open for writing).
+Robustness: rows are buffered in memory (at most about 4 MB) and written, then
+``flush()``-ed, at least every ``flush_interval`` seconds of wall time, with the latest
+checkpoint (the complete integration state from which :meth:`ResultsWriter.resume` continues
+the run bit for bit). The file is created with ``libver="latest"`` and put in SWMR
+(single-writer / multiple-reader) mode once all datasets exist, so its metadata on disk is
+always consistent: a writer killed with ``kill -9`` leaves a file holding every row up to the
+last flush (``complete`` is then False), flagged as still open for writing. :func:`read_results`
+(and so every se3dyn command) repairs such a file on first touch (:func:`repair`, like
+``h5clear -s``) once no writer holds its lock, and follows a live writer by a SWMR read.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import datetime
 import json
 import os
 import time
+import zlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,8 +40,8 @@ from se3dyn.errors import Se3dynError
 from se3dyn.results import Results
 from se3dyn.system import LayoutCounts
 
-__all__ = ["ResultsWriter", "read_results", "ResultsLayout", "ResultsFileError", "FORMAT",
-           "FORMAT_VERSION", "ENERGIES", "SOLVER"]
+__all__ = ["ResultsWriter", "read_results", "repair", "ResultsLayout", "ResultsFileError",
+           "FORMAT", "FORMAT_VERSION", "ENERGIES", "SOLVER"]
 
 #: Value of the root attribute ``format``.
 FORMAT = "se3dyn-results"
@@ -95,13 +99,20 @@ def _joint_columns(system) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ---------------------------------------------------------------------------------------------
+#: Bytes of rows buffered in memory at most before they are written to the file.
+_WRITE_BYTES = 4 << 20
+#: Header of a restart slot (float64 values), followed by the state (see _pack_state).
+_SLOT_HEADER = ("sequence", "rows", "steps", "newton_iterations", "rejected", "h_next", "crc32",
+                "length")
+
+
 class ResultsWriter:
     """Stream the rows of a simulation to an HDF5 results file.
 
     Parameters
     ----------
     path : str or PathLike
-        File to create (overwritten if it exists).
+        File to create.
     system : System or Model
         The compiled system (a Model is compiled here) that is simulated.
     model_text : str, optional
@@ -111,12 +122,21 @@ class ResultsWriter:
         Simulation settings, stored as JSON in the root attribute ``settings``.
     flush_interval : float
         Write buffered rows and flush the file at least this often (seconds of wall time).
+    overwrite : bool
+        Replace an existing file (default); False refuses with a :class:`ResultsFileError`.
 
-    Use ``simulate(..., on_output=writer.append)`` and then :meth:`close` (or a ``with`` block).
+    The file is locked while the writer is open (``fcntl.flock`` on ``PATH.lock``, removed at
+    :meth:`close`): a second writer of the same file is refused with a
+    :class:`ResultsFileError` naming the process that holds it.
+
+    Use ``simulate(..., on_rows=writer.add_rows, store=False)`` (rows in blocks, memory flat) or
+    ``simulate(..., on_output=writer.append)`` (row by row), then :meth:`close` (or a
+    ``with`` block). :meth:`resume` reopens a file to continue its run.
     """
 
     def __init__(self, path: str | os.PathLike, system, *, model_text: str | None = None,
-                 settings: dict | None = None, flush_interval: float = 1.0):
+                 settings: dict | None = None, flush_interval: float = 1.0,
+                 overwrite: bool = True, _resume: bool = False):
         from se3dyn.model import Model
         from se3dyn.system import compile_model
 
@@ -127,6 +147,13 @@ class ResultsWriter:
         self.flush_interval = float(flush_interval)
         self.rows = 0
         self.closed = False
+        self.checkpoint = None  # the latest checkpoint written (resume: the one read)
+        self.base_iterations = 0  # Newton iterations before the checkpoint resumed from
+        self._skip = 0  # rows to skip (resume: the first row is the stored checkpoint's)
+        self._run_skip = 0
+        self._run_base = 0  # rows in the file before the run
+        self._pending_cp = None
+        self._seq = 0
         s = system
         self.M = len(s.node_names)
         self.m = len(s.joint_names)
@@ -142,28 +169,115 @@ class ResultsWriter:
         self._free = free
         self._freeidx = (self._nodedof[free][:, None] + np.arange(6)).astype(np.int64)
         self.nm = 6 * self.m
-        if model_text is None:
-            model_text = ""
-            model = getattr(s, "model", None)
-            if model is not None:
-                from se3dyn.errors import ModelError
-                from se3dyn.modelfile import save_model
-                try:
-                    model_text = save_model(model)
-                except ModelError:
-                    model_text = ""
-
-        self._buf: list[tuple] = []
+        self._buf: list[tuple] = []  # rows given one by one (append)
+        self._blocks: list[dict] = []  # rows in file layout, not yet written
+        self._buf_bytes = 0
+        self._row_bytes = 8 * (1 + self.M * 24 + 3 * self.nk + self.nm + 9)
+        self._chunk = int(max(16, min(256, (1 << 20) // max(self._row_bytes, 1))))
+        # chunk cache per dataset: rows are written in order, whole blocks at a time, so two
+        # chunks of the widest dataset are all it needs (HDF5 2.0's default of 8 MiB per
+        # dataset would grow a writer of the 17 datasets by some 140 MB as the run goes)
+        self._cache = 2 * self._chunk * 8 * max(9 * self.M, self.nk, self.nm, 1)
         self._last_flush = time.monotonic()
-        f = h5py.File(self.path, "w", libver="latest")
-        self.file = f
+        self._lock = _FileLock(self.path)
         try:
-            self._create(f, s, k, cols, model_text, settings)
+            if _resume:
+                self.file = self._reopen(s)
+                return
+            if not overwrite and os.path.exists(self.path):
+                raise ResultsFileError(self.path, "exists (not overwritten)")
+            if model_text is None:
+                model_text = ""
+                model = getattr(s, "model", None)
+                if model is not None:
+                    from se3dyn.errors import ModelError
+                    from se3dyn.modelfile import save_model
+                    try:
+                        model_text = save_model(model)
+                    except ModelError:
+                        model_text = ""
+            f = h5py.File(self.path, "w", libver="latest", rdcc_nbytes=self._cache)
+            self.file = f
+            try:
+                self._create(f, s, k, cols, model_text, settings)
+                f.flush()
+                f.swmr_mode = True
+            except BaseException:
+                f.close()
+                raise
+        except BaseException:
+            self._lock.release()
+            raise
+
+    # -----------------------------------------------------------------------------------------
+    @classmethod
+    def resume(cls, path: str | os.PathLike, system, *,
+               flush_interval: float = 1.0) -> ResultsWriter:
+        """Reopen a results file (complete, failed or left by a killed run) to continue its
+        run: the file is locked and repaired if needed, the rows after its last checkpoint are
+        dropped, and ``writer.checkpoint`` is the :class:`~se3dyn.simulate.Checkpoint` to give
+        ``simulate(..., initial_state=writer.checkpoint, on_rows=writer.add_rows)`` (whose first
+        row, the checkpoint's own, is not written again).
+
+        Raises
+        ------
+        ResultsFileError
+            No such file, another writer holds it, no checkpoint stored, or a file of another
+            model (layout).
+        """
+        return cls(path, system, flush_interval=flush_interval, _resume=True)
+
+    def _reopen(self, s) -> h5py.File:
+        from se3dyn.simulate import Checkpoint
+
+        path = self.path
+        if not os.path.isfile(path):
+            raise ResultsFileError(path, "no such file")
+        # a run killed with kill -9 left the file flagged open (this writer holds the lock)
+        _clear_status_flags(path, check_lock=False)
+        try:
+            f = h5py.File(path, "r+", libver="latest", rdcc_nbytes=self._cache)
+        except OSError as exc:
+            raise ResultsFileError(path, f"cannot be opened for writing ({exc})") from None
+        try:
+            if _str(f.attrs.get("format", "")) != FORMAT:
+                raise ResultsFileError(path, "not an se3dyn results file")
+            g = f["layout"]
+            names = tuple(_str(x) for x in g["node_names"][()])
+            jn = tuple(_str(x) for x in g["joint_names"][()])
+            if (names != tuple(s.node_names) or jn != tuple(s.joint_names)
+                    or int(g.attrs["nq"]) != s.nq or int(g.attrs["nm"]) != s.nm):
+                raise ResultsFileError(path, "holds the results of another model (nodes, "
+                                       "joints or unknowns differ)")
+            if "restart" not in f:
+                raise ResultsFileError(path, "has no checkpoint (written by an older se3dyn or "
+                                       "stopped before its first checkpoint); run it again")
+            cp = _read_checkpoint(f, s)
+            if cp is None:
+                raise ResultsFileError(path, "has no checkpoint yet (the run stopped before "
+                                       "its first one); run it again")
+            (state, rows, steps, its, rejected, h_next), self._seq = cp
+            self._ds = {name: f[name] for name in _SERIES}
+            self._chunk = f["time"].chunks[0]
+            for ds in self._ds.values():  # drop the rows after the checkpoint
+                if ds.shape[0] > rows:
+                    ds.resize(rows, axis=0)
+            self.rows = rows
+            self._slots = f["restart/state"]
+            self._memory = f["restart/solver"]
+            for key in list(f["stats"].attrs):
+                del f["stats"].attrs[key]
+            f.attrs["complete"] = False
             f.flush()
             f.swmr_mode = True
         except BaseException:
             f.close()
             raise
+        self.checkpoint = Checkpoint(state, steps, h_next, its, rejected, rows)
+        self.base_iterations = its
+        self._skip = self._run_skip = 1
+        self._run_base = rows
+        return f
 
     # -----------------------------------------------------------------------------------------
     def _create(self, f, s, k, cols, model_text, settings):
@@ -177,8 +291,6 @@ class ResultsWriter:
         f.attrs["settings"] = json.dumps(settings or {}, default=str, sort_keys=True)
         f.attrs["complete"] = False
         M, nk, nm = self.M, self.nk, self.nm
-        row_bytes = 8 * (1 + M * (3 + 9 + 6 + 6) + 3 * nk + nm + 9)
-        self._chunk = int(max(16, min(256, (1 << 20) // max(row_bytes, 1))))
         self._ds: dict[str, h5py.Dataset] = {}
 
         def mk(name, shape, dtype=np.float64, units=""):
@@ -227,12 +339,24 @@ class ResultsWriter:
         g.attrs["nq"] = int(s.nq)
         g.attrs["nm"] = int(s.nm)
         f.create_group("stats")  # attributes written by close()
+        r = f.create_group("restart")
+        n = len(_SLOT_HEADER) + _state_length(s)
+        self._slots = r.create_dataset("state", shape=(2, n), dtype=np.float64,
+                                       fillvalue=np.nan)
+        r.attrs["header"] = ", ".join(_SLOT_HEADER)
+        r.attrs["state"] = _STATE_DOC
+        self._memory = r.create_dataset("solver", shape=(2, 0), maxshape=(2, None),
+                                        chunks=(2, 4096), dtype=np.float64, fillvalue=np.nan)
+        self._memory.attrs["content"] = _MEMORY_DOC
 
     # -----------------------------------------------------------------------------------------
     def append(self, state, scalars: dict) -> None:
         """Add one row (signature of ``simulate``'s ``on_output``)."""
         if self.closed:
             raise ValueError(f"results file '{self.path}': writer is closed")
+        if self._skip:
+            self._skip -= 1
+            return
         H = np.asarray(state.H)
         vel = np.zeros((self.M, 6))
         acc = np.zeros((self.M, 6))
@@ -246,56 +370,137 @@ class ResultsWriter:
             np.array(state.lam, dtype=float),
             [float(scalars[e]) for e in ENERGIES], int(scalars["iterations"]),
             float(scalars["residual"]), float(scalars["constraint"])))
+        self._buf_bytes += self._row_bytes
+        self._maybe_flush()
+
+    def add_rows(self, block: Results, checkpoint=None) -> None:
+        """Add a block of rows and the checkpoint reached after them (signature of
+        ``simulate``'s ``on_rows``); the checkpoint is stored with the next flush."""
+        if self.closed:
+            raise ValueError(f"results file '{self.path}': writer is closed")
+        self._take_rows()
+        lo = min(self._skip, len(block.t))
+        self._skip -= lo
+        n = len(block.t) - lo
+        if n:
+            sl = slice(lo, None)
+            H = block.H[sl]
+            v, vd = block.v[sl], block.vd[sl]
+            vel = np.zeros((n, self.M, 6))
+            acc = np.zeros((n, self.M, 6))
+            vel[:, self._free] = v[:, self._freeidx]
+            acc[:, self._free] = vd[:, self._freeidx]
+            d = {"nodes/position": H[:, :, :3, 3], "nodes/rotation": H[:, :, :3, :3],
+                 "nodes/velocity": vel, "nodes/acceleration": acc,
+                 "joints/alpha": block.alpha[sl][:, self._jidx],
+                 "joints/velocity": v[:, self._jidx], "joints/acceleration": vd[:, self._jidx],
+                 "joints/multipliers": block.lam[sl],
+                 "solver/iterations": block.iterations[sl].astype(np.int32),
+                 "solver/residual": block.residual[sl],
+                 "solver/constraint": block.constraint[sl]}
+            for e in ENERGIES:
+                d[f"energy/{e}"] = getattr(block, e)[sl]
+            d["time"] = block.t[sl]
+            self._blocks.append(d)
+            self._buf_bytes += n * self._row_bytes
+        if checkpoint is not None:
+            # its rows in the file: those before the run, plus the run's (the checkpoint
+            # counts from the run's first row, which a resumed file already holds)
+            self._pending_cp = (checkpoint, self._run_base + checkpoint.rows - self._run_skip)
+        self._maybe_flush()
+
+    def _take_rows(self) -> None:
+        """Turn the rows given one by one into a block (keeps the order of rows)."""
+        buf, self._buf = self._buf, []
+        if not buf:
+            return
+        nb = len(buf)
+        cols = list(zip(*buf, strict=True))
+        d = {
+            "nodes/position": np.stack(cols[1]), "nodes/rotation": np.stack(cols[2]),
+            "nodes/velocity": np.stack(cols[3]), "nodes/acceleration": np.stack(cols[4]),
+            "joints/alpha": np.stack(cols[5]), "joints/velocity": np.stack(cols[6]),
+            "joints/acceleration": np.stack(cols[7]),
+            "joints/multipliers": np.stack(cols[8]),
+            "solver/iterations": np.array(cols[10], dtype=np.int32),
+            "solver/residual": np.array(cols[11]),
+            "solver/constraint": np.array(cols[12]),
+        }
+        en = np.array(cols[9]).reshape(nb, len(ENERGIES))
+        for i, e in enumerate(ENERGIES):
+            d[f"energy/{e}"] = en[:, i]
+        d["time"] = np.array(cols[0])
+        self._blocks.append(d)
+
+    def _maybe_flush(self) -> None:
         if time.monotonic() - self._last_flush >= self.flush_interval:
             self.flush()
+        elif self._buf_bytes >= _WRITE_BYTES:
+            self._write()
 
-    def flush(self) -> None:
-        """Write the buffered rows and flush the file."""
-        if self.closed:
-            return
-        buf, self._buf = self._buf, []
-        if buf:
-            n0, nb = self.rows, len(buf)
-            cols = list(zip(*buf, strict=True))
-            data = {
-                "nodes/position": np.stack(cols[1]), "nodes/rotation": np.stack(cols[2]),
-                "nodes/velocity": np.stack(cols[3]), "nodes/acceleration": np.stack(cols[4]),
-                "joints/alpha": np.stack(cols[5]), "joints/velocity": np.stack(cols[6]),
-                "joints/acceleration": np.stack(cols[7]),
-                "joints/multipliers": np.stack(cols[8]),
-                "solver/iterations": np.array(cols[10], dtype=np.int32),
-                "solver/residual": np.array(cols[11]),
-                "solver/constraint": np.array(cols[12]),
-            }
-            en = np.array(cols[9]).reshape(nb, len(ENERGIES))
-            for i, e in enumerate(ENERGIES):
-                data[f"energy/{e}"] = en[:, i]
-            data["time"] = np.array(cols[0])  # last: a row exists once its time is written
-            for name, arr in data.items():
+    def _write(self) -> None:
+        """Write the buffered rows to the datasets (time last: a row exists once its time is
+        written), then the latest checkpoint whose rows are all written."""
+        self._take_rows()
+        blocks, self._blocks = self._blocks, []
+        self._buf_bytes = 0
+        if blocks:
+            n0 = self.rows
+            nb = sum(len(b["time"]) for b in blocks)
+            for name in _SERIES:
+                arr = blocks[0][name] if len(blocks) == 1 else np.concatenate(
+                    [b[name] for b in blocks])
                 ds = self._ds[name]
                 ds.resize(n0 + nb, axis=0)
                 ds[n0:n0 + nb] = arr
             self.rows = n0 + nb
+        if self._pending_cp is not None and self._pending_cp[1] <= self.rows:
+            cp, rows = self._pending_cp
+            self._pending_cp = None
+            self._seq += 1
+            slot, memory = _pack_slot(self.system, cp, rows, self._seq, self.base_iterations)
+            if memory is not None:  # the linear solver's memory first: the slot validates it
+                ds = self._memory
+                if ds.shape[1] < len(memory):
+                    ds.resize(len(memory), axis=1)
+                row = np.full(ds.shape[1], np.nan)
+                row[:len(memory)] = memory
+                ds[self._seq % 2] = row
+            self._slots[self._seq % 2] = slot
+            self.checkpoint = cp
+
+    def flush(self) -> None:
+        """Write the buffered rows (and the latest checkpoint) and flush the file."""
+        if self.closed:
+            return
+        self._write()
         self.file.flush()
         self._last_flush = time.monotonic()
 
-    def close(self, stats: dict | None = None) -> None:
+    def close(self, stats: dict | None = None, settings: dict | None = None) -> None:
         """Write the remaining rows, the final ``stats`` (scalars only; e.g. steps,
-        newton_iterations, wall_time, failed, failure) and mark the file ``complete``."""
+        newton_iterations, wall_time, failed, failure) and, if given, new ``settings`` (a
+        resumed run to a later t_end), mark the file ``complete`` and release its lock."""
         if self.closed:
             return
-        self.flush()
-        self.file.close()
-        self.closed = True
-        # attributes cannot be created in SWMR mode: reopen normally for the final ones
-        with h5py.File(self.path, "r+", libver="latest") as f:
-            g = f["stats"]
-            for key, val in (stats or {}).items():
-                val = _attr_value(val)
-                if val is not None:
-                    g.attrs[str(key)] = val
-            f.attrs["rows"] = self.rows
-            f.attrs["complete"] = True
+        try:
+            self.flush()
+            self.file.close()
+            self.closed = True
+            # attributes cannot be created in SWMR mode: reopen normally for the final ones
+            with h5py.File(self.path, "r+", libver="latest") as f:
+                g = f["stats"]
+                for key, val in (stats or {}).items():
+                    val = _attr_value(val)
+                    if val is not None:
+                        g.attrs[str(key)] = val
+                if settings is not None:
+                    f.attrs["settings"] = json.dumps(settings, default=str, sort_keys=True)
+                f.attrs["rows"] = self.rows
+                f.attrs["complete"] = True
+        finally:
+            self.closed = True
+            self._lock.release()
 
     def __enter__(self) -> ResultsWriter:
         return self
@@ -309,6 +514,270 @@ class ResultsWriter:
             stats = dict(getattr(res, "stats", None) or {})
             stats.update(failed=True, failure=f"{type(exc).__name__}: {exc}")
         self.close(stats)
+
+
+_SERIES = ("nodes/position", "nodes/rotation", "nodes/velocity", "nodes/acceleration",
+           "joints/alpha", "joints/velocity", "joints/acceleration", "joints/multipliers") + \
+    tuple(f"energy/{e}" for e in ENERGIES) + tuple(f"solver/{s}" for s in SOLVER) + ("time",)
+
+_STATE_DOC = ("t, h_last, work_act, work_ext, dissipated, power (3), number of dropped "
+              "equations nr, dropped (nm, first nr used), H (M x 16), HJ (m x 16), v, vd, a "
+              "(nq each), lam (nm), alpha (nq), nv (the values of the linear solver's memory "
+              "in /restart/solver, -1: none)")
+_MEMORY_DOC = ("State.solver.ref of the checkpoint in the slot of the same index of "
+               "/restart/state (its first nv values): the iteration matrix of the last full "
+               "sparse LU factorisation, whose pivot sequence the next steps reuse")
+
+
+def _state_length(s) -> int:
+    M, m, nq, nm = len(s.node_names), len(s.joint_names), int(s.nq), int(s.nm)
+    return 9 + nm + 16 * (M + m) + 4 * nq + nm + 1
+
+
+def _pack_slot(s, cp, rows: int, seq: int, base_its: int):
+    """One restart slot (the header and the checkpoint's complete integration state) and the
+    values of the linear solver's memory (None: none); the CRC covers both."""
+    st = cp.state
+    nm = int(s.nm)
+    dropped = np.zeros(nm)
+    dropped[:len(st.dropped)] = st.dropped
+    mem = getattr(st, "solver", None)
+    memory = None if mem is None else np.asarray(mem.ref, dtype=np.float64)
+    payload = np.concatenate([
+        [st.t, st.h_last, st.work_act, st.work_ext, st.dissipated], np.asarray(st.power),
+        [len(st.dropped)], dropped, np.asarray(st.H).ravel(), np.asarray(st.HJ).ravel(),
+        st.v, st.vd, st.a, st.lam, st.alpha,
+        [-1 if memory is None else len(memory)]]).astype(np.float64)
+    head = np.array([seq, rows, cp.steps, base_its + cp.newton_iterations, cp.rejected,
+                     cp.h_next, 0.0, len(payload)], dtype=np.float64)
+    parts = [head, payload] + ([] if memory is None else [memory])
+    head[6] = zlib.crc32(np.concatenate(parts).tobytes())
+    return np.concatenate([head, payload]), memory
+
+
+def _read_checkpoint(f: h5py.File, s):
+    """The newest valid restart slot whose rows are all in the file: ((State, rows, steps,
+    newton_iterations, rejected, h_next), sequence), or None. A slot half written when the
+    writer was killed fails its CRC, and one whose rows did not reach the disk is passed
+    over: the other one is used."""
+    from se3dyn.integrator import State
+
+    present = min(f[name].shape[0] for name in _SERIES)
+    slots = f["restart/state"][()]
+    memories = f["restart/solver"][()] if "restart/solver" in f else np.zeros((2, 0))
+    best = None
+    for k, slot in enumerate(slots):
+        head, payload = slot[:len(_SLOT_HEADER)].copy(), slot[len(_SLOT_HEADER):]
+        if not np.all(np.isfinite(head)) or int(head[7]) != len(payload):
+            continue
+        nv = int(payload[-1]) if np.isfinite(payload[-1]) else -2
+        if nv < -1 or nv > memories.shape[1]:
+            continue
+        memory = None if nv < 0 else memories[k, :nv].copy()
+        crc = head[6]
+        head[6] = 0.0
+        parts = [head, payload] + ([] if memory is None else [memory])
+        if zlib.crc32(np.concatenate(parts).tobytes()) != crc:
+            continue
+        if int(head[1]) > present:
+            continue
+        if best is None or head[0] > best[0][0]:
+            best = (head, payload, memory)
+    if best is None:
+        return None
+    head, p, memory = best
+    M, m, nq, nm = len(s.node_names), len(s.joint_names), int(s.nq), int(s.nm)
+    pos = [0]
+
+    def take(n):
+        out = p[pos[0]:pos[0] + n].copy()
+        pos[0] += n
+        return out
+
+    t, h_last, w_act, w_ext, diss = take(5)
+    power = take(3)
+    nr = int(take(1)[0])
+    dropped = take(nm)[:nr].astype(np.int64)
+    H = take(16 * M).reshape(M, 4, 4)
+    HJ = take(16 * m).reshape(m, 4, 4)
+    v, vd, a = take(nq), take(nq), take(nq)
+    lam, alpha = take(nm), take(nq)
+    extra = {}
+    if memory is not None:
+        from se3dyn.integrator import SolverMemory
+
+        extra["solver"] = SolverMemory(ref=memory)
+    st = State(t=float(t), H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
+               work_act=float(w_act), work_ext=float(w_ext), dissipated=float(diss),
+               power=power, dropped=dropped, h_last=float(h_last), **extra)
+    return ((st, int(head[1]), int(head[2]), int(head[3]), int(head[4]), float(head[5])),
+            int(head[0]))
+
+
+# ---------------------------------------------------------------------------------------------
+class _FileLock:
+    """An exclusive ``fcntl.flock`` on ``PATH.lock`` for a writer of ``PATH`` (released and
+    removed by :meth:`release`; the kernel releases it when the process dies)."""
+
+    def __init__(self, path: str):
+        self.path = path
+        self.lockpath = path + ".lock"
+        self.fd = None
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - no flock on this platform
+            return
+        while True:
+            try:
+                fd = os.open(self.lockpath, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as exc:
+                raise ResultsFileError(path, f"cannot create the lock file {self.lockpath} "
+                                       f"({exc.strerror})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                try:
+                    pid = os.read(fd, 32).decode("ascii", "replace").strip()
+                finally:
+                    os.close(fd)
+                who = f" (process {pid})" if pid.isdigit() else ""
+                raise ResultsFileError(path, f"is being written by another se3dyn run{who}; "
+                                       "wait for it to end or write elsewhere") from None
+            # the previous holder may have removed the file between our open and flock
+            try:
+                same = os.path.samestat(os.fstat(fd), os.stat(self.lockpath))
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode("ascii"))
+        self.fd = fd
+
+    def release(self) -> None:
+        if self.fd is None:
+            return
+        try:
+            os.unlink(self.lockpath)
+        except OSError:
+            pass
+        os.close(self.fd)
+        self.fd = None
+
+
+def _writer_alive(path: str) -> bool:
+    """Whether a se3dyn writer holds the lock of ``path`` now."""
+    lockpath = os.fspath(path) + ".lock"
+    if not os.path.exists(lockpath):
+        return False
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover
+        return False
+    try:
+        fd = os.open(lockpath, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
+def _lookup3(data: bytes, initval: int = 0) -> int:
+    """Bob Jenkins' lookup3 ``hashlittle``, the checksum of HDF5 metadata
+    (``H5_checksum_lookup3``)."""
+    mask = 0xFFFFFFFF
+
+    def rot(x, k):
+        return ((x << k) | (x >> (32 - k))) & mask
+
+    n = len(data)
+    a = b = c = (0xDEADBEEF + n + initval) & mask
+    i = 0
+    while n > 12:
+        a = (a + int.from_bytes(data[i:i + 4], "little")) & mask
+        b = (b + int.from_bytes(data[i + 4:i + 8], "little")) & mask
+        c = (c + int.from_bytes(data[i + 8:i + 12], "little")) & mask
+        a = (a - c) & mask; a ^= rot(c, 4); c = (c + b) & mask  # noqa: E702
+        b = (b - a) & mask; b ^= rot(a, 6); a = (a + c) & mask  # noqa: E702
+        c = (c - b) & mask; c ^= rot(b, 8); b = (b + a) & mask  # noqa: E702
+        a = (a - c) & mask; a ^= rot(c, 16); c = (c + b) & mask  # noqa: E702
+        b = (b - a) & mask; b ^= rot(a, 19); a = (a + c) & mask  # noqa: E702
+        c = (c - b) & mask; c ^= rot(b, 4); b = (b + a) & mask  # noqa: E702
+        n -= 12
+        i += 12
+    if n == 0:
+        return c
+    tail = data[i:i + n] + bytes(12 - n)
+    a = (a + int.from_bytes(tail[0:4], "little")) & mask
+    b = (b + int.from_bytes(tail[4:8], "little")) & mask
+    c = (c + int.from_bytes(tail[8:12], "little")) & mask
+    c ^= b; c = (c - rot(b, 14)) & mask  # noqa: E702
+    a ^= c; a = (a - rot(c, 11)) & mask  # noqa: E702
+    b ^= a; b = (b - rot(a, 25)) & mask  # noqa: E702
+    c ^= b; c = (c - rot(b, 16)) & mask  # noqa: E702
+    a ^= c; a = (a - rot(c, 4)) & mask  # noqa: E702
+    b ^= a; b = (b - rot(a, 14)) & mask  # noqa: E702
+    c ^= b; c = (c - rot(b, 24)) & mask  # noqa: E702
+    return c
+
+
+_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def _clear_status_flags(path: str, check_lock: bool = True) -> bool:
+    """Clear the superblock's file-consistency flags that a writer killed while the file was
+    open (kill -9, a crash) leaves set, as ``h5clear -s`` does; True if they were set.
+
+    A file with these flags opens only as a SWMR reader, so ordinary HDF5 tools refuse it.
+    Only superblocks of version 2 and 3 (``libver="latest"``, as se3dyn writes) carry them;
+    the superblock checksum (lookup3) is rewritten. Never done while a writer holds the file
+    (``check_lock=False``: the caller holds its lock).
+    """
+    if check_lock and _writer_alive(path):
+        return False
+    with open(path, "r+b") as fh:
+        head = fh.read(12)
+        if len(head) < 12 or head[:8] != _SIGNATURE or head[8] not in (2, 3):
+            return False
+        if head[11] == 0:
+            return False
+        osize = head[9]
+        fh.seek(0)
+        sb = bytearray(fh.read(12 + 4 * osize + 4))
+        body = sb[:-4]
+        if _lookup3(bytes(body)) != int.from_bytes(sb[-4:], "little"):
+            return False  # not a superblock we understand: leave it alone
+        body[11] = 0
+        eoa = int.from_bytes(body[12 + 2 * osize:12 + 3 * osize], "little")
+        fh.seek(0)
+        fh.write(bytes(body) + _lookup3(bytes(body)).to_bytes(4, "little"))
+        fh.flush()
+        os.fsync(fh.fileno())
+    # space the writer had allocated but not yet written: the library refuses a file shorter
+    # than its end-of-allocation address ("truncated file")
+    if os.path.getsize(path) < eoa:
+        os.truncate(path, eoa)
+    return True
+
+
+def repair(path: str | os.PathLike) -> bool:
+    """Make a results file left by a killed writer (kill -9, a crash, a power cut) open in
+    every HDF5 tool again: clears its superblock status flags (like ``h5clear -s``). Rows up
+    to the writer's last flush are kept. Returns True if the file needed it; False for an
+    intact file and for one a writer is still writing (``PATH.lock`` held)."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise ResultsFileError(path, "no such file")
+    try:
+        return _clear_status_flags(path)
+    except OSError as exc:
+        raise ResultsFileError(path, f"cannot be repaired ({exc.strerror or exc})") from None
 
 
 def _attr_value(val: Any):
@@ -337,12 +806,23 @@ def _open(path: str) -> h5py.File:
     if not is_h5:
         raise ResultsFileError(path, "not an HDF5 file (expected an se3dyn results file)")
     try:
-        return h5py.File(path, "r")
+        return h5py.File(path, "r"), False
     except OSError as first:
-        # a writer that is still running or was killed leaves the file flagged "open for SWMR
-        # writing": a SWMR read opens it
+        # a writer that was killed leaves the file flagged "open for SWMR writing": the flags
+        # are cleared (like h5clear -s) unless a writer still holds the file, which a SWMR
+        # read follows
+        repaired = False
         try:
-            return h5py.File(path, "r", libver="latest", swmr=True)
+            repaired = _clear_status_flags(path)
+        except OSError:
+            pass
+        if repaired:
+            try:
+                return h5py.File(path, "r"), True
+            except OSError:
+                pass
+        try:
+            return h5py.File(path, "r", libver="latest", swmr=True), False
         except OSError:
             raise ResultsFileError(path, f"cannot be opened ({first})") from None
 
@@ -357,7 +837,9 @@ def read_results(path: str | os.PathLike) -> Results:
     Its ``system`` is a :class:`ResultsLayout` built from ``/layout``; every accessor works as on
     the in-memory results. ``stats`` holds the ``/stats`` attributes plus ``complete`` (False for
     a file whose writer did not close it, e.g. killed), ``rows``, ``model`` (YAML text),
-    ``settings`` (dict), ``se3dyn_version`` and ``created``.
+    ``settings`` (dict), ``se3dyn_version`` and ``created``, and ``repaired`` (True when the
+    file had been left flagged open by a killed writer and was repaired on this first read,
+    see :func:`repair`).
 
     Raises
     ------
@@ -365,7 +847,8 @@ def read_results(path: str | os.PathLike) -> Results:
         Missing file, not an HDF5 file, not an se3dyn results file, newer format version.
     """
     path = os.fspath(path)
-    with _open(path) as f:
+    f, repaired = _open(path)
+    with f:
         fmt = _str(f.attrs.get("format", ""))
         if fmt != FORMAT:
             raise ResultsFileError(path, f"attribute 'format' is {fmt!r}, expected {FORMAT!r} "
@@ -380,7 +863,9 @@ def read_results(path: str | os.PathLike) -> Results:
             raise ResultsFileError(path, f"format_version {ver} is newer than the supported "
                                          f"{FORMAT_VERSION}; upgrade se3dyn")
         try:
-            return _read(f, path)
+            res = _read(f, path)
+            res.stats["repaired"] = repaired
+            return res
         except KeyError as e:
             raise ResultsFileError(path, f"damaged or incomplete layout ({e})") from None
 

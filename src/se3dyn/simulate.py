@@ -33,12 +33,75 @@ SCALARS = ("kinetic", "potential", "spring", "work_actuators", "work_loads", "di
            "iterations", "residual", "constraint")
 
 
+@dataclasses.dataclass(frozen=True)
+class Checkpoint:
+    """A point from which a run continues bit for bit (see ``on_rows`` of :func:`simulate`).
+
+    Attributes
+    ----------
+    state : State
+        The integration state after the last row of the block it comes with.
+    steps : int
+        Steps from ``t_start`` up to ``state`` (a multiple of the checkpoint interval,
+        ``CHECKPOINT_EVERY`` rounded up to a multiple of ``output_every``).
+    h_next : float
+        The step the run takes next (adaptive runs: the controller's step; fixed: ``step``).
+    newton_iterations, rejected : int
+        Counters of this call up to ``state``.
+    rows : int
+        Rows stored by this call up to ``state`` (its row included; the initial one too).
+    """
+
+    state: State
+    steps: int
+    h_next: float
+    newton_iterations: int = 0
+    rejected: int = 0
+    rows: int = 0
+
+
+#: Steps between checkpoints (a multiple of output_every is taken): states (with the linear
+#: solver's memory, ``State.solver``) from which a run continues, in any process, exactly as
+#: the uninterrupted run, and whose stored rows are exactly those of that run.
+CHECKPOINT_EVERY = 1000
+#: Bytes of rows held at most in memory by a streamed run (``store=False``) between blocks.
+_STREAM_BYTES = 4 << 20
+#: Wall time (s) after which rows computed step by step are passed on to ``on_rows``.
+_EMIT_EVERY = 0.2
+
+
 class _Recorder:
-    def __init__(self, s: System, capacity: int, sink=None, limit: int | None = None):
+    """The stored rows of one run.
+
+    With ``store`` every row is kept: the arrays grow in place (``ndarray.resize``, which
+    reallocates without a copy where the C library can, doubling up to the rows expected) and
+    are trimmed in place at the end, so the results cost their own size. Without ``store``
+    (streamed runs) rows are held only until they are passed on to ``on_rows``: memory stays
+    flat whatever the length of the run, and the results keep the first and the last row.
+    The summary statistics (energy balance error, largest energy, constraint violation and
+    Newton iterations) cover every row either way.
+    """
+
+    _FIELDS = ("t", "H", "v", "vd", "lam", "alpha", "scal")
+
+    def __init__(self, s: System, capacity: int, sink=None, limit: int | None = None, *,
+                 store: bool = True, on_rows=None):
         self.s = s
         self.sink = sink
+        self.on_rows = on_rows
+        self.store = store
         self.limit = limit  # rows expected in all (fixed steps): growth stops there
-        self.n = 0
+        self.row_bytes = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
+        if not store:
+            capacity = max(16, min(capacity, _STREAM_BYTES // self.row_bytes))
+        self.n = 0  # rows in the buffer
+        self.sent = 0  # rows of the buffer already passed on to on_rows
+        self.summarized = 0  # rows of the buffer already in the summary
+        self.total = 0  # rows recorded in all
+        self.first = None  # (store=False) the first row, kept for the results
+        self.pending = None  # the latest checkpoint not yet passed on
+        self.last_emit = time.perf_counter()
+        self.summary = dict(e0=None, balance=0.0, energy=0.0, constraint=0.0, iterations=0)
         self.t = np.zeros(capacity)
         self.H = np.zeros((capacity, s.M, 4, 4))
         self.v = np.zeros((capacity, s.nq))
@@ -47,12 +110,32 @@ class _Recorder:
         self.alpha = np.zeros((capacity, s.nq))
         self.scal = np.zeros((capacity, 9))
 
+    def _resize(self, rows: int) -> None:
+        for name in self._FIELDS:
+            shape = (rows,) + getattr(self, name).shape[1:]
+            try:
+                # in place (realloc), zero-filled; refused while anything else references the
+                # array (so no local name for it here)
+                getattr(self, name).resize(shape)
+            except ValueError:
+                old = getattr(self, name)
+                new = np.zeros(shape)
+                k = min(rows, len(old))
+                new[:k] = old[:k]
+                setattr(self, name, new)
+                del old
+
     def _grow(self):
         n = len(self.t)
+        if not self.store:
+            self._resize(2 * n)  # rows of one step beyond the buffer (dense output)
+            return
         extra = n if self.limit is None or self.limit <= n else min(n, self.limit - n)
-        for name in ("t", "H", "v", "vd", "lam", "alpha", "scal"):
-            arr = getattr(self, name)
-            setattr(self, name, np.concatenate([arr, np.zeros((extra,) + arr.shape[1:])]))
+        self._resize(n + max(extra, 1))
+
+    def free(self) -> int:
+        """Rows that fit in the buffer without growing it."""
+        return len(self.t) - self.n
 
     def add(self, st: State, kin: float, pot: float, spring: float, iters: int, res: float,
             con: float):
@@ -68,19 +151,110 @@ class _Recorder:
         self.scal[i] = (kin, pot, spring, st.work_act, st.work_ext, st.dissipated, iters, res,
                         con)
         self.n += 1
+        self.total += 1
         if self.sink is not None:
             self.sink(st, dict(zip(SCALARS, self.scal[i].tolist(), strict=True)))
 
-    def results(self, stats: dict) -> Results:
-        n = self.n
-        c = self.scal[:n]
-        return Results(system=self.s, t=self.t[:n].copy(), H=self.H[:n].copy(),
-                       v=self.v[:n].copy(), vd=self.vd[:n].copy(), lam=self.lam[:n].copy(),
-                       alpha=self.alpha[:n].copy(), kinetic=c[:, 0].copy(),
-                       potential=c[:, 1].copy(), spring=c[:, 2].copy(),
+    def added(self, count: int) -> None:
+        """``count`` rows were written into the buffer by the compiled loop."""
+        self.total += count - self.n
+        self.n = count
+
+    def _summarize(self) -> None:
+        lo, hi = self.summarized, self.n
+        if hi <= lo:
+            return
+        c = self.scal[lo:hi]
+        energy = c[:, 0] + c[:, 1] + c[:, 2]
+        balance = energy - c[:, 3] - c[:, 4] + c[:, 5]
+        sm = self.summary
+        if sm["e0"] is None:
+            sm["e0"] = float(balance[0])
+        sm["balance"] = max(sm["balance"], float(np.abs(balance - sm["e0"]).max()))
+        sm["energy"] = max(sm["energy"], float(np.abs(energy).max()))
+        sm["constraint"] = max(sm["constraint"], float(c[:, 8].max()))
+        sm["iterations"] = max(sm["iterations"], int(c[:, 6].max()))
+        # the energy in play (energy_balance_check): kinetic and elastic energy, and the
+        # changes of the gravity potential, the works and the dissipation
+        if sm.get("x0") is None:
+            sm["x0"] = c[0, [1, 3, 4, 5]].copy()
+        sm["scale"] = max(sm.get("scale", 0.0), float(np.abs(c[:, 0]).max()),
+                          float(np.abs(c[:, 2]).max()),
+                          float(np.abs(c[:, [1, 3, 4, 5]] - sm["x0"]).max()))
+        self.summarized = hi
+
+    def _block(self, lo: int, hi: int, stats: dict | None = None) -> Results:
+        c = self.scal[lo:hi]
+        cp = lambda x: x[lo:hi].copy()  # noqa: E731
+        return Results(system=self.s, t=cp(self.t), H=cp(self.H), v=cp(self.v),
+                       vd=cp(self.vd), lam=cp(self.lam), alpha=cp(self.alpha),
+                       kinetic=c[:, 0].copy(), potential=c[:, 1].copy(), spring=c[:, 2].copy(),
                        work_actuators=c[:, 3].copy(), work_loads=c[:, 4].copy(),
                        dissipation=c[:, 5].copy(), iterations=c[:, 6].astype(int),
-                       residual=c[:, 7].copy(), constraint=c[:, 8].copy(), stats=stats)
+                       residual=c[:, 7].copy(), constraint=c[:, 8].copy(),
+                       stats=stats if stats is not None else {})
+
+    def emit(self, checkpoint: Checkpoint | None = None, force: bool = True) -> None:
+        """Pass the new rows (and the checkpoint reached after them) on to ``on_rows``; in a
+        streamed run, drop them from the buffer. Without ``force``, only when the buffer is
+        nearly full or ``_EMIT_EVERY`` seconds have passed."""
+        if checkpoint is not None:
+            self.pending = checkpoint  # passed on with the next block
+        if not force and self.free() > 1 and time.perf_counter() - self.last_emit < _EMIT_EVERY:
+            return
+        self._summarize()
+        checkpoint, self.pending = self.pending, None
+        if self.on_rows is not None and (self.n > self.sent or checkpoint is not None):
+            self.on_rows(self._block(self.sent, self.n), checkpoint)
+        self.sent = self.n
+        self.last_emit = time.perf_counter()
+        if not self.store and self.n:
+            if self.first is None:
+                self.first = self._block(0, 1)
+            self._move_last_to_front()
+
+    def _move_last_to_front(self) -> None:
+        """(store=False) Keep only the last row, at the front of the buffer."""
+        for name in self._FIELDS:
+            arr = getattr(self, name)
+            arr[0] = arr[self.n - 1]
+        self.n = self.sent = self.summarized = 1
+
+    def last_time(self) -> float | None:
+        return float(self.t[self.n - 1]) if self.n else None
+
+    def stats(self) -> dict:
+        """The summary statistics over every row recorded."""
+        self._summarize()
+        sm = self.summary
+        return dict(rows=self.total, energy_balance_error=sm["balance"],
+                    energy_scale=sm.get("scale", 0.0), max_energy=sm["energy"],
+                    max_constraint=sm["constraint"], max_iterations=sm["iterations"])
+
+    def results(self, stats: dict) -> Results:
+        stats.update(self.stats())
+        n = self.n
+        if not self.store:
+            first = self.first if self.first is not None else (
+                self._block(0, 1) if n else None)
+            last = self._block(n - 1, n) if n else None
+            if self.total <= 1 or first is None or last is None:
+                out = first if first is not None else last
+                out.stats = stats
+                return out
+            return Results(system=self.s, stats=stats, **{
+                f.name: np.concatenate([getattr(first, f.name), getattr(last, f.name)])
+                for f in dataclasses.fields(Results) if f.name not in ("system", "stats")})
+        # in place: the trimmed arrays become the results (no copy of the rows)
+        self._resize(n)
+        c = self.scal
+        out = Results(system=self.s, t=self.t, H=self.H, v=self.v, vd=self.vd, lam=self.lam,
+                      alpha=self.alpha, kinetic=c[:, 0].copy(), potential=c[:, 1].copy(),
+                      spring=c[:, 2].copy(), work_actuators=c[:, 3].copy(),
+                      work_loads=c[:, 4].copy(), dissipation=c[:, 5].copy(),
+                      iterations=c[:, 6].astype(int), residual=c[:, 7].copy(),
+                      constraint=c[:, 8].copy(), stats=stats)
+        return out
 
 
 def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float = 0.9,
@@ -91,7 +265,10 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
              engine: str = "auto", newton: str = "modified",
              initial_velocities: str = "project",
              progress: Callable[[float, int], None] | None = None,
-             on_output: Callable[[State, dict], None] | None = None) -> Results:
+             on_output: Callable[[State, dict], None] | None = None,
+             on_rows: Callable[[Results, Checkpoint | None], None] | None = None,
+             store: bool = True,
+             initial_state: State | Checkpoint | None = None) -> Results:
     """Simulate a model from ``t_start`` to ``t_end`` (Eqs. (38)-(46)), with a fixed step or,
     when ``tol`` is given, with adaptive steps.
 
@@ -155,11 +332,38 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         :class:`~se3dyn.integrator.State` and a dict of the scalar columns ``SCALARS``
         (energies, works, Newton iterations, residual, constraint violation). Used to stream
         results to a file while the simulation runs.
+    on_rows : callable(rows, checkpoint), optional
+        Called with the stored rows in blocks as they are computed (the initial state in the
+        first): ``rows`` is a :class:`Results` of the new rows (its own arrays), ``checkpoint``
+        a :class:`Checkpoint` from which the run continues bit for bit, or None when none was
+        reached since the last call. Blocks come about every 0.1-0.2 s of wall time. The
+        streaming interface of :class:`se3dyn.h5.ResultsWriter` (``writer.add_rows``).
+    store : bool
+        Keep every stored row in the returned results (default). False for streamed runs:
+        rows are only passed on to ``on_output`` / ``on_rows`` and memory stays flat however
+        long the run; the returned results then hold the first and the last row, and
+        ``stats`` the summary of all of them either way (``rows``, ``energy_balance_error``,
+        ``max_energy``, ``max_constraint``, ``max_iterations``).
+    initial_state : State or Checkpoint, optional
+        Continue from this state (``stats["final_state"]`` of an earlier run, or a
+        :class:`Checkpoint` from ``on_rows``, whose ``h_next`` is then an adaptive run's first
+        step) instead of the model's initial state, with the same settings: ``t_start`` stays
+        the start of the whole run (the fixed steps keep the times ``t_start + k step``, so
+        ``initial_state.t`` must be one of them). The first row of the results is
+        ``initial_state``. The state carries the linear solver's memory (``State.solver``),
+        so the continued run computes exactly what the uninterrupted run computes from that
+        state on; its rows are the uninterrupted run's rows when it starts from a
+        :class:`Checkpoint` (every ``CHECKPOINT_EVERY`` = 1000 steps, rounded up to a multiple
+        of ``output_every``, and the start) or from a final state reached at a step time that
+        is a multiple of ``output_every`` (the last step of a run is shortened to land on
+        ``t_end`` otherwise). An adaptive run continues to its own ``t_end`` only (``tol``
+        and ``h_max`` are per run length).
 
     Returns
     -------
     Results
         ``stats`` holds steps, rejected steps, Newton iterations, smallest/largest step, the
+        summary over all rows (see ``store``), ``final_state`` (the :class:`State` reached),
         initial velocity changes (above), and ``energy_balance_error`` (J: the largest drift
         of kinetic + potential + elastic energy - work of actuators and loads + dissipation)
         beside ``energy_scale`` (J: the energy in play, see :func:`energy_balance_check`); a
@@ -177,38 +381,64 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     s = model if isinstance(model, System) else compile_model(model)
     t_end, step, t_start, output_every, span, opt = _settings(
         t_end, step, t_start, output_every, tol, h_min, h_max, output_step)
-    for fld, val in (("progress", progress), ("on_output", on_output)):
+    for fld, val in (("progress", progress), ("on_output", on_output), ("on_rows", on_rows)):
         if val is not None and not callable(val):
             raise ModelError("simulate", fld, "a callable or None", val)
-    _check_size(s, span, step, output_every, opt["output_step"], opt["tol"] is not None)
+    if not isinstance(store, bool | np.bool_):
+        raise ModelError("simulate", "store", "True or False", store)
+    store = bool(store)
+    adaptive = opt["tol"] is not None
+    k0 = 0  # steps before the first one of this call (fixed steps from an initial_state)
+    first_step = None
+    if isinstance(initial_state, Checkpoint):
+        first_step = initial_state.h_next
+        k0 = int(initial_state.steps) if adaptive else 0
+        initial_state = initial_state.state
+    if initial_state is not None:
+        k0 = _check_initial_state(s, initial_state, t_start, t_end, step, adaptive) or k0
+    _check_size(s, span, step, output_every, opt["output_step"], adaptive, store)
     if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool):
         rho_inf = float(rho_inf)
     integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,
                              tol_constraint=tol_constraint, max_iter=max_iter,
                              formulation=formulation, redundant=redundant, engine=engine,
                              newton=newton, initial_velocities=initial_velocities)
-    adaptive = opt["tol"] is not None
-    grid = None
+    grid = None  # the output times t_start + j output_step, the last moved to t_end
+    gi = 1  # next grid time to fill
     if opt["output_step"] is not None:
         k = max(1, math.ceil(span / opt["output_step"] - 1e-9))
-        grid = np.minimum(t_start + opt["output_step"] * np.arange(k + 1), t_end)
-        grid[-1] = t_end
-        capacity = len(grid)
+        dt_out = opt["output_step"]
+
+        def grid(j: int) -> float:  # computed when needed: nothing allocated per row
+            return t_end if j >= k else min(t_start + dt_out * j, t_end)
+
+        n_grid = k + 1
+        capacity = n_grid
+        if initial_state is not None:
+            gi = min(n_grid, max(1, int((initial_state.t - t_start) / dt_out) - 1))
+            while gi < n_grid and grid(gi) <= initial_state.t + 1e-12 * span:
+                gi += 1
+            capacity = n_grid - gi + 1
     elif adaptive:
         capacity = 1024
     else:
-        capacity = max(1, math.ceil(span / step - 1e-9)) // output_every + 2
+        capacity = (max(1, math.ceil(span / step - 1e-9)) // output_every + 2
+                    - k0 // output_every)
     # storage grows as the run goes (doubling, up to the rows expected)
     rec = _Recorder(s, min(capacity, _INITIAL_ROWS), on_output,
-                    None if adaptive and grid is None else capacity)
+                    None if adaptive and grid is None else capacity, store=store,
+                    on_rows=on_rows)
     wall0 = time.perf_counter()
     ws = Workspace(s)  # this run's engine and steppers, shared with no other run
-    st = integ.init(s, t_start, ws=ws)
+    if initial_state is None:
+        st = integ.init(s, t_start, ws=ws)
+    else:
+        st = initial_state
     solver = integ.solver(s, st)
-    e = energies(s, st, step_inputs(s, t_start), ws)
-    v_report = _velocity_report(s, st, e["kinetic"], ws)
+    e = energies(s, st, step_inputs(s, st.t), ws)
+    # (a continued run starts from a state, not from the model's velocities)
+    v_report = _velocity_report(s, st, e["kinetic"], ws) if initial_state is None else {}
     rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
-    gi = 1  # next grid time to fill
     stats = dict(steps=0, rejected=0, newton_iterations=0, rho_inf=rho_inf, step=step,
                  t_start=t_start, t_end=t_end, tol_residual=tol_residual,
                  tol_constraint=tol_constraint, unknowns=s.nq, multipliers=s.nm,
@@ -217,15 +447,24 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                  linear_solver="dense LU" if solver.dense else "sparse LU (SuperLU)",
                  adaptive=adaptive, tol=opt["tol"], h_min_used=math.inf, h_max_used=0.0,
                  **v_report)
+    if initial_state is not None:
+        stats["resumed_at"] = st.t
     nsteps = 0 if adaptive else max(1, math.ceil(span / step - 1e-9))
     h = min(step, opt["h_max"]) if adaptive else step
-    i = 0
+    if adaptive and first_step is not None:
+        h = min(first_step, opt["h_max"])
+    i = k0
+    cpe = output_every * math.ceil(CHECKPOINT_EVERY / output_every)  # checkpoint interval
+    if k0 % cpe == 0:  # the start is a checkpoint too
+        rec.pending = Checkpoint(st, k0, h, 0, 0, 1)
 
     def fail(exc: SimulationError):
-        stats.update(steps=i, failed=True, wall_time=time.perf_counter() - wall0)
-        if grid is None and rec.n and rec.t[rec.n - 1] != st.t:
+        stats.update(steps=i - k0, failed=True, wall_time=time.perf_counter() - wall0,
+                     final_state=st)
+        if grid is None and rec.n and rec.last_time() != st.t:
             e = energies(s, st, step_inputs(s, st.t), ws)
             rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
+        rec.emit()
         exc.result = rec.results(stats)
         raise exc
 
@@ -241,8 +480,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                 out[-1] = t_end
             return out
 
-        st, i, fac, hs = _run_compiled(s, integ, st, times, nsteps, output_every, rec, progress,
-                                       stats, ws)
+        st, i, fac, hs = _run_compiled(s, integ, st, times, k0, nsteps, output_every, cpe,
+                                       rec, progress, stats, ws)
         stats["factorizations"] = fac
         if i < nsteps:
             try:
@@ -250,7 +489,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             except SimulationError as exc:
                 fail(exc)
             raise AssertionError("the compiled step failed but GeneralizedAlpha.step converged")
-        if nsteps:
+        if nsteps > k0:
             stats["h_min_used"], stats["h_max_used"] = hs
     while st.t < t_end and (adaptive or i < nsteps):
         if adaptive:
@@ -283,8 +522,10 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                 h = max(opt["h_min"], h * min(0.9, max(0.2, 0.9 * err ** -0.5)))
                 continue
             t1 = st.t + h if t_end - st.t - h > 1e-12 * span else t_end
+            regular = True  # (an adaptive run continues to its own t_end only)
         else:
             t1 = t_start + (i + 1) * step if i + 1 < nsteps else t_end
+            regular = t1 == t_start + (i + 1) * step
             h = t1 - st.t
             try:
                 new, info = integ.step(s, st, h, solver, ws)
@@ -295,9 +536,11 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         stats["newton_iterations"] += info.iterations
         stats["h_min_used"] = min(stats["h_min_used"], h)
         stats["h_max_used"] = max(stats["h_max_used"], h)
+        stored = False
         if grid is not None:
-            while gi < len(grid) and grid[gi] <= t1 + 1e-12 * span:
-                tg = grid[gi]
+            stored = True  # every grid time up to t1 is filled
+            while gi < n_grid and grid(gi) <= t1 + 1e-12 * span:
+                tg = grid(gi)
                 if abs(tg - t1) <= 1e-12 * span:
                     out = new
                 else:
@@ -307,26 +550,63 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                 out = dataclasses.replace(out, power=ei["power"])
                 rec.add(out, ei["kinetic"], ei["potential"], ei["spring"], info.iterations,
                         info.residual, info.constraint)
+                if tg != t_start + opt["output_step"] * gi:
+                    regular = False  # the last grid time, moved to t_end
                 gi += 1
         elif i % output_every == 0 or t1 >= t_end:
             e = info.energies
             rec.add(new, e["kinetic"], e["potential"], e["spring"], info.iterations,
                     info.residual, info.constraint)
+            stored = i % output_every == 0 or adaptive
         st = new
         if progress is not None:
             progress(st.t, i)
         if adaptive:
             h = min(opt["h_max"], h * min(2.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.5)))
-    stats.update(steps=i, failed=False, wall_time=time.perf_counter() - wall0, final_state=st)
+        cp = None
+        if stored and regular and i % cpe == 0:
+            cp = Checkpoint(st, i, h, stats["newton_iterations"], stats["rejected"], rec.total)
+        rec.emit(cp, force=st.t >= t_end or (not adaptive and i >= nsteps))
+    rec.emit()
+    stats.update(steps=i - k0, failed=False, wall_time=time.perf_counter() - wall0,
+                 final_state=st)
     res = rec.results(stats)
     _energy_check(res)
     return res
 
 
+def _check_initial_state(s: System, st, t_start: float, t_end: float, step: float,
+                         adaptive: bool) -> int:
+    """Validate ``initial_state``; the number of fixed steps before it (0 when adaptive)."""
+    if not isinstance(st, State):
+        raise ModelError("simulate", "initial_state", "a State (stats['final_state'] of an "
+                         "earlier run) or None", st)
+    F = {"H": (s.M, 4, 4), "HJ": (s.m, 4, 4), "v": (s.nq,), "vd": (s.nq,), "a": (s.nq,),
+         "lam": (s.nm,), "alpha": (s.nq,)}
+    for name, shape in F.items():
+        arr = np.asarray(getattr(st, name))
+        if arr.shape != shape:
+            raise ModelError("simulate", "initial_state", f"a state of this model ({name} of "
+                             f"shape {shape})", f"{name} of shape {arr.shape}")
+    t = float(st.t)
+    if not (math.isfinite(t) and t_start <= t < t_end):
+        raise ModelError("simulate", "initial_state", f"a state at a time in [t_start, t_end) ="
+                         f" [{t_start:g}, {t_end:g})", f"t = {t!r}")
+    if adaptive:
+        return 0
+    k = round((t - t_start) / step)
+    if abs(t_start + k * step - t) > 1e-9 * step:
+        raise ModelError("simulate", "initial_state", f"a state at a step time t_start + k "
+                         f"step ({t_start:g} + k {step:g})", f"t = {t!r}",
+                         "give the t_start of the run that computed it, or t_start=t")
+    return int(k)
+
+
 def _check_size(s: System, span: float, step: float, output_every: int,
-                output_step: float | None, adaptive: bool) -> None:
+                output_step: float | None, adaptive: bool, store: bool = True) -> None:
     """Refuse, before anything is allocated, a run of more than MAX_STEPS fixed steps or more
-    than MAX_STEPS stored rows, or whose stored rows would not fit in the available memory."""
+    than MAX_STEPS stored rows, or whose stored rows would not fit in the available memory
+    (streamed runs, ``store=False``, keep no rows)."""
     what = f"(t_end - t_start) / step = {span:g} / {step:g}"
     n = span / step  # may be inf
     if not adaptive and not n <= MAX_STEPS:
@@ -340,8 +620,10 @@ def _check_size(s: System, span: float, step: float, output_every: int,
         raise ModelError("simulate", "output_step" if output_step is not None else
                          "output_every", f"at most {MAX_STEPS:.0e} stored rows", rows,
                          "store fewer rows: a larger output_step or output_every")
+    if not store:
+        return
     per_row = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
-    need = rows * per_row  # (the copy returned in Results doubles it at the end)
+    need = rows * per_row
     avail = _available_memory()
     if avail is not None and need > avail:
         raise ModelError(
@@ -465,8 +747,11 @@ def _energy_check(res: Results) -> None:
 
     from se3dyn.errors import Se3dynWarning
 
-    err, scale = energy_balance_check(res)
-    res.stats.update(energy_balance_error=err, energy_scale=scale)
+    if "energy_scale" in res.stats:  # over every row, streamed ones included (_Recorder)
+        err, scale = res.stats["energy_balance_error"], res.stats["energy_scale"]
+    else:
+        err, scale = energy_balance_check(res)
+        res.stats.update(energy_balance_error=err, energy_scale=scale)
     if err > 0.1 * scale and err > 1e-12:
         warnings.warn(Se3dynWarning(
             f"energy balance error {err:.3g} J is {100 * err / max(scale, 1e-300):.3g} % of "
@@ -487,14 +772,17 @@ def _available_memory() -> float | None:
     return None
 
 
-def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, nsteps: int,
-                  output_every: int, rec: _Recorder, progress, stats: dict, ws: Workspace):
-    """Fixed steps to the times ``times(k0, k1)`` of steps ``k0 <= k < k1 < nsteps`` in the
-    compiled loop (``Stepper.run``); returns the state reached, the number of steps done (less
-    than ``nsteps`` when a step failed), the factorisations and the smallest and largest step.
+def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int, nsteps: int,
+                  output_every: int, cpe: int, rec: _Recorder, progress, stats: dict,
+                  ws: Workspace):
+    """Fixed steps ``k0 <= k < nsteps`` to the times ``times(k, k1)`` in the compiled loop
+    (``Stepper.run``); returns the state reached, the number of steps done (less than
+    ``nsteps`` when a step failed), the factorisations and the smallest and largest step.
     Times and inputs are tabulated in blocks of about _BLOCK steps (a multiple of
-    ``output_every``, so the stored rows are those of one table). Progress is reported and
-    stored rows are streamed between chunks of steps that last about 0.1 s each."""
+    ``output_every``, starting at multiples of the block, so the stored rows are those of one
+    table). Progress is reported and stored rows are passed on between chunks of steps that
+    last about 0.1 s each (and fill at most the recorder's buffer in a streamed run); a chunk
+    ending at a multiple ``cpe`` of steps at its regular time ends with a :class:`Checkpoint`."""
     from se3dyn.integrator import KMAX, _stepper
     from se3dyn.system import input_table
 
@@ -507,28 +795,45 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, nsteps: 
     alpha, v, vd, a, lam = c(st.alpha), c(st.v), c(st.vd), c(st.a), c(st.lam)
     acc = np.array([*st.power, st.work_act, st.work_ext, st.dissipated, st.h_last, st.t])
     am, af, g, b = integ.params
-    i = 0
+    i = k0
     fac = 0
     chunk = 16
     n_ok = nsteps
     b0 = b1 = 0
     tb = U = None
     h_lo, h_hi, t_prev = math.inf, 0.0, st.t
+    t_last = float(times(nsteps - 1, nsteps)[0])
+    # the last step lands on t_end: a checkpoint only if that is its regular time too
+    regular_end = (nsteps % cpe == 0
+                   and t_last == stats["t_start"] + float(nsteps) * stats["step"])
+
+    def state() -> State:
+        return State(t=float(acc[7]), H=H[:s.M].copy(), HJ=H[s.M:].copy(), v=v.copy(),
+                     vd=vd.copy(), a=a.copy(), lam=lam.copy(), alpha=alpha.copy(),
+                     work_act=float(acc[3]), work_ext=float(acc[4]), dissipated=float(acc[5]),
+                     power=acc[:3].copy(), dropped=st.dropped, h_last=float(acc[6]),
+                     solver=ws.memory(stp))
+
     while i < n_ok:
         if i >= b1:  # the next block of times and inputs
-            b0, b1 = i, min(nsteps, i + block)
+            b0 = (i // block) * block
+            b1 = min(nsteps, b0 + block)
             tb = times(b0, b1)
             U, ok = input_table(s, tb)
             if ok < len(tb):
                 n_ok = b0 + ok
-            hs = np.diff(np.concatenate([[t_prev], tb]))
-            h_lo, h_hi = min(h_lo, float(hs.min())), max(h_hi, float(hs.max()))
+            hs = np.diff(np.concatenate([[t_prev], tb[i - b0:]]))
+            if hs.size:
+                h_lo, h_hi = min(h_lo, float(hs.min())), max(h_hi, float(hs.max()))
             t_prev = float(tb[-1])
             if i >= n_ok:
                 break
-        i1 = min(n_ok, b1, i + chunk)
+        if not rec.store:  # at most a buffer of rows per chunk
+            chunk = min(chunk, (rec.free() - 1) * output_every)
+        i1 = min(n_ok, b1, (i // cpe + 1) * cpe,
+                 max(i + 1, ((i + max(chunk, 1)) // output_every) * output_every))
         rows_needed = (i1 // output_every - i // output_every) + 1
-        while len(rec.t) - rec.n < rows_needed:
+        while rec.free() < rows_needed:
             rec._grow()
         n0 = rec.n
         tic = time.perf_counter()
@@ -539,7 +844,7 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, nsteps: 
             rec.t, rec.H.reshape(-1), rec.v.reshape(-1), rec.vd.reshape(-1),
             rec.lam.reshape(-1), rec.alpha.reshape(-1), rec.scal.reshape(-1), rec.n)
         dt = time.perf_counter() - tic
-        rec.n = count
+        rec.added(count)
         stats["newton_iterations"] += its
         fac += nf
         i = b0 + done
@@ -549,16 +854,16 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, nsteps: 
                             vd=rec.vd[r], a=rec.vd[r], lam=rec.lam[r], alpha=rec.alpha[r])
                 # (read-only views of the recorder's rows)
                 rec.sink(row, dict(zip(SCALARS, rec.scal[r].tolist(), strict=True)))
-        if progress is not None and i > 0:
+        cp = None
+        if status == 0 and i > k0 and i % cpe == 0 and (i < nsteps or regular_end):
+            cp = Checkpoint(state(), i, stats["step"], stats["newton_iterations"], 0, rec.total)
+        rec.emit(cp)
+        if progress is not None and i > k0:
             progress(float(tb[i - 1 - b0]), i)
         if status != 0:
             break
         chunk = max(1, min(4 * chunk, int(chunk * 0.1 / max(dt, 1e-6))))
-    st = State(t=float(acc[7]), H=H[:s.M].copy(), HJ=H[s.M:].copy(), v=v.copy(), vd=vd.copy(),
-               a=a.copy(), lam=lam.copy(), alpha=alpha.copy(), work_act=float(acc[3]),
-               work_ext=float(acc[4]), dissipated=float(acc[5]), power=acc[:3].copy(),
-               dropped=st.dropped, h_last=float(acc[6]), solver=ws.memory(stp))
-    return st, i, fac, (h_lo, h_hi)
+    return state(), i, fac, (h_lo, h_hi)
 
 
 def _err_kwargs(exc) -> dict:

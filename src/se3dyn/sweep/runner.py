@@ -208,9 +208,10 @@ def _finished(row: dict | None, out: Path, ctx: RunContext, retry_failed: bool) 
 
 
 def _clean_tmp(runs_dir: Path) -> None:
-    """Remove the temporary files of runs that were killed while writing."""
+    """Remove the temporary files of runs that were killed while writing (and the lock files
+    their writers left, ``.lock`` after the name: se3dyn.h5.ResultsWriter)."""
     if runs_dir.is_dir():
-        for p in runs_dir.glob(f".*{TMP_SUFFIX}"):
+        for p in [*runs_dir.glob(f".*{TMP_SUFFIX}"), *runs_dir.glob(f".*{TMP_SUFFIX}.lock")]:
             try:
                 p.unlink()
             except OSError:
