@@ -795,6 +795,27 @@ class ModelBuilder:
         p = None if at is None else _vec(at, 3, item, "at")
         self._loads[name] = LoadSpec(name, node, f, m, p, force_frame, torque_frame)
 
+    def _two_nodes(self, kind: str, what: str, existing: dict, name: Any, node_a: Any,
+                   node_b: Any, one_free: bool = True) -> str:
+        """The checks of an element between two nodes: a unique valid name, two defined and
+        distinct nodes, not both fixed (``one_free``). Returns the item of its error
+        messages."""
+        _check_name(kind, name)
+        item = f"{kind} {name!r}"
+        if name in existing:
+            raise ModelError(item, "name", f"a unique {what} name", name, "defined twice")
+        for fld, nd in (("node_a", node_a), ("node_b", node_b)):
+            if not isinstance(nd, str) or nd not in self._nodes:
+                raise ModelError(item, fld, "the name of a defined node", nd,
+                                 _unknown("node", nd, list(self._nodes))
+                                 if isinstance(nd, str) else None)
+        if node_a == node_b:
+            raise ModelError(item, "node_b", "a node other than node_a", node_b)
+        if one_free and self._nodes[node_a].fixed and self._nodes[node_b].fixed:
+            raise ModelError(item, "node_b", "at least one free node", node_b,
+                             "both nodes are fixed: the element does nothing")
+        return item
+
     # -----------------------------------------------------------------------------------------
     def spring_damper(self, name: str, node_a: str, node_b: str, *, at_a: Any = None,
                       at_b: Any = None, stiffness: Any, damping: Any = 0.0,
@@ -820,20 +841,7 @@ class ModelBuilder:
         length : float, optional
             Absolute free length (m); the initial distance of the points by default.
         """
-        _check_name("spring_damper", name)
-        item = f"spring_damper {name!r}"
-        if name in self._springs:
-            raise ModelError(item, "name", "a unique spring-damper name", name, "defined twice")
-        for fld, nd in (("node_a", node_a), ("node_b", node_b)):
-            if not isinstance(nd, str) or nd not in self._nodes:
-                raise ModelError(item, fld, "the name of a defined node", nd,
-                                 _unknown("node", nd, list(self._nodes))
-                                 if isinstance(nd, str) else None)
-        if node_a == node_b:
-            raise ModelError(item, "node_b", "a node other than node_a", node_b)
-        if self._nodes[node_a].fixed and self._nodes[node_b].fixed:
-            raise ModelError(item, "node_b", "at least one free node", node_b,
-                             "both nodes are fixed: the element does nothing")
+        item = self._two_nodes("spring_damper", "spring-damper", self._springs, name, node_a, node_b)
         pa = self._nodes[node_a].position if at_a is None else _vec(at_a, 3, item, "at_a")
         pb = self._nodes[node_b].position if at_b is None else _vec(at_b, 3, item, "at_b")
         vals = {}
@@ -911,17 +919,9 @@ class ModelBuilder:
             (``v = v_a + w_a x (x - x_a)``, ``w = w_a``, inertial frame); the end nodes keep
             theirs.
         """
-        _check_name("beam", name)
-        item = f"beam {name!r}"
-        if name in self._beams:
-            raise ModelError(item, "name", "a unique beam name", name, "defined twice")
-        for fld, nd in (("node_a", node_a), ("node_b", node_b)):
-            if not isinstance(nd, str) or nd not in self._nodes:
-                raise ModelError(item, fld, "the name of a defined node", nd,
-                                 _unknown("node", nd, list(self._nodes))
-                                 if isinstance(nd, str) else None)
-        if node_a == node_b:
-            raise ModelError(item, "node_b", "a node other than node_a", node_b)
+        # (both ends may be fixed: a clamped-clamped beam has free nodes in between)
+        item = self._two_nodes("beam", "beam", self._beams, name, node_a, node_b,
+                               one_free=False)
         na, nb = self._nodes[node_a], self._nodes[node_b]
         if elements is not None and (not isinstance(elements, int | np.integer)
                                      or isinstance(elements, bool) or elements < 1
@@ -1109,20 +1109,7 @@ class ModelBuilder:
             exp(deformation)``, the one attached to node a at ``H(orientation, at)``. Zero by
             default: the bushing starts unloaded.
         """
-        _check_name("bushing", name)
-        item = f"bushing {name!r}"
-        if name in self._bushings:
-            raise ModelError(item, "name", "a unique bushing name", name, "defined twice")
-        for fld, nd in (("node_a", node_a), ("node_b", node_b)):
-            if not isinstance(nd, str) or nd not in self._nodes:
-                raise ModelError(item, fld, "the name of a defined node", nd,
-                                 _unknown("node", nd, list(self._nodes))
-                                 if isinstance(nd, str) else None)
-        if node_a == node_b:
-            raise ModelError(item, "node_b", "a node other than node_a", node_b)
-        if self._nodes[node_a].fixed and self._nodes[node_b].fixed:
-            raise ModelError(item, "node_b", "at least one free node", node_b,
-                             "both nodes are fixed: the element does nothing")
+        item = self._two_nodes("bushing", "bushing", self._bushings, name, node_a, node_b)
         p = self._nodes[node_b].position.copy() if at is None else _vec(at, 3, item, "at")
         K = _sym6(stiffness, item, "stiffness")
         D = _sym6(damping, item, "damping")
