@@ -80,8 +80,9 @@ def _check_one(path: str, rank_max: int) -> None:
     n_free = int(np.sum(~s.node_fixed))
     bodies = int(np.sum(s.node_mass > 0))
     print(f"{path}: ok")
-    print(f"  model '{model.name}': {len(model.nodes)} nodes ({n_free} free, {bodies} with mass),"
-          f" {len(model.joints)} joints, {len(model.loads)} loads")
+    nn, nj, extra = _counts(model)
+    print(f"  model '{model.name}': {nn} nodes ({n_free - extra} free, {bodies} with mass),"
+          f" {nj} joints, {len(model.loads)} loads")
     from se3dyn.modelfile import ELEMENT_SECTIONS
 
     others = [f"{len(getattr(model, es.key))} {es.key}" for es in ELEMENT_SECTIONS
@@ -107,8 +108,14 @@ def _check_one(path: str, rank_max: int) -> None:
         print(f"  constraint Jacobian rank {r.rank} of {r.constraints} equations: "
               f"degrees of freedom (mobility) {r.dof}")
         if r.redundant:
-            print(f"  redundant constraint equations ({len(r.redundant)}): "
-                  + "; ".join(r.redundant))
+            import textwrap
+
+            print(f"  redundant constraint equations ({len(r.redundant)}), left out with zero "
+                  "multipliers:")
+            shown = r.redundant[:24]
+            more = f"; and {len(r.redundant) - 24} more" if len(r.redundant) > 24 else ""
+            print(textwrap.fill("; ".join(shown) + more, width=100, initial_indent="    ",
+                                subsequent_indent="    "))
         else:
             print("  no redundant constraints")
         from se3dyn.analysis import massless_motions
@@ -123,6 +130,14 @@ def _check_one(path: str, rank_max: int) -> None:
     if settings:
         print("  simulation settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()))
     _check_start(path, s, settings)
+
+
+def _counts(model) -> tuple[int, int, int]:
+    """Nodes and joints as the model file gives them: a composite joint (universal) counts as
+    one joint, its intermediate cross node not at all; and the number of those cross nodes."""
+    extra = len(model.composites)
+    parts = sum(len(p) for p in model.composites.values())
+    return len(model.nodes) - extra, len(model.joints) - parts + extra, extra
 
 
 def _check_start(path: str, s, settings: dict) -> None:
@@ -271,7 +286,8 @@ def cmd_run(args) -> int:
     prog = _Progress(t_from, float(cfg["t_end"]), not quiet, cp.steps if cp is not None else 0)
     print(f"se3dyn {sd.__version__}: {args.model} -> {path}"
           + (f" (resumed at t = {cp.state.t:g} s)" if cp is not None else ""))
-    print(f"  {len(model.nodes)} nodes, {len(model.joints)} joints; {s.nq} unknowns, {s.nm} "
+    nn, nj, _ = _counts(model)
+    print(f"  {nn} nodes, {nj} joints; {s.nq} unknowns, {s.nm} "
           f"multipliers; t_end = {cfg['t_end']} s, h = {cfg['step']} s, "
           f"rho_inf = {cfg.get('rho_inf', 0.9)}, {cfg.get('formulation', 'index2')}")
     t0 = time.perf_counter()

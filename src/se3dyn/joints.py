@@ -50,6 +50,15 @@ class JointType:
 
 JOINT_TYPES: dict[str, JointType] = {}
 
+#: the names other tools give the joint types (URDF, MuJoCo, EXUDYN, Chrono, ADAMS), accepted
+#: for se3dyn's own (models keep the se3dyn name)
+JOINT_SYNONYMS: dict[str, str] = {
+    "revolute": "hinge", "pin": "hinge", "continuous": "hinge",
+    "slider": "prismatic", "slide": "prismatic", "translational": "prismatic",
+    "ball": "spherical", "fixed": "rigid", "weld": "rigid",
+    "helical": "screw", "cardan": "universal", "hooke": "universal",
+}
+
 
 def register_joint(key: str, params: tuple[str, ...], doc: str = ""):
     """Decorator registering ``make_A`` under ``key``."""

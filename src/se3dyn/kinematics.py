@@ -37,7 +37,7 @@ from se3dyn import lie
 from se3dyn._lazy import LazyModule
 from se3dyn.errors import ModelError, SimulationError
 from se3dyn.model import Model
-from se3dyn.results import node_dofs
+from se3dyn.results import node_accelerations, node_dofs
 from se3dyn.system import LinearSolver, System, compile_model, evaluate, matrix_values, step_inputs
 from se3dyn.timefunc import (
     Callable,
@@ -864,9 +864,11 @@ class KinematicsResult(_Accessors):
         return self._node_dof(name, self.v, frame)
 
     def node_acceleration(self, name: str, frame: str = "material") -> np.ndarray:
-        """Time derivative of the material velocity, shape (n, 6) (``frame="inertial"`` rotates
-        both parts by R)."""
-        return self._node_dof(name, self.vd, frame)
+        """Acceleration of a node, shape (n, 6): material ``(dU/dt, dOmega/dt)``, or
+        ``frame="inertial"`` the acceleration of its origin and its angular acceleration in the
+        inertial frame (:func:`se3dyn.results.node_accelerations`)."""
+        return self._out(node_accelerations(self.system, self._H, self.v, self.vd,
+                                            self._node(name), frame))
 
     def joint_velocities(self, name: str) -> np.ndarray:
         """Relative velocities of a joint (Eq. (61)), shape (n, k)."""

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from se3dyn.errors import ModelError
-from se3dyn.joints import JOINT_TYPES, is_abelian, unit_vector
+from se3dyn.joints import JOINT_SYNONYMS, JOINT_TYPES, is_abelian, unit_vector
 from se3dyn.timefunc import Component, TimeFunction, as_timefunc
 from se3dyn.visuals import VisualSpec, make_visual
 
@@ -619,10 +619,19 @@ class ModelBuilder:
         """
         jt_keys = sorted(list(JOINT_TYPES) + ["universal"])
         _check_name("joint", name)
+        if isinstance(type, str):
+            type = JOINT_SYNONYMS.get(type, type)  # revolute -> hinge, ball -> spherical, ...
         if not isinstance(type, str) or type not in jt_keys:
-            close = difflib.get_close_matches(str(type), jt_keys, n=1)
-            raise ModelError(f"joint {name!r}", "type", "one of " + ", ".join(jt_keys), type,
-                             f"did you mean '{close[0]}'?" if close else "")
+            close = difflib.get_close_matches(str(type), jt_keys + list(JOINT_SYNONYMS), n=1)
+            hint = ""
+            if close:
+                c = close[0]
+                hint = (f"did you mean '{c}' (se3dyn's '{JOINT_SYNONYMS[c]}')?"
+                        if c in JOINT_SYNONYMS else f"did you mean '{c}'?")
+            raise ModelError(f"joint {name!r}", "type", "one of " + ", ".join(jt_keys)
+                             + " (or a synonym: " + ", ".join(
+                                 f"{k} = {v}" for k, v in JOINT_SYNONYMS.items()) + ")", type,
+                             hint)
         item = f"joint {name!r} ({type})"
         if name in self._joints or name in self._composites:
             raise ModelError(item, "name", "a unique joint name", name, "defined twice")

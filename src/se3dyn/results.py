@@ -33,6 +33,23 @@ def node_dofs(s, H: np.ndarray, arr: np.ndarray, i: int, frame: str) -> np.ndarr
     return out
 
 
+def node_accelerations(s, H: np.ndarray, v: np.ndarray, vd: np.ndarray, i: int,
+                       frame: str) -> np.ndarray:
+    """Acceleration of node i in every row, shape (n, 6), from the frames H (n, M, 4, 4), the
+    velocities v and their time derivatives vd (n, nq). ``frame="material"``: ``(dU/dt,
+    dOmega/dt)``, the unknowns of Eq. (39); ``frame="inertial"``: the acceleration of the node's
+    origin and the angular acceleration in the inertial frame, ``(R (dU/dt + Omega x U),
+    R dOmega/dt)`` (the derivative of dx/dt = R U with dR/dt = R hat(Omega), Eqs. (3)-(4))."""
+    a = node_dofs(s, H, vd, i, "material")
+    if frame != "inertial":
+        return node_dofs(s, H, vd, i, frame)  # (checks frame)
+    w = node_dofs(s, H, v, i, "material")
+    R = H[:, i, :3, :3]
+    lin = a[:, :3] + np.cross(w[:, 3:], w[:, :3])
+    return np.concatenate([np.einsum("nij,nj->ni", R, lin),
+                           np.einsum("nij,nj->ni", R, a[:, 3:])], axis=1)
+
+
 @dataclass
 class Results:
     """Time histories of a simulation (one row per stored step, the initial state included).
@@ -125,9 +142,11 @@ class Results:
         return self._node_dof(name, self.v, frame)
 
     def node_acceleration(self, name: str, frame: str = "material") -> np.ndarray:
-        """Time derivative of the material velocity, shape (n, 6); ``frame="inertial"`` rotates
-        both parts by R (this is not the inertial acceleration of the point unless Omega = 0)."""
-        return self._node_dof(name, self.vd, frame)
+        """Acceleration of a node, shape (n, 6): ``frame="material"`` the time derivative of the
+        material velocity ``(dU/dt, dOmega/dt)``; ``frame="inertial"`` the acceleration of the
+        node's origin and the angular acceleration in the inertial frame (see
+        :func:`node_accelerations`)."""
+        return node_accelerations(self.system, self.H, self.v, self.vd, self._node(name), frame)
 
     def _joint_cols(self, name: str, arr: np.ndarray) -> np.ndarray:
         s = self.system

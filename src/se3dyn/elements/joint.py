@@ -81,9 +81,9 @@ def model_file(mf):
     ``mf`` is :mod:`se3dyn.modelfile` (its field types), passed by it: the element library
     never imports the YAML layer.
     """
-    from se3dyn.joints import JOINT_TYPES
+    from se3dyn.joints import JOINT_SYNONYMS, JOINT_TYPES
 
-    keys = tuple(sorted([*JOINT_TYPES, "universal"]))
+    keys = tuple(sorted([*JOINT_TYPES, "universal"])) + tuple(JOINT_SYNONYMS)
     v3 = mf.Vec(3)
     kvec = mf.OneOf((mf.Num(), mf.Vec(None, 1, 6)))
     kvec_nn = mf.OneOf((mf.Num(minimum=0), mf.Vec(None, 1, 6)))
@@ -92,7 +92,9 @@ def model_file(mf):
                "at most one.")
     F = mf.Field
     fields = (
-        F("type", mf.Str(keys), None, "Joint type, see [joint types](#joint-types).", True),
+        F("type", mf.Str(keys), None, "Joint type, see [joint types](#joint-types) (the "
+          "names of other tools are accepted too: " + ", ".join(
+              f"{k} = {v}" for k, v in JOINT_SYNONYMS.items()) + ").", True),
         F("a", mf.Str(ref="node"), None, "Node A (H_B = H_A H_J, Eq. 7).", True),
         F("b", mf.Str(ref="node"), None, "Node B.", True),
         F("axis", v3, None, "Unit axis in the inertial frame of the initial configuration "
