@@ -66,3 +66,43 @@ def test_a_long_list_of_redundant_equations_is_wrapped_and_cut(tmp_path):
     assert "redundant constraint equations (" in p.stdout
     assert max(len(line) for line in p.stdout.splitlines()) <= 110
     assert "more" in p.stdout  # 36 - 6 + ... > 24: the list is cut
+
+
+def test_info_tells_a_complete_run_from_a_failed_one(tmp_path):
+    ok = tmp_path / "ok.yaml"
+    ok.write_text("""se3dyn: 1
+nodes:
+  g: {fixed: true}
+  bob: {position: [0.5, 0, 0], mass: 1.0, inertia: [0.001, 0.001, 0.001]}
+joints:
+  h: {type: revolute, a: g, b: bob, axis: [0, 1, 0], at: [0, 0, 0]}
+gravity: [0, 0, -9.81]
+simulation: {t_end: 0.2, step: 0.01}
+""")
+    bad = tmp_path / "bad.yaml"  # Newton fails: a one-iteration budget
+    bad.write_text(ok.read_text().replace("step: 0.01}", "step: 0.01, max_iter: 1}"))
+    for f in (ok, bad):
+        subprocess.run([*CLI, "run", str(f), "--out", str(tmp_path / "o"), "--quiet"],
+                       capture_output=True, text=True)
+    p = subprocess.run([*CLI, "info", str(tmp_path / "o" / "ok.h5")], capture_output=True,
+                       text=True)
+    assert p.returncode == 0, p.stderr
+    assert "status: complete: t = 0 .. 0.2 s" in p.stdout and "Newton iterations" in p.stdout
+    assert "settings: " in p.stdout and "t_end=0.2" in p.stdout
+    p = subprocess.run([*CLI, "info", str(tmp_path / "o" / "bad.h5")], capture_output=True,
+                       text=True)
+    assert p.returncode == 0, p.stderr
+    assert "status: failed at t = 0" in p.stdout and "max_iter" in p.stdout
+
+
+def test_types_lists_every_joint_type_and_element_section():
+    from se3dyn.joints import JOINT_TYPES
+    from se3dyn.modelfile import ELEMENT_SECTIONS
+
+    p = subprocess.run([*CLI, "types"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    for key in [*JOINT_TYPES, "universal"]:
+        assert f"\n  {key} " in p.stdout
+    for es in ELEMENT_SECTIONS:
+        assert f"\n  {es.key}: " in p.stdout
+    assert "also called revolute" in p.stdout

@@ -475,6 +475,72 @@ def cmd_channels(args) -> int:
     return 0
 
 
+def cmd_info(args) -> int:
+    """What a results file holds: its status (complete, failed, interrupted, cut short), the
+    model, the settings and the statistics of the run."""
+    res = _read(args.results)
+    st = res.stats
+    t0, t1 = (float(res.t[0]), float(res.t[-1])) if len(res.t) else (math.nan, math.nan)
+    print(f"{args.results}: se3dyn {st.get('se3dyn_version', '?')} results, written "
+          f"{st.get('created', '?')}")
+    model = st.get("model", "")
+    name = next((ln.split(":", 1)[1].strip() for ln in model.splitlines()
+                 if ln.startswith("name:")), "?")
+    print(f"  model '{name}': {len(res.system.node_names)} nodes, "
+          f"{len(res.system.joint_names)} joints (the model file is stored in the results)")
+    msg = st.get("message", "")
+    if st.get("complete") and not st.get("failed"):
+        status = f"complete: t = {t0:g} .. {t1:g} s"
+    elif st.get("failed") and msg == "interrupted":
+        status = f"interrupted at t = {t1:.9g} s (se3dyn run MODEL --resume {args.results})"
+    elif st.get("failed"):
+        status = f"failed at t = {t1:.9g} s: {msg}"
+    else:
+        status = (f"cut short at t = {t1:.9g} s (the writer stopped without closing the file: "
+                  f"killed?); se3dyn run MODEL --resume {args.results} continues it")
+    print(f"  status: {status}")
+    print(f"  rows: {len(res.t)}")
+    sett = st.get("settings") or {}
+    if sett:
+        print("  settings: " + ", ".join(f"{k}={v}" for k, v in sett.items()))
+    keys = [("steps", "steps"), ("rejected", "rejected steps"),
+            ("newton_iterations", "Newton iterations"), ("factorizations", "factorisations"),
+            ("formulation", "formulation"), ("matrix_size", "matrix size"),
+            ("wall_time", "wall time (s)")]
+    have = [f"{label} {st[k]:.4g}" if isinstance(st[k], float) else f"{label} {st[k]}"
+            for k, label in keys if k in st]
+    if have:
+        print("  statistics: " + ", ".join(have))
+    for line in run_report(st):
+        print("  " + line)
+    if len(res.constraint):
+        print(f"  max constraint violation {float(np.max(res.constraint)):.2e}")
+    return 0
+
+
+def cmd_types(args) -> int:
+    """The joint types and element types with their model-file fields."""
+    from se3dyn.joints import JOINT_SYNONYMS, JOINT_TYPES
+    from se3dyn.modelfile import ELEMENT_SECTIONS
+
+    print("joint types (joints: type):")
+    for key in sorted([*JOINT_TYPES, "universal"]):
+        if key == "universal":
+            params, doc = ("axes",), "two hinges with orthogonal axes through a cross (k = 2)"
+        else:
+            params, doc = JOINT_TYPES[key].params, JOINT_TYPES[key].doc
+        syn = [k for k, v in JOINT_SYNONYMS.items() if v == key]
+        print(f"  {key:12s} {doc}; parameters: {', '.join(params) or 'none'}"
+              + (f"; also called {', '.join(syn)}" if syn else ""))
+    print("element types (model-file sections; docs/model-file.md has every field):")
+    for es in ELEMENT_SECTIONS:
+        req = [f.name for f in es.fields if f.required]
+        opt = [f.name for f in es.fields if not f.required]
+        print(f"  {es.key}: {es.doc}")
+        print(f"      required: {', '.join(req) or 'none'}; optional: {', '.join(opt)}")
+    return 0
+
+
 def cmd_plot(args) -> int:
     """Plot channels of a results file against time into a PNG."""
     from se3dyn.channels import channel_unit
@@ -669,6 +735,11 @@ def build_parser() -> argparse.ArgumentParser:
     ch = sub.add_parser("channels", help="list the channels of a results file")
     ch.add_argument("results")
     ch.set_defaults(func=cmd_channels)
+    inf = sub.add_parser("info", help="status, settings and statistics of a results file")
+    inf.add_argument("results")
+    inf.set_defaults(func=cmd_info)
+    ty = sub.add_parser("types", help="the joint and element types and their fields")
+    ty.set_defaults(func=cmd_types)
     pl = sub.add_parser("plot", help="plot channels against time (PNG)")
     pl.add_argument("results")
     pl.add_argument("channels", nargs="+")
