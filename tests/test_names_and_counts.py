@@ -106,3 +106,33 @@ def test_types_lists_every_joint_type_and_element_section():
     for es in ELEMENT_SECTIONS:
         assert f"\n  {es.key}: " in p.stdout
     assert "also called revolute" in p.stdout
+
+
+def test_plot_writes_where_it_says_and_refuses_what_it_cannot_write(tmp_path):
+    model = tmp_path / "p.yaml"
+    model.write_text("""se3dyn: 1
+nodes:
+  g: {fixed: true}
+  bob: {position: [0.5, 0, 0], mass: 1.0, inertia: [0.001, 0.001, 0.001]}
+joints:
+  h: {type: hinge, a: g, b: bob, axis: [0, 1, 0], at: [0, 0, 0]}
+gravity: [0, 0, -9.81]
+simulation: {t_end: 0.5, step: 0.01}
+""")
+    subprocess.run([*CLI, "run", str(model), "--out", str(tmp_path), "--quiet"], check=True,
+                   capture_output=True)
+    h5 = str(tmp_path / "p.h5")
+    figs = tmp_path / "figs"
+    figs.mkdir()
+    # a folder gets the default name inside it; panels per unit; an x-y plot
+    p = subprocess.run([*CLI, "plot", h5, "joint/h/alpha/0", "node/bob/position/[xz]",
+                        "-o", str(figs)], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    assert (figs / "p.png").stat().st_size > 0
+    p = subprocess.run([*CLI, "plot", h5, "node/bob/position/z", "--x", "node/bob/position/x",
+                        "-o", str(tmp_path / "xy.svg")], capture_output=True, text=True)
+    assert p.returncode == 0 and (tmp_path / "xy.svg").read_text().startswith("<?xml")
+    p = subprocess.run([*CLI, "plot", h5, "joint/h/alpha/0", "-o", str(tmp_path / "f.xyz")],
+                       capture_output=True, text=True)
+    assert p.returncode == 2 and "f.xyz" in p.stderr and "Traceback" not in p.stderr
+    assert not (tmp_path / "f.xyz").exists() and not (tmp_path / "f.xyz.png").exists()

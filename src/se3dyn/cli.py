@@ -542,7 +542,8 @@ def cmd_types(args) -> int:
 
 
 def cmd_plot(args) -> int:
-    """Plot channels of a results file against time into a PNG."""
+    """Plot channels of a results file against time into a PNG (or PDF/SVG): one panel per
+    unit, curves that stay visible when they coincide, the legend beside the data."""
     from se3dyn.channels import channel_unit
 
     res = _read(args.results)
@@ -554,25 +555,59 @@ def cmd_plot(args) -> int:
         import matplotlib.pyplot as plt
     except ImportError:
         raise _Usage("plotting needs matplotlib: pip install 'se3dyn[plot]'") from None
-    png = Path(args.output) if args.output else Path(args.results).with_suffix(".png")
-    fig, ax = plt.subplots(figsize=(7.0, 4.4), dpi=110)
+    png = _figure_path(args.output, Path(args.results).with_suffix(".png"))
+    if args.x is not None:  # x-y plot: one channel against another
+        xs = _channels(res, [args.x])
+        if len(xs) != 1:
+            raise _Usage(f"--x {args.x}: one channel expected, it names {len(xs)}")
+        xname, xval = xs[0]
+    else:
+        xname, xval = "time", res.t
+    groups: dict[str, list] = {}
     for name, y in data:
-        ax.plot(res.t, y, lw=1.3, label=name)
-    units = sorted({channel_unit(n) for n, _ in data} - {""})
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel(" | ".join(f"[{u}]" for u in units) if units else "")
-    ax.set_title(args.title or Path(args.results).stem)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+        groups.setdefault(channel_unit(name, res), []).append((name, y))
+    n = len(groups)
+    fig, axes = plt.subplots(n, 1, figsize=(7.6, 2.2 + 2.2 * n), dpi=110, sharex=True,
+                             squeeze=False)
+    styles = ["-", "--", "-.", ":"]
+    for ax, (unit, curves) in zip(axes[:, 0], groups.items(), strict=True):
+        for k, (name, y) in enumerate(curves):
+            # dashes cycle with the colours: coinciding curves stay visible
+            ax.plot(xval, y, lw=1.4, ls=styles[(k // 10 + k) % len(styles)], label=name)
+        ax.set_ylabel(f"[{unit}]" if unit else "(dimensionless)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
+    xunit = channel_unit(xname, res) if xname != "time" else "s"
+    axes[-1, 0].set_xlabel(f"{xname} [{xunit}]" if xunit else xname)
+    what = ", ".join(sorted({name.rsplit("/", 1)[0] for name, _ in data}))
+    title = args.title or (f"{Path(args.results).name}: {what}"
+                           + (f" against {xname}" if args.x else ""))
+    axes[0, 0].set_title(title if len(title) <= 90 else title[:87] + "...", fontsize=10)
     fig.tight_layout()
     try:
         fig.savefig(png)
-    except OSError as exc:
-        raise _Usage(f"-o {png}: cannot write ({exc.strerror})") from None
+    except (OSError, ValueError) as exc:
+        raise _Usage(f"-o {png}: cannot write ({getattr(exc, 'strerror', None) or exc})"
+                     ) from None
     finally:
         plt.close(fig)
     print(f"wrote {png}")
     return 0
+
+
+def _figure_path(output: str | None, default: Path) -> Path:
+    """Where a figure goes: the default next to the results file; a folder (existing, or given
+    with a trailing /) gets the default name inside it; a name needs a suffix matplotlib
+    writes (.png, .pdf, .svg); none is added silently."""
+    if output is None:
+        return default
+    p = Path(output)
+    if p.is_dir() or output.endswith(("/", "\\")):
+        return p / default.name
+    if p.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise _Usage(f"-o {output}: expected a file name ending in .png, .pdf or .svg, or a "
+                     "folder")
+    return p
 
 
 def cmd_export(args) -> int:
@@ -743,8 +778,11 @@ def build_parser() -> argparse.ArgumentParser:
     pl = sub.add_parser("plot", help="plot channels against time (PNG)")
     pl.add_argument("results")
     pl.add_argument("channels", nargs="+")
-    pl.add_argument("-o", "--output", help="PNG file (default: next to the results file)")
-    pl.add_argument("--title")
+    pl.add_argument("-o", "--output", help="PNG, PDF or SVG file, or a folder (default: a PNG "
+                    "next to the results file)")
+    pl.add_argument("--title", help="title (default: the file and what is plotted)")
+    pl.add_argument("--x", metavar="CHANNEL", help="plot against this channel instead of time "
+                    "(an x-y plot, e.g. a node's z against its x)")
     pl.set_defaults(func=cmd_plot)
     ex = sub.add_parser("export", help="export channels to CSV, or the motion to glTF")
     ex.add_argument("results")
