@@ -79,6 +79,27 @@ def test_example_file_loads_checks_and_runs_with_its_settings(tmp_path):
     assert abs(rod["mass_per_length"] * length - 0.5) < 0.0015
     assert settings["t_end"] == 5.0 and settings["rho_inf"] == 0.9
 
+    # beam channels of the results file (the file's model text is compiled for them) equal the
+    # section forces of the same run in memory
+    from se3dyn.channels import get_channel, list_channels
+    from se3dyn.elements.beam import section_forces
+    from se3dyn.h5 import read_results
+
+    fres = read_results(tmp_path / "slider_crank_flexible.h5")
+    names = list_channels(fres)
+    for e in range(4):
+        assert f"beam/rod/{e}/force/N" in names and f"beam/rod/{e}/energy" in names
+    model, _ = load_model(FLEX_YAML)
+    mem = sd.simulate(model, **settings)
+    ref = section_forces(mem.system, mem.H, vq=mem.v)
+    for e in (0, 3):
+        for q, c, col in (("force", "N", 0), ("force", "M3", 5), ("strain", "k2", 4)):
+            x = get_channel(fres, f"beam/rod/{e}/{q}/{c}")
+            y = ref[q][:, e, col]
+            assert np.abs(x - y).max() <= 1e-9 * (np.abs(y).max() + 1e-30)
+        np.testing.assert_allclose(get_channel(fres, f"beam/rod/{e}/energy"),
+                                   ref["energy"][:, e], rtol=1e-9, atol=1e-18)
+
 
 def test_stiffer_rod_converges_to_the_rigid_slider_crank_like_one_over_E():
     """E (and G) x 1, 10, 100 from 0.7 GPa to the file's 70 GPa aluminium: the crank angle
