@@ -48,7 +48,7 @@ def _model(stiffness_factor: float = 1.0, rigid: bool = False):
     d = yaml.safe_load(FLEX_YAML.read_text())
     rod = d["beams"]["rod"]
     for k in ("EA", "GA", "GJ", "EI"):
-        rod[k] = rod[k] * stiffness_factor
+        rod[k] = float(rod[k] * stiffness_factor)
     if rigid:
         n = rod["elements"]
         names = [rod["a"]] + [f"rod/{i}" for i in range(1, n)] + [rod["b"]]
