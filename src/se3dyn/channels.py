@@ -70,6 +70,37 @@ def _joint_size(res: Results, name: str) -> tuple[int, int]:
     return int(sum(int(s.joint_k[j]) for j in ids)), 6 * len(ids)
 
 
+def _beam_system(res: Results):
+    """The compiled system that holds the beams of ``res``, or None when it has none.
+
+    In-memory results carry their compiled system. Results read from a file carry only its
+    layout (:class:`se3dyn.h5.ResultsLayout`); the file stores the model as YAML text
+    (``stats["model"]``), which is compiled here once (cached on ``res``) when it has beams and
+    its nodes and unknowns match the file's layout (the beam channels are the element's
+    :func:`~se3dyn.elements.beam.section_forces` of the stored motion)."""
+    s = res.system
+    if getattr(s, "beams", None) is not None:
+        return s if len(s.beams) else None
+    cached = res.__dict__.get("_beam_system_cache", False)
+    if cached is not False:
+        return cached
+    system = None
+    text = (res.stats or {}).get("model", "") if isinstance(res.stats, dict) else ""
+    if text and "beams:" in text:
+        try:
+            from se3dyn.modelfile import loads_model
+            from se3dyn.system import compile_model
+
+            cand = compile_model(loads_model(text)[0])
+            if (tuple(cand.node_names) == tuple(s.node_names) and int(cand.nq) == int(s.nq)
+                    and len(getattr(cand, "beams", ()))):
+                system = cand
+        except Exception:  # noqa: BLE001 - a model text that does not load: no beam channels
+            system = None
+    object.__setattr__(res, "_beam_system_cache", system)
+    return system
+
+
 def list_channels(res: Results) -> list[str]:
     """Every channel name of ``res``, in a stable order."""
     s = res.system
@@ -88,7 +119,8 @@ def list_channels(res: Results) -> list[str]:
         out += [f"{e}/alpha/{c}" for c in range(k)]
         out += [f"{e}/velocity/{c}" for c in range(k)]
         out += [f"{e}/multiplier/{c}" for c in range(nmult)]
-    for b in getattr(s, "beams", ()):
+    bsys = _beam_system(res)
+    for b in getattr(bsys, "beams", ()):
         e = f"beam/{escape_name(b['beam'])}/{b['index']}"
         for q, comps in _BEAM.items():
             out += [f"{e}/{q}/{c}" for c in comps]
@@ -101,7 +133,7 @@ def list_channels(res: Results) -> list[str]:
 def _beam_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
     from se3dyn.elements.beam import section_forces
 
-    s = res.system
+    s = _beam_system(res)
     beam = unescape_name(parts[1])
     els = [i for i, b in enumerate(getattr(s, "beams", ())) if b["beam"] == beam]
     if not els:
