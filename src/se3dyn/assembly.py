@@ -173,7 +173,7 @@ class Layout:
         logs = np.flatnonzero((jk > 0) & ~np.asarray(s.joint_abelian, bool)) if m \
             else np.zeros(0, np.int64)
         lA = np.zeros((len(logs), 6, 6))
-        for kk in np.unique(jk[logs]):
+        for kk in sorted(set(jk[logs].tolist())):  # (not np.unique: it imports numpy.ma)
             sel = np.flatnonzero(jk[logs] == kk)
             lA[sel, :kk, :] = np.linalg.pinv(A[M + logs[sel]][:, :, :kk])
         needed = np.zeros(F, bool)

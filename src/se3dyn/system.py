@@ -778,7 +778,7 @@ class LinearSolver:
         self.N = s.nq + (2 * s.nm if index2 else s.nm)
         self.dense = self.N <= dense_max
         self._lu = None
-        self.drop = np.unique(np.asarray(drop, dtype=np.int64))
+        self.drop = np.array(sorted(set(np.asarray(drop, dtype=np.int64).tolist())), np.int64)
         self._pat = None  # built on first use: the compiled engine may never need it
         self._dense_key = None
 

@@ -43,7 +43,7 @@ def tables(s, lay) -> dict:
 
     A = np.ascontiguousarray(lay.frame_A[M + ids])
     Apinv = np.zeros((n, 6, 6))
-    for k in np.unique(jk[ids]):
+    for k in sorted(set(jk[ids].tolist())):  # (np.unique would import numpy.ma: 20 ms)
         e = np.flatnonzero(jk[ids] == k)
         Apinv[e, :k, :] = np.linalg.pinv(A[e][:, :, :k])
     stiff = np.zeros(m, bool)
