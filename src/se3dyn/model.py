@@ -850,7 +850,8 @@ class ModelBuilder:
         length : float, optional
             Absolute free length (m); the initial distance of the points by default.
         """
-        item = self._two_nodes("spring_damper", "spring-damper", self._springs, name, node_a, node_b)
+        item = self._two_nodes("spring_damper", "spring-damper", self._springs, name, node_a,
+                               node_b)
         pa = self._nodes[node_a].position if at_a is None else _vec(at_a, 3, item, "at_a")
         pb = self._nodes[node_b].position if at_b is None else _vec(at_b, 3, item, "at_b")
         vals = {}
@@ -1187,9 +1188,10 @@ class ModelBuilder:
         for n in self._nodes.values():
             if not n.fixed and n.mass == 0 and attached[n.name] == 0:
                 raise ModelError(f"node {n.name!r}", "mass",
-                                 "a mass, or a joint or beam attaching it", 0.0, "a free massless node with no joint has no equation of "
-                                 "motion" + (" (a load alone is not enough)" if n.name in loaded
-                                             else ""))
+                                 "a mass, or a joint or beam attaching it", 0.0,
+                                 "a free massless node with no joint has no equation of motion"
+                                 + (" (a load alone is not enough)" if n.name in loaded
+                                    else ""))
         return Model(tuple(self._nodes.values()), tuple(self._joints.values()),
                      tuple(self._loads.values()), self._gravity.copy(), dict(self._composites),
                      self._name, tuple(self._springs.values()),
