@@ -22,7 +22,7 @@ namespace se3dyn {
 
 // target (k_i x 6) -= Vel block (k_i x k_j) * (B_n A)_{joint, slot}^T
 struct VelProd {
-  long target, src;
+  long target, src;  // offsets in the values; src in velv once the engine is set up
   int ki, kj, joint, slot;
 };
 // target (6 x 6) -= (B A)_{c1, s1} (6 x k) * (B_n A)_{c2, s2}^T
@@ -49,10 +49,13 @@ struct Engine {
   std::vector<VelProd> velprod;
   std::vector<XiProd> xiprod;
   std::vector<char> is_joint_frame;    // (F,)
+  // the velocity-level blocks the products use (Context::vel): offsets in the values,
+  // increasing, and in velv
+  std::vector<long> vel_off, vel_at;
   // work
   FrameState S;
   std::vector<Frame> Hn;
-  std::vector<double> velv;
+  std::vector<double> velv;  // (the velocity-level blocks only)
 
   void add_batch(const std::string& key, const Tables& t) {
     std::unique_ptr<ElementBatch> b = make_batch(key);
@@ -64,6 +67,20 @@ struct Engine {
   void setup() {
     S.resize(T.F);
     Hn.resize(T.F);
+    // velv holds the distinct sources of the products, in the order of their offsets
+    std::vector<std::pair<long, long>> src;  // (offset in the values, size)
+    for (const VelProd& p : velprod) src.emplace_back(p.src, long(p.ki) * p.kj);
+    std::sort(src.begin(), src.end());
+    src.erase(std::unique(src.begin(), src.end()), src.end());
+    long nv = 0;
+    for (const auto& [off, size] : src) {
+      vel_off.push_back(off);
+      vel_at.push_back(nv);
+      nv += size;
+    }
+    velv.assign(nv, 0.0);
+    for (VelProd& p : velprod)
+      p.src = vel_at[std::lower_bound(vel_off.begin(), vel_off.end(), p.src) - vel_off.begin()];
     if (!joints) {  // no constraint elements: an empty batch keeps the index-2 code uniform
       batches.push_back(std::make_unique<Joints>());
       joints = static_cast<Joints*>(batches.back().get());
@@ -145,7 +162,7 @@ struct Engine {
     long nv = index2 ? nvals2 : nvals;
     if (o.vals) std::fill(o.vals, o.vals + nv, 0.0);
     bool prod = o.vals && index2;
-    if (prod) velv.assign(nvals, 0.0);
+    if (prod) std::fill(velv.begin(), velv.end(), 0.0);
     if (o.energy) std::fill(o.energy, o.energy + N_ENERGY, 0.0);
     Context X;
     X.T = &T;
@@ -160,6 +177,9 @@ struct Engine {
     X.psi = o.psi;
     X.vals = o.vals;
     X.velv = prod ? velv.data() : nullptr;
+    X.vel_off = vel_off.data();
+    X.vel_at = vel_at.data();
+    X.nvel = long(vel_off.size());
     X.cM = cM;
     X.cC = cC;
     X.cK = cK;
@@ -174,7 +194,7 @@ struct Engine {
       joints->store_B(T, Hn, joints->Bnu);
       double* vals = o.vals;
       for (const VelProd& p : velprod) {
-        const double* V = velv.data() + p.src;  // ki x kj row-major
+        const double* V = velv.data() + p.src;  // ki x kj row-major (src: in velv)
         const double* Bn = &joints->Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
         double* t = vals + p.target;  // ki x 6
         for (int i = 0; i < p.ki; ++i)

@@ -269,7 +269,8 @@ struct Beams : ElementBatch {
           double Cb[36];
           mm<6, 6, 6>(Rv[s], Cl[t], Cb);
           add_frame_block(T, S, X.vals, offs[s][t], fr[s], fr[t], Cb, X.cC, false);
-          if (X.velv) add_frame_block(T, S, X.velv, offs[s][t], fr[s], fr[t], Cb, X.cC, false);
+          if (double* V = X.vel(offs[s][t]))
+            add_frame_block(T, S, V, 0, fr[s], fr[t], Cb, X.cC, false);
         }
     }
   }

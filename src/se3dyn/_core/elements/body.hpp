@@ -73,7 +73,7 @@ struct Bodies : ElementBatch {
       mTm<6, 6, 6>(ad, Me, adTM);
       for (int i = 0; i < 36; ++i) B[i] = X.cM * Me[i] - X.cC * (L[i] + adTM[i]);
       add_frame_block(T, S, X.vals, off[e], fr, fr, B, 1.0, false);
-      if (X.velv) add_frame_block(T, S, X.velv, off[e], fr, fr, B, 1.0, false);
+      if (double* V = X.vel(off[e])) add_frame_block(T, S, V, 0, fr, fr, B, 1.0, false);
       if (X.cK != 0.0) {
         double K[36] = {0}, G[9], CG[9], Cm[9];
         hat3(rtg, G);

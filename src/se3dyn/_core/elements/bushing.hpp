@@ -249,7 +249,8 @@ struct Bushings : ElementBatch {
             }
           add_frame_block(T, S, X.vals, offs[t], fr[s], fr[t], Kb, X.cK, true);
           add_frame_block(T, S, X.vals, offs[t], fr[s], fr[t], Cb, X.cC, false);
-          if (X.velv) add_frame_block(T, S, X.velv, offs[t], fr[s], fr[t], Cb, X.cC, false);
+          if (double* V = X.vel(offs[t]))
+            add_frame_block(T, S, V, 0, fr[s], fr[t], Cb, X.cC, false);
         }
       }
     }

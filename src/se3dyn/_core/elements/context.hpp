@@ -1,5 +1,6 @@
 // What an element kernel sees and writes at one Newton iterate.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -34,10 +35,22 @@ struct Context {
   double* psi;           // (nm,) velocity constraints (index 2) or nullptr
   double* arhs = nullptr;  // (nm,) right-hand side of the acceleration-level constraints
   double* vals;          // iteration-matrix values (block storage) or nullptr
-  double* velv;          // velocity-level part cM M + cC C_T (index 2) or nullptr
+  double* velv;          // velocity-level part cM M + cC C_T (index 2) or nullptr: the blocks
+                         // the index-2 products use, at vel_at[i] for the block at vel_off[i]
+  const long* vel_off = nullptr;  // (nvel,) their offsets in vals, increasing
+  const long* vel_at = nullptr;   // (nvel,) their offsets in velv
+  long nvel = 0;
   double cM = 0, cC = 0, cK = 0;  // coefficients of M, C_T and K_T T (Eq. (46))
   double fscale = 0;     // magnitude of the forces entering r (for relative tolerances)
   double* energy;        // (N_ENERGY,) or nullptr
+
+  // Where the velocity-level block at offset `off` of vals goes: into velv, or nowhere
+  // (nullptr: not an index-2 matrix, or a block no index-2 product uses)
+  double* vel(long off) const {
+    if (!velv) return nullptr;
+    const long* p = std::lower_bound(vel_off, vel_off + nvel, off);
+    return p != vel_off + nvel && *p == off ? velv + vel_at[p - vel_off] : nullptr;
+  }
 
   void scale(const double* g, int n) {
     for (int i = 0; i < n; ++i) fscale = std::fmax(fscale, std::fabs(g[i]));

@@ -142,7 +142,7 @@ struct JointForces : ElementBatch {
       double Bt[36];
       for (int i = 0; i < 36; ++i) Bt[i] = Bk[i] + Bc[i];
       add_block(X.vals, off[e], k, k, Bt, 1.0);
-      if (X.velv) add_block(X.velv, off[e], k, k, Bc, 1.0);
+      if (double* V = X.vel(off[e])) add_block(V, 0, k, k, Bc, 1.0);
     }
   }
 
