@@ -399,8 +399,10 @@ class Layout:
         nv = self.nvals2 if index2 else self.nvals
         indptr = np.empty(N + 1, np.int32)
         indices = np.empty(nv, np.int32)
+        src = np.empty(nv, np.int64)  # the value of every entry
+        _core().block_csc(N, self.block_table(index2), nv, indptr, indices, src)
         perm = np.empty(nv, np.int64)
-        _core().block_csc(N, self.block_table(index2), nv, indptr, indices, perm)
+        perm[src] = np.arange(nv, dtype=np.int64)
         return indptr, indices, perm
 
     @property

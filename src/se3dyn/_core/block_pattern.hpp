@@ -1,9 +1,9 @@
 // The compressed-column pattern of an iteration matrix made of dense blocks (se3dyn.assembly:
-// one row per block, never one per value), and the position in it of every value.
+// one row per block, never one per value), and the value of every entry of it.
 //
 // Values are stored block after block, each block row-major at its offset. Blocks do not
 // overlap, so the pattern has one entry per value (nnz = nvals); in every column the row indices
-// increase. O(nvals + nb log nb) time, no memory beyond the outputs.
+// increase. O(nvals + nb log nb) time, memory beyond the outputs: a bit per value.
 #pragma once
 #include <algorithm>
 #include <cstdint>
@@ -16,10 +16,11 @@
 namespace se3dyn {
 
 // blocks: nb rows of (first row, rows, first column, columns, offset) in an N x N matrix with
-// nvals values. Out: colptr (N+1), rowind (nvals), perm (nvals): value -> position in rowind.
-template <class PermT>
+// nvals values. Out: colptr (N+1), rowind (nvals), src (nvals): the value of each entry
+// (position in rowind -> index in the values).
+template <class SrcT>
 inline void block_csc(int N, const int64_t* blocks, long nb, long nvals, int* colptr,
-                      int* rowind, PermT* perm) {
+                      int* rowind, SrcT* src) {
   auto bad = [](const char* what) {
     throw std::invalid_argument(std::string("block pattern: ") + what);
   };
@@ -45,7 +46,7 @@ inline void block_csc(int N, const int64_t* blocks, long nb, long nvals, int* co
     return p[2] != q[2] ? p[2] < q[2] : p[0] < q[0];
   });
   std::vector<int> next(colptr, colptr + N), last(N, -1);
-  std::fill(perm, perm + nvals, PermT(-1));
+  std::vector<bool> taken(nvals, false);
   for (long t = 0; t < nb; ++t) {
     const int64_t* q = blocks + 5 * order[t];
     const int r0 = static_cast<int>(q[0]), nr = static_cast<int>(q[1]);
@@ -56,10 +57,11 @@ inline void block_csc(int N, const int64_t* blocks, long nb, long nvals, int* co
       if (nr > 0 && r0 <= last[c]) bad("overlapping blocks");
       int p = next[c];
       for (int i = 0; i < nr; ++i, ++p) {
+        const long v = off + static_cast<long>(i) * nc + j;
+        if (taken[v]) bad("overlapping values");
+        taken[v] = true;
         rowind[p] = r0 + i;
-        PermT& v = perm[off + static_cast<long>(i) * nc + j];
-        if (v >= 0) bad("overlapping values");
-        v = p;
+        src[p] = static_cast<SrcT>(v);
       }
       next[c] = p;
       if (nr > 0) last[c] = r0 + nr - 1;

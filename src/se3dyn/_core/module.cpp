@@ -232,33 +232,18 @@ NB_MODULE(_engine, m) {
       });
 
   m.def("block_csc", [](int N, IArr blocks, long nvals, I32Arr colptr, I32Arr rowind,
-                        IArr perm) {
+                        IArr src) {
     // the compressed-column pattern of a matrix of non-overlapping dense blocks (se3dyn.assembly
-    // Layout.csc): colptr (N+1,), rowind (nvals,), perm (nvals,) value -> CSC position
+    // Layout.csc): colptr (N+1,), rowind (nvals,), src (nvals,) CSC position -> value
     if (blocks.size() % 5) throw std::invalid_argument("blocks: (nb, 5)");
     if (colptr.size() != size_t(N) + 1 || rowind.size() != size_t(nvals) ||
-        perm.size() != size_t(nvals))
+        src.size() != size_t(nvals))
       throw std::invalid_argument("block_csc: output sizes");
     block_csc(N, blocks.data(), long(blocks.size() / 5), nvals, colptr.data(), rowind.data(),
-              perm.data());
+              src.data());
   });
 
   nb::class_<Stepper>(m, "Stepper")
-      .def("__init__",
-           [](Stepper* S, Engine& E, bool index2, int N, IArr colptr, IArr rowind, IArr perm,
-              IArr group, IArr drop) {
-             new (S) Stepper();
-             std::vector<int> cp(colptr.data(), colptr.data() + colptr.size());
-             std::vector<int> ri(rowind.data(), rowind.data() + rowind.size());
-             std::vector<long> pm(perm.data(), perm.data() + perm.size());
-             std::vector<int> gr(group.data(), group.data() + group.size());
-             std::vector<char> dr(drop.data(), drop.data() + drop.size());
-             if (cp.size() != size_t(N + 1)) throw std::invalid_argument("colptr size");
-             if (dr.size() != size_t(E.nm)) throw std::invalid_argument("drop size");
-             S->init(&E, index2, N, cp.data(), ri.data(), pm.data(), long(pm.size()),
-                     gr.empty() ? nullptr : gr.data(), dr.data());
-           },
-           nb::keep_alive<1, 2>())
       .def("__init__",
            [](Stepper* S, Engine& E, bool index2, int N, IArr blocks, IArr group, IArr drop) {
              // the pattern from the blocks of se3dyn.assembly (block_pattern.hpp): no pattern
@@ -271,11 +256,10 @@ NB_MODULE(_engine, m) {
              if (drop.size() != size_t(E.nm)) throw std::invalid_argument("drop size");
              std::vector<int> gr(group.data(), group.data() + group.size());
              std::vector<char> dr(drop.data(), drop.data() + drop.size());
-             std::vector<long> pm(nv);
-             std::vector<int> cp(size_t(N) + 1), ri(nv);
+             std::vector<int> cp(size_t(N) + 1), ri(nv), src(nv);
              block_csc(N, blocks.data(), long(blocks.size() / 5), nv, cp.data(), ri.data(),
-                       pm.data());
-             S->init(&E, index2, N, cp.data(), ri.data(), pm.data(), nv,
+                       src.data());
+             S->init(&E, index2, N, std::move(cp), std::move(ri), std::move(src),
                      gr.empty() ? nullptr : gr.data(), dr.data());
            },
            nb::keep_alive<1, 2>())

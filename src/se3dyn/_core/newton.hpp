@@ -56,11 +56,10 @@ struct Stepper {
   Engine* E;
   bool index2;
   int N = 0;                         // size of the linear system
-  std::vector<int> perm;             // value index -> CSC position (nnz fits an int: colptr)
-  std::vector<long> zero_at, one_at; // CSC positions of dropped equations: zero, or 1 (diagonal)
+  std::vector<int> zero_at, one_at;  // values of dropped equations: zero, or 1 (diagonal)
   std::vector<char> dropm;           // (nm,) dropped multiplier equations
-  SparseLU lu;
-  std::vector<double> vals, csc, rhs, r, phi, psi;
+  SparseLU lu;                       // reads vals in place (its value map)
+  std::vector<double> vals, rhs, r, phi, psi;
   std::vector<double> energy = std::vector<double>(N_ENERGY);  // (N_ENERGY,) of the last iterate
   // solver memory (see the header): the matrix values of the last full factorisation, the
   // reference of the refactorisations' pivot sequence (none kept while it is the generic
@@ -69,13 +68,15 @@ struct Stepper {
   bool have_ref = false, ref_probe = false;
   long ref_serial = 0;
 
-  void init(Engine* e, bool idx2, int n_sys, const int* colptr, const int* rowind,
-            const long* perm_, long nv, const int* group, const char* drop) {
+  // The pattern in CSC (colptr, rowind) and the value of each of its entries (src: index in
+  // vals), all taken over by the sparse LU
+  void init(Engine* e, bool idx2, int n_sys, std::vector<int>&& colptr,
+            std::vector<int>&& rowind, std::vector<int>&& src, const int* group,
+            const char* drop) {
     E = e;
     index2 = idx2;
     N = n_sys;
-    perm.assign(perm_, perm_ + nv);
-    long nnz = colptr[N];
+    const long nnz = colptr[N];
     dropm.assign(drop, drop + E->nm);
     std::vector<char> dropped(N, 0);
     for (int i = 0; i < E->nm; ++i)
@@ -86,25 +87,24 @@ struct Stepper {
     for (int c = 0; c < N; ++c)
       for (int p = colptr[c]; p < colptr[c + 1]; ++p) {
         int rw = rowind[p];
-        if (dropped[rw] || dropped[c]) (rw == c ? one_at : zero_at).push_back(p);
+        if (dropped[rw] || dropped[c]) (rw == c ? one_at : zero_at).push_back(src[p]);
       }
     // pattern entries that are zero in every state (a third to two thirds of the engine's) are
     // left out of the factors: those zero in a generic matrix of the model (probe())
     SparseLU::Options opt;
     opt.drop_zeros = true;
     lu.set_options(opt);
-    vals.assign(nv, 0.0);
-    csc.assign(nnz, 0.0);
+    vals.assign(nnz, 0.0);
     rhs.assign(N, 0.0);
     r.assign(E->nq, 0.0);
     phi.assign(E->nm, 0.0);
     psi.assign(E->nm, 0.0);
     // the ordering and the entries kept in the factors' patterns from a generic matrix
     probe();
-    to_csc(vals.data());
+    set_dropped();
     std::vector<char> keep(nnz);
-    for (long p = 0; p < nnz; ++p) keep[p] = csc[p] != 0.0;  // NaN counts as nonzero
-    lu.analyze(N, colptr, rowind, group, csc.data());
+    for (long p = 0; p < nnz; ++p) keep[p] = vals[src[p]] != 0.0;  // NaN counts as nonzero
+    lu.analyze(N, std::move(colptr), std::move(rowind), std::move(src), group, vals.data());
     lu.set_keep(keep.data());
     probe_reference();
   }
@@ -113,8 +113,8 @@ struct Stepper {
   // (the solver memory is then the model's own: nothing to keep in a State)
   int probe_reference() {
     probe();
-    to_csc(vals.data());
-    int code = lu.factor(csc.data());
+    set_dropped();
+    int code = lu.factor(vals.data());
     have_ref = code == 0;
     ref_probe = have_ref;
     ref_vals.clear();
@@ -157,19 +157,19 @@ struct Stepper {
                stab, 0.6, false, o);
   }
 
-  void to_csc(const double* x) {
-    for (size_t i = 0; i < vals.size(); ++i) csc[perm[i]] = x[i];
-    for (long p : zero_at) csc[p] = 0.0;  // dropped (redundant) equations: identity rows/cols
-    for (long p : one_at) csc[p] = 1.0;
+  // dropped (redundant) equations: identity rows and columns
+  void set_dropped() {
+    for (int i : zero_at) vals[i] = 0.0;
+    for (int i : one_at) vals[i] = 1.0;
   }
 
   // Factorise the matrix of `vals`: a refactorisation with the pivot sequence of the last full
   // factorisation when it succeeds, else a full one, whose values become the reference
   int factor() {
-    to_csc(vals.data());
-    int code = have_ref ? lu.refactor(csc.data()) : 1;
+    set_dropped();
+    int code = have_ref ? lu.refactor(vals.data()) : 1;
     if (code != 0) {
-      code = lu.factor(csc.data());
+      code = lu.factor(vals.data());
       have_ref = code == 0;
       ref_probe = false;
       if (have_ref) ref_vals = vals;

@@ -39,6 +39,8 @@
 //   U (CSC, strictly upper part): column k holds rows Ui_[Up_[k] .. Up_[k+1]) in pivot numbering,
 //              all < k, sorted ascending (an order in which the updates of refactor may be
 //              applied: L(:, j) only touches rows > j), values Ux_; the diagonal is Ud_[k].
+//   Value map: entry p of the pattern of analyze is values[vmap_[p]] in the caller's arrays
+//              (empty: values[p], the CSC order).
 //   Refactor scatter map: the entries of A(:, Q_[k]) that are in the factor pattern are
 //              (value index Rv_[q], pivot row Rr_[q]) for q in [Rp_[k], Rp_[k+1]); the value
 //              indices of its entries left out of the pattern (only with drop_zeros) are
@@ -502,9 +504,15 @@ class SparseLU {
   // numerically singular diagonal block wait in the ordering until a neighbour is eliminated
   // (see above), and with drop_zeros the zero entries are left out of the ordering's graph.
   // Without values (and Options::order_with_values, the default) the ordering is left to the
-  // first factor, which does the same with its values. The pattern is copied. Returns 0, or -1 for an invalid pattern (then factor fails with
-  // kNotAnalyzed).
+  // first factor, which does the same with its values. The pattern is copied. Returns 0, or -1
+  // for an invalid pattern (then factor fails with kNotAnalyzed).
   int analyze(int n, const int* colptr, const int* rowind, const int* group = nullptr,
+              const double* values = nullptr);
+  // The same with the pattern's arrays taken over (not copied) and the caller's own order of
+  // the values: entry p of the pattern is values[vmap[p]] here and in every later call that
+  // takes values (the refactorisations read them in place; empty vmap: the CSC order).
+  int analyze(int n, std::vector<int>&& colptr, std::vector<int>&& rowind,
+              std::vector<int>&& vmap, const int* group = nullptr,
               const double* values = nullptr);
 
   // Numeric LU with threshold partial pivoting; values in the CSC order of analyze. Returns 0,
@@ -575,12 +583,16 @@ class SparseLU {
   // (e <= l), R its rows below l, given the final values u[0..e-j) of those columns (the rows
   // inside the supernode are updated by the caller, a small unit triangular solve)
   inline void supernode_update(int j, int e, int l, const double* u, double* x) const;
+  // the position of pattern entry p in the caller's values, and its value there
+  int vidx(int p) const { return vmap_.empty() ? p : vmap_[p]; }
+  double at(const double* values, int p) const { return values[vidx(p)]; }
 
   Options opt_;
   int n_ = 0;
   bool analyzed_ = false, valid_ = false, have_pattern_ = false;
   Status status_ = kNotAnalyzed;
   std::vector<int> colptr_, rowind_;  // the pattern of analyze
+  std::vector<int> vmap_;             // value map (see the invariants)
   std::vector<int> blk_;              // block of every unknown (0..nb_-1; unknown i without groups)
   std::vector<int> bp_, bm_;          // members of block b: bm_[bp_[b] .. bp_[b+1]), increasing
   int nb_ = 0;
@@ -604,19 +616,33 @@ class SparseLU {
 // ---------------------------------------------------------------------------------------------
 inline int SparseLU::analyze(int n, const int* colptr, const int* rowind, const int* group,
                              const double* values) {
+  if (n < 0 || colptr == nullptr || (n > 0 && rowind == nullptr && colptr[n] > 0)) {
+    analyzed_ = valid_ = have_pattern_ = false;
+    status_ = kNotAnalyzed;
+    n_ = 0;
+    return -1;
+  }
+  return analyze(n, std::vector<int>(colptr, colptr + n + 1),
+                 std::vector<int>(rowind, rowind + colptr[n]), {}, group, values);
+}
+
+inline int SparseLU::analyze(int n, std::vector<int>&& colptr, std::vector<int>&& rowind,
+                             std::vector<int>&& vmap, const int* group, const double* values) {
   analyzed_ = valid_ = have_pattern_ = false;
   status_ = kNotAnalyzed;
   n_ = 0;
-  if (n < 0 || colptr == nullptr || (n > 0 && rowind == nullptr && colptr[n] > 0)) return -1;
-  if (colptr[0] != 0) return -1;
+  if (n < 0 || colptr.size() != static_cast<std::size_t>(n) + 1 || colptr[0] != 0) return -1;
   for (int j = 0; j < n; ++j)
     if (colptr[j + 1] < colptr[j]) return -1;
   const int nz = colptr[n];
+  if (rowind.size() != static_cast<std::size_t>(nz)) return -1;
+  if (!vmap.empty() && vmap.size() != static_cast<std::size_t>(nz)) return -1;
   for (int p = 0; p < nz; ++p)
-    if (rowind[p] < 0 || rowind[p] >= n) return -1;
+    if (rowind[p] < 0 || rowind[p] >= n || (!vmap.empty() && vmap[p] < 0)) return -1;
   n_ = n;
-  colptr_.assign(colptr, colptr + n + 1);
-  rowind_.assign(rowind, rowind + nz);
+  colptr_.swap(colptr);
+  rowind_.swap(rowind);
+  vmap_.swap(vmap);
 
   // --- blocks: the distinct ids renumbered 0..nb-1 in increasing order
   std::vector<int> blk(n);
@@ -702,7 +728,7 @@ inline void SparseLU::compute_ordering(const double* values) {
     colmax.assign(n, 0.0);
     for (int j = 0; j < n; ++j)
       for (int p = cp[j]; p < cp[j + 1]; ++p)
-        colmax[j] = std::max(colmax[j], std::fabs(values[p]));
+        colmax[j] = std::max(colmax[j], std::fabs(at(values, p)));
   }
   const double dtol = opt_.drop_tol;
   std::vector<int> Cp(nb + 1, 0), Ci, seen(nb, -1);
@@ -712,7 +738,7 @@ inline void SparseLU::compute_ordering(const double* values) {
     for (int t = bp[b]; t < bp[b + 1]; ++t) {
       const int j = bm[t];
       for (int p = cp[j]; p < cp[j + 1]; ++p) {
-        if (!colmax.empty() && std::fabs(values[p]) <= dtol * colmax[j]) continue;
+        if (!colmax.empty() && std::fabs(at(values, p)) <= dtol * colmax[j]) continue;
         const int c = blk[ri[p]];
         if (seen[c] != b) {
           seen[c] = b;
@@ -720,7 +746,7 @@ inline void SparseLU::compute_ordering(const double* values) {
         }
       }
       for (int p = Tp[j]; p < Tp[j + 1]; ++p) {
-        if (!colmax.empty() && std::fabs(values[Tv[p]]) <= dtol * colmax[Ti[p]]) continue;
+        if (!colmax.empty() && std::fabs(at(values, Tv[p])) <= dtol * colmax[Ti[p]]) continue;
         const int c = blk[Ti[p]];
         if (seen[c] != b) {
           seen[c] = b;
@@ -752,7 +778,7 @@ inline void SparseLU::compute_ordering(const double* values) {
           const int j = bm[q];
           double d = 0.0;
           for (int p = cp[j]; p < cp[j + 1]; ++p)
-            if (ri[p] == j) d += values[p];
+            if (ri[p] == j) d += at(values, p);
           if (d == 0.0) weak[b] = 1;
         }
         continue;
@@ -762,7 +788,7 @@ inline void SparseLU::compute_ordering(const double* values) {
       for (int q = bp[b]; q < bp[b + 1]; ++q) {
         const int j = bm[q];
         for (int p = cp[j]; p < cp[j + 1]; ++p)
-          if (blk[ri[p]] == b) D[loc[ri[p]] * sb + loc[j]] += values[p];
+          if (blk[ri[p]] == b) D[loc[ri[p]] * sb + loc[j]] += at(values, p);
       }
       for (const double v : D) dmax = std::max(dmax, std::fabs(v));
       bool singular = !(dmax > 0.0);
@@ -864,21 +890,21 @@ inline int SparseLU::factor(const double* values) {
     const int pa = colptr_[c], pb = colptr_[c + 1];
     double cth = 0.0;  // entries with |a| <= cth are left out (drop_zeros)
     if (drop) {
-      for (int p = pa; p < pb; ++p) cth = std::max(cth, std::fabs(values[p]));
+      for (int p = pa; p < pb; ++p) cth = std::max(cth, std::fabs(at(values, p)));
       cth *= dtol;
     }
     // --- reach of the pattern of A(:, c) in the graph of L: xi[top..n), topological order
     int top = n;
     const bool kp = !keep_.empty();
     for (int p = pa; p < pb; ++p) {
-      if (drop && std::fabs(values[p]) <= cth && !(kp && keep_[p])) continue;
+      if (drop && std::fabs(at(values, p)) <= cth && !(kp && keep_[p])) continue;
       const int i = rowind_[p];
       if (mark_[i] != k) top = dfs(i, k, top, xi, pstack);
     }
     // --- sparse triangular solve x = L \ A(:, c) on the reach
     double amax = 0.0, asum = 0.0;
     for (int p = pa; p < pb; ++p) {
-      const double v = values[p];
+      const double v = at(values, p);
       asum += std::fabs(v);
       if (drop && std::fabs(v) <= cth && !(kp && keep_[p])) continue;
       x[rowind_[p]] += v;
@@ -972,15 +998,15 @@ inline int SparseLU::factor(const double* values) {
     const int c = Q_[k];
     double cth = 0.0;
     if (drop) {
-      for (int p = colptr_[c]; p < colptr_[c + 1]; ++p) cth = std::max(cth, std::fabs(values[p]));
+      for (int p = colptr_[c]; p < colptr_[c + 1]; ++p) cth = std::max(cth, std::fabs(at(values, p)));
       cth *= dtol;
     }
     for (int p = colptr_[c]; p < colptr_[c + 1]; ++p) {
-      if (drop && std::fabs(values[p]) <= cth && !(!keep_.empty() && keep_[p])) {
-        Rz_.push_back(p);
+      if (drop && std::fabs(at(values, p)) <= cth && !(!keep_.empty() && keep_[p])) {
+        Rz_.push_back(vidx(p));
         continue;
       }
-      Rv_.push_back(p);
+      Rv_.push_back(vidx(p));
       Rr_.push_back(pinv_[rowind_[p]]);
     }
     Rp_[k + 1] = static_cast<int>(Rv_.size());
@@ -1248,7 +1274,7 @@ inline void SparseLU::solve_refined(const double* values, double* b, int iters) 
     std::copy(b, b + n, r);
     for (int j = 0; j < n; ++j) {
       const double xj = x[j];
-      for (int p = colptr_[j]; p < colptr_[j + 1]; ++p) r[rowind_[p]] -= values[p] * xj;
+      for (int p = colptr_[j]; p < colptr_[j + 1]; ++p) r[rowind_[p]] -= at(values, p) * xj;
     }
     solve(r);
     for (int i = 0; i < n; ++i) x[i] += r[i];
