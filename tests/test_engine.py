@@ -116,3 +116,21 @@ def test_restart_in_a_new_workspace_is_bit_exact(formulation, model):
             again, _info = integ.step(s, again, h, ws=ws2)
         for f in ("H", "HJ", "v", "vd", "a", "lam", "alpha"):
             assert np.array_equal(getattr(again, f), getattr(states[30], f)), (start, f)
+
+
+def test_solver_memory_is_shared_not_copied():
+    """The solver memory (the values of a whole iteration matrix) is one read-only array that
+    the stepper and every State holding it share: no copy per State or per call."""
+    from se3dyn.system import Workspace
+
+    s = sd.compile_model(_chain(6))
+    integ = GeneralizedAlpha()
+    ws = Workspace(s)
+    st = integ.init(s, ws=ws)
+    for _ in range(30):
+        st, _info = integ.step(s, st, 2e-3, ws=ws)
+    assert st.solver is not None  # (released from rest: refactorisations fail at the start)
+    ref = ws.stepper(True, st.dropped).memory()
+    assert np.shares_memory(ref, st.solver.ref)
+    with pytest.raises(ValueError):
+        ref.flags.writeable = True

@@ -299,13 +299,15 @@ NB_MODULE(_engine, m) {
            })
       .def("memory",
            [](const Stepper& S) -> nb::object {
-             // a copy of the solver memory (the values of the last full factorisation) or None
-             // (none, or the generic matrix's: a function of the model)
+             // the solver memory (the values of the last full factorisation, read-only: shared
+             // with the stepper, no copy) or None (none, or the generic matrix's: a function of
+             // the model)
              if (!S.have_ref || S.ref_probe) return nb::none();
-             double* d = new double[S.ref_vals.size()];
-             std::copy(S.ref_vals.begin(), S.ref_vals.end(), d);
-             nb::capsule owner(d, [](void* p) noexcept { delete[] static_cast<double*>(p); });
-             return nb::cast(nb::ndarray<nb::numpy, double>(d, {S.ref_vals.size()}, owner));
+             using Ref = std::shared_ptr<const std::vector<double>>;
+             Ref* ref = new Ref(S.ref_vals);
+             nb::capsule owner(ref, [](void* p) noexcept { delete static_cast<Ref*>(p); });
+             return nb::cast(nb::ndarray<nb::numpy, const double>((*ref)->data(),
+                                                                  {(*ref)->size()}, owner));
            })
       .def("holds",
            [](const Stepper& S, std::optional<CArr> ref) {

@@ -27,6 +27,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <memory>
 #include <vector>
 
 #include "engine.hpp"
@@ -63,8 +64,9 @@ struct Stepper {
   std::vector<double> energy = std::vector<double>(N_ENERGY);  // (N_ENERGY,) of the last iterate
   // solver memory (see the header): the matrix values of the last full factorisation, the
   // reference of the refactorisations' pivot sequence (none kept while it is the generic
-  // matrix's, ref_probe), and a serial number of it (Python side)
-  std::vector<double> ref_vals;
+  // matrix's, ref_probe), and a serial number of it (Python side). Never changed once made:
+  // the States that hold it share it (module.cpp, memory()).
+  std::shared_ptr<const std::vector<double>> ref_vals;
   bool have_ref = false, ref_probe = false;
   long ref_serial = 0;
 
@@ -117,7 +119,7 @@ struct Stepper {
     int code = lu.factor(vals.data());
     have_ref = code == 0;
     ref_probe = have_ref;
-    ref_vals.clear();
+    ref_vals.reset();
     ++ref_serial;
     return code;
   }
@@ -172,7 +174,8 @@ struct Stepper {
       code = lu.factor(vals.data());
       have_ref = code == 0;
       ref_probe = false;
-      if (have_ref) ref_vals = vals;
+      ref_vals.reset();  // (freed unless a State holds it)
+      if (have_ref) ref_vals = std::make_shared<const std::vector<double>>(vals);
       ++ref_serial;
     }
     return code;
@@ -191,7 +194,8 @@ struct Stepper {
   bool holds(const double* ref) const {
     if (!have_ref) return false;
     if (!ref) return ref_probe;
-    return !ref_probe && std::memcmp(ref, ref_vals.data(), vals.size() * sizeof(double)) == 0;
+    return !ref_probe && (ref == ref_vals->data() ||
+                          std::memcmp(ref, ref_vals->data(), vals.size() * sizeof(double)) == 0);
   }
 
   struct Params {
