@@ -412,29 +412,23 @@ inline void amd_order(int n, int nvar, std::vector<int>& Cp, std::vector<int>& C
     if (post[t] < n) perm[q++] = post[t];
 }
 
-// Sort the row indices of every column of a CSC matrix (with its values) by transposing twice,
-// in O(n + nnz). Workspace is allocated here (called by factor only).
+// Sort the row indices of every column of a CSC matrix (with its values; no index twice in a
+// column) in place, a column at a time: workspace of the longest column only (called by factor
+// only; a sort by transposing twice would need a copy of the whole matrix).
 inline void sort_columns(int n, const std::vector<int>& Ap, std::vector<int>& Ai,
                          std::vector<double>& Ax) {
-  const int nz = Ap[n];
-  std::vector<int> Tp(n + 1, 0), Ti(nz), cnt(n);
-  std::vector<double> Tx(nz);
-  for (int p = 0; p < nz; ++p) ++Tp[Ai[p] + 1];
-  for (int i = 0; i < n; ++i) Tp[i + 1] += Tp[i];
-  for (int i = 0; i < n; ++i) cnt[i] = Tp[i];
-  for (int j = 0; j < n; ++j)
-    for (int p = Ap[j]; p < Ap[j + 1]; ++p) {
-      const int q = cnt[Ai[p]]++;
-      Ti[q] = j;
-      Tx[q] = Ax[p];
+  std::vector<std::pair<int, double>> col;
+  for (int j = 0; j < n; ++j) {
+    const int p0 = Ap[j], p1 = Ap[j + 1];
+    if (std::is_sorted(Ai.begin() + p0, Ai.begin() + p1)) continue;
+    col.clear();
+    for (int p = p0; p < p1; ++p) col.emplace_back(Ai[p], Ax[p]);
+    std::sort(col.begin(), col.end());
+    for (int p = p0; p < p1; ++p) {
+      Ai[p] = col[p - p0].first;
+      Ax[p] = col[p - p0].second;
     }
-  for (int j = 0; j < n; ++j) cnt[j] = Ap[j];
-  for (int i = 0; i < n; ++i)
-    for (int q = Tp[i]; q < Tp[i + 1]; ++q) {
-      const int p = cnt[Ti[q]]++;
-      Ai[p] = i;
-      Ax[p] = Tx[q];
-    }
+  }
 }
 
 }  // namespace sparse_lu_detail
