@@ -14,7 +14,7 @@ as one JSON line (VmHWM of /proc/self/status; ``ru_maxrss`` beside it, which a c
 vfork inherits from a bigger parent); ``compare_exudyn.py`` runs it in its own subprocess.
 
 Run:  python benchmarks/chain_scaling.py [N ...] [--formulations index2 [index3]]
-      python benchmarks/chain_scaling.py --memory 10000 --t-end 0.1
+      python benchmarks/chain_scaling.py --memory 10000 --t-end 0.1 [--phases]
 """
 
 from __future__ import annotations
@@ -115,8 +115,47 @@ def per_step(system, formulation: str = "index2", h: float = 1e-3, long: float =
             "matrix_size": res_long.stats["matrix_size"]}
 
 
+def _status_mb(key: str) -> float:
+    """A size of /proc/self/status in MB (VmRSS, VmHWM), NaN when unknown."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(key + ":"):
+                    return int(line.split()[1]) / 1024.0  # kB -> MB
+    except OSError:
+        pass
+    return float("nan")
+
+
+def _report_phases() -> None:
+    """Print VmRSS and VmHWM to stderr after the phases of every ``simulate`` (workspace,
+    steppers, initial state, first compiled chunk of steps), by wrapping those calls."""
+    import se3dyn.integrator as ig
+    import se3dyn.system as sy
+    sim = sys.modules["se3dyn.simulate"]
+
+    def wrap(owner, name, label, once=False):
+        orig = getattr(owner, name)
+
+        def call(self, *a, **k):
+            out = orig(self, *a, **k)
+            if not (once and getattr(self, "_phase_reported", False)):
+                lab = label(a) if callable(label) else label
+                print(f"  {lab:34s} VmRSS {_status_mb('VmRSS'):6.0f} MB, VmHWM "
+                      f"{_status_mb('VmHWM'):6.0f} MB", file=sys.stderr, flush=True)
+                if once:
+                    self._phase_reported = True
+            return out
+        setattr(owner, name, call)
+
+    wrap(sy.Workspace, "__init__", "workspace (engine, layout)")
+    wrap(sy.Workspace, "stepper", lambda a: f"stepper index {2 if a[0] else 3}")
+    wrap(ig.GeneralizedAlpha, "init", "initial state")
+    wrap(sim._Recorder, "added", "first compiled chunk of steps", once=True)
+
+
 def peak_memory(n_links: int, t_end: float = 1.0, output_every: int = 10,
-                formulation: str = "index2") -> dict:
+                formulation: str = "index2", phases: bool = False) -> dict:
     """Run the chain in this process (se3dyn defaults) and report the peak resident set size,
     also as it was after importing, after building + compiling the model and after the one-time
     set-up of the first ``simulate`` (a one-step run).
@@ -124,23 +163,19 @@ def peak_memory(n_links: int, t_end: float = 1.0, output_every: int = 10,
     The peak is read as VmHWM from /proc/self/status (the high-water mark of this process's own
     address space). ``resource.getrusage(RUSAGE_SELF).ru_maxrss`` is reported too, but it is not
     trusted: a child started by vfork (Python's subprocess does) inherits its parent's peak
-    through execve, so a big parent makes it report the parent's peak."""
+    through execve, so a big parent makes it report the parent's peak. ``phases``: VmRSS and
+    VmHWM after every phase of both runs on stderr (:func:`_report_phases`)."""
     import resource
 
     def hwm_mb() -> float:
-        try:
-            with open("/proc/self/status") as f:
-                for line in f:
-                    if line.startswith("VmHWM:"):
-                        return int(line.split()[1]) / 1024.0  # kB -> MB
-        except OSError:
-            pass
-        return float("nan")
+        return _status_mb("VmHWM")
 
     def maxrss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB -> MB (Linux)
 
     rss_import = hwm_mb()
+    if phases:
+        _report_phases()
     t0 = time.perf_counter()
     system = sd.compile_model(chain(n_links))
     build = time.perf_counter() - t0
@@ -194,11 +229,14 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--memory", type=int, help="only: peak RSS of a run with N links")
     ap.add_argument("--t-end", type=float, default=1.0, help="model time of --memory")
     ap.add_argument("--formulation", default="index2", help="formulation of --memory")
+    ap.add_argument("--phases", action="store_true",
+                    help="--memory: VmRSS and VmHWM after every phase of the runs on stderr")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" /
                                           "chain_scaling.json"))
     a = ap.parse_args(argv)
     if a.memory:
-        print(json.dumps(peak_memory(a.memory, a.t_end, formulation=a.formulation)))
+        print(json.dumps(peak_memory(a.memory, a.t_end, formulation=a.formulation,
+                                     phases=a.phases)))
         return 0
     print(f"se3dyn {sd.__version__}, numpy {np.__version__}, scipy {scipy.__version__}, "
           f"Python {platform.python_version()}, {platform.machine()}, {os.cpu_count()} CPUs, "

@@ -43,8 +43,10 @@ class SolverMemory:
     Attributes
     ----------
     ref : ndarray (nv,)
-        Values of the iteration matrix (in the engine's value order) of the last full sparse LU
-        factorisation, whose pivot sequence the refactorisations of the following steps reuse.
+        Values of the iteration matrix (in the engine's value order; dropped equations as
+        identity rows and columns) of the last full sparse LU factorisation, whose pivot
+        sequence the refactorisations of the following steps reuse. Read-only: the stepper
+        and the States holding it share one array.
     """
 
     ref: np.ndarray
