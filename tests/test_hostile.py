@@ -670,24 +670,31 @@ def _console_script():
 @pytest.mark.skipif(not sys.platform.startswith("linux") or not _console_script(),
                     reason="needs /proc and the installed console script")
 def test_sigint_during_start_up_prints_one_line_and_exits_130(tmp_path):
-    """Ctrl-C while the package is still loading (numpy loaded, se3dyn not yet)."""
+    """Ctrl-C while the package is still loading (numpy loaded, se3dyn not yet). On a loaded
+    machine the small check can finish before the signal arrives: then it is sent again to a
+    new process (a missed signal is not what this test is about)."""
     (tmp_path / "m.yaml").write_text(SMALL)
-    p = subprocess.Popen([_console_script(), "check", str(tmp_path / "m.yaml")],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    maps = Path(f"/proc/{p.pid}/maps")
-    deadline = time.time() + 60
-    while time.time() < deadline and p.poll() is None:
-        try:
-            if "_multiarray_umath" in maps.read_text():
-                break
-        except OSError:
-            pass
-        time.sleep(0.002)
-    p.send_signal(signal.SIGINT)
-    out, err = p.communicate(timeout=60)
-    assert "Traceback" not in err, err
-    assert p.returncode == 130, (p.returncode, err)
-    assert err.strip() == "se3dyn: error: interrupted", err
+    for _ in range(5):
+        p = subprocess.Popen([_console_script(), "check", str(tmp_path / "m.yaml")],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        maps = Path(f"/proc/{p.pid}/maps")
+        deadline = time.time() + 60
+        while time.time() < deadline and p.poll() is None:
+            try:
+                if "_multiarray_umath" in maps.read_text():
+                    break
+            except OSError:
+                pass
+            time.sleep(0.002)
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=60)
+        if p.returncode == 0 and not err:
+            continue  # finished before the signal
+        assert "Traceback" not in err, err
+        assert p.returncode == 130, (p.returncode, err)
+        assert err.strip() == "se3dyn: error: interrupted", err
+        return
+    pytest.skip("the check finished before the signal five times")
 
 
 def test_storage_grows_as_the_run_goes_up_to_the_rows_expected(monkeypatch):
