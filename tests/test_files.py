@@ -221,7 +221,7 @@ FIELDS = ("t", "H", "v", "vd", "lam", "alpha", "kinetic", "potential", "work_act
 
 
 @pytest.mark.parametrize("kw", [dict(), dict(output_every=7), dict(output_step=0.0013),
-                                dict(tol=1e-4), dict(formulation="index3", rho_inf=0.8)],
+                                dict(tol=1e-6), dict(formulation="index3", rho_inf=0.8)],
                          ids=["fixed", "output_every", "output_step", "adaptive", "index3"])
 def test_a_run_continued_from_a_checkpoint_equals_the_uninterrupted_run(kw):
     m = sd.examples.slider_crank()

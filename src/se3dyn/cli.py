@@ -695,7 +695,8 @@ _OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step",
 
 def run_report(stats: dict) -> list[str]:
     """Summary lines on what a run's results may hide: the initial velocities changed to
-    satisfy the joints, and the energy balance error against the energy in play."""
+    satisfy the joints, the local errors of an adaptive run, and the energy balance error
+    against the energy in play."""
     out = []
     ch = stats.get("initial_velocity_changes") or []
     if ch:
@@ -706,6 +707,10 @@ def run_report(stats: dict) -> list[str]:
                    f"energy {stats['initial_kinetic_energy_given']:.6g} J given, "
                    f"{stats['initial_kinetic_energy_used']:.6g} J used "
                    "(--initial-velocities strict refuses them)")
+    if stats.get("error_estimate") is not None and stats.get("tol") is not None:
+        out.append(f"adaptive steps: local error estimates add up to "
+                   f"{stats['error_estimate']:.3e} m (tol {stats['tol']:g} m); the global "
+                   "error grows beyond it where the motion amplifies errors (docs/accuracy.md)")
     if "energy_balance_error" in stats:
         err, scale = stats["energy_balance_error"], stats["energy_scale"]
         rel = f"{100 * err / scale:.3g} % of" if scale > 0 else "with no"
@@ -724,7 +729,8 @@ def _add_overrides(p: argparse.ArgumentParser) -> None:
     p.add_argument("--formulation", choices=("index2", "index3"),
                    help="stabilized index-2 (default) or the paper's index-3 form")
     p.add_argument("--tol", type=_positive("pos"),
-                   help="adaptive steps: position error tolerance over the run (m, rad)")
+                   help="adaptive steps: the local position errors (m, RMS over each "
+                        "body's mass) add up to TOL over the run (docs/accuracy.md)")
     p.add_argument("--output-step", type=_positive("pos"),
                    help="store results every OUTPUT_STEP seconds (dense output)")
     p.add_argument("--initial-velocities", choices=("project", "strict"),

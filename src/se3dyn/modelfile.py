@@ -765,8 +765,9 @@ FIELDS: dict[str, tuple[Field, ...]] = {
               "form."),
         Field("redundant", Str(("drop", "error")), "drop", "Redundant constraint equations: "
               "left out with zero multipliers, or an error."),
-        Field("tol", Num(exclusive_minimum=0), None, "Adaptive time stepping: tolerance on the "
-              "position error over the run (m, rad); `step` is then the initial step."),
+        Field("tol", Num(exclusive_minimum=0), None, "Adaptive time stepping: the local "
+              "position errors (m, RMS over each body's mass) add up to `tol` over the run "
+              "(docs/accuracy.md); `step` is then the initial step."),
         Field("h_min", Num(exclusive_minimum=0), "1e-12 x duration", "Smallest adaptive step "
               "(s)."),
         Field("h_max", Num(exclusive_minimum=0), "duration / 10", "Largest adaptive step (s)."),

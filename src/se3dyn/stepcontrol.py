@@ -1,0 +1,131 @@
+"""Step-size control of adaptive runs (``simulate(..., tol=...)``): the norm of a step's local
+error estimate and the choice of the next step.
+
+The estimate itself comes from the integrator (:meth:`GeneralizedAlpha.step`): the part of the
+increment's Taylor expansion the generalized-alpha update does not reproduce,
+``(beta - 1/6) h^2 (a_{n+1} - a_n)`` (Eqs. (38), (43)), an increment in the Lie algebra of
+every node and joint.
+
+**Norm.** A body's error is the root mean square, over its mass, of the position errors of its
+material points: for an increment error ``(e_U, e_Omega)`` in the material frame of a node of
+mass ``m``, centre of mass ``c`` and inertia ``J`` about it (Eqs. (47)-(53)),
+``sqrt(|e_U + e_Omega x c|^2 + e_Omega . J e_Omega / m)`` (metres); the norm is the largest
+over the nodes. Errors of a rotation weigh by the body's radius of gyration about that axis:
+a slender rod's spin about its own axis, which moves no material point far, counts little,
+and massless nodes (joint frames that the constraints determine) not at all. A node with
+rotary inertia and no mass counts its rotation error times the model's length scale.
+
+**Controller.** The local errors are to add up to ``tol`` over the run: a step is accepted when
+its error is at most its share ``tol * h_bar / (t_end - t_start)``, with ``h_bar`` the mean
+step from ``t_start`` so far (the initial step before the first one), and the next step is
+``h (share / error)^(1/3)`` (safety 0.9, at most doubled, at least a fifth), kept unchanged
+when the proposal would grow it by less than 30 % (no step-size jitter on motions of even
+difficulty). Error per step (rather than per unit step) is the distribution that minimises the
+number of steps for a given sum of local errors. Everything depends on the time, the step
+count and the step only, so a run continued from a checkpoint chooses the same steps.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Safety factor on the proposed step, its bounds per step and the dead band of growth.
+SAFETY, GROW_MAX, SHRINK_MIN, KEEP_BELOW = 0.9, 2.0, 0.2, 1.3
+
+
+class ErrorNorm:
+    """The mass-weighted norm of errors of the node frames of one system (see the module):
+    of a step's local error estimate (an increment) and, exactly for finite errors, of the
+    frames of one run against another (:meth:`frames`).
+
+    Parameters
+    ----------
+    s : System
+    """
+
+    def __init__(self, s):
+        free = np.asarray(s.node_free, dtype=np.int64)
+        m = np.asarray(s.node_mass, dtype=float)[free]
+        J = np.asarray(s.node_J, dtype=float)[free]
+        massive = m > 0
+        spinning = ~massive & (np.abs(J).max(axis=(1, 2), initial=0.0) > 0)
+        self._nodes = free[massive]  # (nb,) node indices
+        self._spin_nodes = free[spinning]  # (nr,)
+        self._dof = np.asarray(s.node_dofidx)[massive]  # (nb, 6)
+        self._com = np.asarray(s.node_com, dtype=float)[free][massive]  # (nb, 3)
+        self._Jm = J[massive] / m[massive, None, None]  # (nb, 3, 3) J / m
+        # second moment of the mass about the centre of mass per unit mass, S = tr(J)/2 - J
+        tr = np.trace(self._Jm, axis1=1, axis2=2)
+        self._Sm = 0.5 * tr[:, None, None] * np.eye(3) - self._Jm
+        self._rot = np.asarray(s.node_dofidx)[spinning][:, 3:]  # (nr, 3)
+        self._length = float(s.length_scale)
+
+    def frames(self, H: np.ndarray, H_ref: np.ndarray) -> np.ndarray:
+        """The norm of the error of the node frames ``H`` against ``H_ref``, exact for finite
+        errors: per body the root mean square over its mass of ``|x + R X - x_ref - R_ref X|``
+        over its material points X, ``|dx + dR c|^2 + tr(dR S dR^T) / m`` with S the second
+        moment of the mass about the centre of mass, the largest over the bodies (m).
+
+        Parameters
+        ----------
+        H, H_ref : ndarray (..., M, 4, 4)
+            Frames of all nodes (e.g. ``Results.H`` of two runs on the same times).
+
+        Returns
+        -------
+        ndarray (...)
+        """
+        H, H_ref = np.asarray(H, dtype=float), np.asarray(H_ref, dtype=float)
+        A, B = H[..., self._nodes, :, :], H_ref[..., self._nodes, :, :]
+        dR = A[..., :3, :3] - B[..., :3, :3]
+        d = A[..., :3, 3] - B[..., :3, 3] + np.einsum("...ij,...j->...i", dR, self._com)
+        sq = (np.einsum("...i,...i->...", d, d)
+              + np.einsum("...ij,...jk,...ik->...", dR, self._Sm, dR))
+        out = np.sqrt(np.maximum(sq, 0.0).max(axis=-1, initial=0.0))
+        if len(self._spin_nodes):
+            C = np.einsum("...ji,...jk->...ik", H_ref[..., self._spin_nodes, :3, :3],
+                          H[..., self._spin_nodes, :3, :3])
+            c = np.clip(0.5 * (np.trace(C, axis1=-2, axis2=-1) - 1.0), -1.0, 1.0)
+            out = np.maximum(out, self._length * np.arccos(c).max(axis=-1))
+        return out
+
+    def __call__(self, e: np.ndarray) -> float:
+        """Norm (m) of a local error estimate ``e`` of shape (nq,) (the node components, an
+        increment ``(e_U, e_Omega)`` per node in its material frame)."""
+        E = e[self._dof]
+        eu, ew = E[:, :3], E[:, 3:]
+        d = eu + np.cross(ew, self._com)
+        sq = np.einsum("ni,ni->n", d, d) + np.einsum("ni,nij,nj->n", ew, self._Jm, ew)
+        out = float(np.sqrt(sq.max(initial=0.0)))
+        if len(self._rot):
+            out = max(out, self._length * float(np.abs(e[self._rot]).max()))
+        return out
+
+    def worst(self, e: np.ndarray) -> int:
+        """Index in ``e`` of the largest component of the node with the largest error."""
+        E = e[self._dof]
+        if not len(E):
+            return int(np.argmax(np.abs(e)))
+        d = E[:, :3] + np.cross(E[:, 3:], self._com)
+        k = int(np.argmax(np.einsum("ni,ni->n", d, d)
+                          + np.einsum("ni,nij,nj->n", E[:, 3:], self._Jm, E[:, 3:])))
+        return int(self._dof[k][np.argmax(np.abs(E[k]))])
+
+
+def share(tol: float, span: float, t: float, t_start: float, steps: int, h: float) -> float:
+    """A step's share of the tolerance, ``tol h_bar / span`` with ``h_bar`` the mean step of
+    the ``steps`` steps from ``t_start`` to ``t`` (``h`` before the first)."""
+    h_bar = (t - t_start) / steps if steps > 0 and t > t_start else h
+    return max(tol * h_bar / span, 1e-300)
+
+
+def next_step(h: float, ratio: float, accepted: bool) -> float:
+    """The step after one of size ``h`` whose error was ``ratio`` times its share (unbounded by
+    ``h_min``/``h_max``; the caller clips). A rejected step always shrinks."""
+    f = SAFETY * max(ratio, 1e-10) ** (-1.0 / 3.0)
+    if not accepted:
+        return h * min(SAFETY, max(SHRINK_MIN, f))
+    f = min(GROW_MAX, max(SHRINK_MIN, f))
+    if 1.0 <= f < KEEP_BELOW:
+        f = 1.0
+    return h * f

@@ -1,0 +1,116 @@
+"""The error norm of adaptive steps (:mod:`se3dyn.stepcontrol`): the root mean square over a
+body's mass of the position errors of its material points, checked against the points of a
+uniform box (two-point Gauss rule per axis, exact for the quadratic integrand), and the step
+controller's rules."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import se3dyn as sd
+from se3dyn import lie, stepcontrol
+
+finite = st.floats(-1.0, 1.0, allow_nan=False)
+vec3 = st.tuples(finite, finite, finite).map(np.array)
+sizes = st.tuples(*(st.floats(0.05, 2.0),) * 3).map(np.array)
+
+
+def _box_system(dims, com_offset, R0):
+    """One free node at the origin, orientation R0, carrying a uniform box of mass 2 with its
+    centre at ``com_offset`` (material frame), its edges along the material axes; a massless
+    node and a fixed one beside it."""
+    a, b, c = dims
+    m = 2.0
+    J = m / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+    mb = sd.ModelBuilder()
+    mb.node("g", (0, 0, 0), fixed=True)
+    mb.node("box", (0, 0, 0), orientation=R0, mass=m, inertia=R0 @ J @ R0.T,
+            com=tuple(R0 @ com_offset))
+    mb.node("frame", (1, 0, 0))
+    mb.joint("j", "rigid", "box", "frame")
+    return sd.compile_model(mb.build())
+
+
+def _box_points(dims, com_offset):
+    """The 8 two-point Gauss points of the box (material frame): their mean of any quadratic
+    function of the position is the box's mean."""
+    g = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+    return np.array([com_offset + 0.5 * dims * np.array(p) for p in itertools.product(g, g, g)])
+
+
+@settings(max_examples=60, deadline=None)
+@given(dims=sizes, off=vec3, w0=vec3, dw=vec3, dx=vec3, x0=vec3)
+def test_frame_error_is_the_rms_position_error_of_the_material_points(dims, off, w0, dw, dx,
+                                                                     x0):
+    R0 = lie.exp_so3(w0)
+    s = _box_system(dims, off, R0)
+    norm = stepcontrol.ErrorNorm(s)
+    H_ref = np.array(s.node_H0, dtype=float)
+    H_ref[:, :3, 3] += x0
+    H = H_ref.copy()
+    k = s.node_names.index("box")
+    H[k, :3, :3] = H_ref[k, :3, :3] @ lie.exp_so3(dw)  # finite errors
+    H[k, :3, 3] += dx
+    X = _box_points(dims, off)
+    p = H[k, :3, 3] + X @ H[k, :3, :3].T
+    p_ref = H_ref[k, :3, 3] + X @ H_ref[k, :3, :3].T
+    rms = np.sqrt(np.mean(np.sum((p - p_ref) ** 2, axis=1)))
+    assert norm.frames(H, H_ref) == pytest.approx(rms, rel=1e-9, abs=1e-14)
+
+
+@settings(max_examples=40, deadline=None)
+@given(dims=sizes, off=vec3, e=st.tuples(*(finite,) * 6).map(np.array))
+def test_increment_norm_is_the_frame_norm_to_first_order(dims, off, e):
+    s = _box_system(dims, off, np.eye(3))
+    norm = stepcontrol.ErrorNorm(s)
+    H0 = np.array(s.node_H0, dtype=float)
+    k = s.node_names.index("box")
+    full = np.zeros(s.nq)
+    for eps in (1e-4, 1e-5):
+        full[s.node_dofadr[k]:s.node_dofadr[k] + 6] = eps * e
+        H = H0.copy()
+        H[k] = H0[k] @ lie.exp_se3(eps * e)
+        # the increment's norm and the exact norm of the frames it gives agree to O(eps^2)
+        assert abs(norm(full) - norm.frames(H, H0)) <= 10 * eps ** 2 * (1 + np.abs(e).sum())
+
+
+def test_massless_nodes_do_not_count_and_a_slender_rod_spin_counts_by_its_gyration_radius():
+    L, r, m = 1.0, 0.01, 3.0
+    mb = sd.ModelBuilder()
+    mb.node("g", (0, 0, 0), fixed=True)
+    # a rod along x: inertia m r^2 / 2 about its axis, m L^2 / 12 across
+    mb.node("rod", (0, 0, 0), mass=m, inertia=(m * r * r / 2, m * L * L / 12, m * L * L / 12))
+    mb.node("frame", (1, 0, 0))
+    mb.joint("j", "rigid", "rod", "frame")
+    s = sd.compile_model(mb.build())
+    norm = stepcontrol.ErrorNorm(s)
+    e = np.zeros(s.nq)
+    frame = s.node_dofadr[s.node_names.index("frame")]
+    rod = s.node_dofadr[s.node_names.index("rod")]
+    e[frame:frame + 6] = 1.0  # a massless node: not counted
+    assert norm(e) == 0.0
+    e[rod + 3] = 1e-3  # spin about the rod's axis: radius of gyration r / sqrt(2)
+    assert norm(e) == pytest.approx(1e-3 * r / np.sqrt(2), rel=1e-12)
+    e[rod + 3], e[rod + 4] = 0.0, 1e-3  # across: L / sqrt(12)
+    assert norm(e) == pytest.approx(1e-3 * L / np.sqrt(12), rel=1e-12)
+    assert s.labels[norm.worst(e)] == "node 'rod' Omega_y"
+
+
+def test_share_is_the_tolerance_per_mean_step_and_the_controller_keeps_even_steps():
+    # the shares of n equal steps add up to tol
+    tol, span, h = 1e-3, 2.0, 0.01
+    total = sum(stepcontrol.share(tol, span, k * h, 0.0, k, h) for k in range(200))
+    assert total == pytest.approx(tol, rel=1e-12)
+    # an error at its share keeps the step; a growth below 30 % is not taken; rejected steps
+    # shrink; the step changes by at most a factor of 2 and at least 1/5
+    assert stepcontrol.next_step(h, stepcontrol.SAFETY ** 3, True) == h
+    assert stepcontrol.next_step(h, 0.5, True) == h
+    assert stepcontrol.next_step(h, 0.1, True) == pytest.approx(h * 0.9 * 10 ** (1 / 3))
+    assert stepcontrol.next_step(h, 1e-12, True) == 2 * h
+    assert stepcontrol.next_step(h, 1e12, True) == pytest.approx(0.2 * h)
+    assert stepcontrol.next_step(h, 1.0001, False) <= 0.9 * h
