@@ -127,9 +127,10 @@ def _independent_rows(P: np.ndarray, rtol: float) -> bool:
     holds its eigenvalues, whose moduli lie between the extreme singular values of R, which
     are those of P; and ``|R_11|`` (the largest column norm) is at most the largest. So
     ``sigma_min > rtol sigma_max`` suffices, with a margin for the rounding of both
-    factorisations (relative errors ~ n eps of sigma_max). Fewer columns than rows: False."""
+    factorisations (relative errors ~ n eps of sigma_max). Fewer columns than rows or values
+    that are not finite: False (the QR decides, as before)."""
     k, n = P.shape
-    if k == 0 or n < k:
+    if k == 0 or n < k or not np.all(np.isfinite(P)):
         return False
     sv = np.linalg.svd(P, compute_uv=False)
     return bool(sv[-1] > (2.0 * rtol + 64.0 * n * np.finfo(float).eps) * sv[0])
