@@ -56,7 +56,13 @@ Timings and the targets of issue 12 (PASS/MISS printed beside each):
    Python bytecode cache either (``PYTHONPYCACHEPREFIX`` = a new empty directory, for both codes
    alike: every module, the standard library included, is compiled from source); "warm" is a new
    process with the bytecode caches filled. The operating system's file cache cannot be emptied
-   on this shared machine. Also ``python -c "import se3dyn"`` / ``"import exudyn"``.
+   on this shared machine. Also ``python -c "import se3dyn"`` / ``"import exudyn"``. Every
+   subprocess of this script writes bytecode caches as Python does by default:
+   ``PYTHONDONTWRITEBYTECODE`` is removed from their environment (set in some shells, it kept
+   the caches of se3dyn's own modules, which an editable install runs from the source tree,
+   from ever being written, so that every "warm" process and every "fresh process" of section 1
+   compiled them from source; installed packages such as EXUDYN, numpy and a non-editable
+   se3dyn have theirs written by pip at install).
 4. Cost per step vs N = 100 ... 10^4 links (``chain_scaling.scaling_row``: set-up excluded,
    (wall(0.1 s) - wall(0.02 s)) / 80 steps, se3dyn defaults): fitted exponent <= 1.1; peak RSS
    of the N = 10^4 chain (0.1 s, every 10th step stored) in its own subprocess
@@ -477,6 +483,7 @@ def run_process(argv: list[str], cwd, cold: bool, full: bool = False):
     import tempfile
 
     env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)  # caches are written, as by default (docstring)
     tmp = tempfile.mkdtemp(prefix="cmpexu_")
     argv = [a.replace("{tmp}", os.path.join(tmp, "out")) for a in argv]
     if cold:
@@ -615,10 +622,13 @@ def section_slider_crank(a, report) -> None:
     here, repo = a.here, a.repo
     cmds = process_commands(here, repo)
     fresh = {"nodes": [], "bodies": [], "exu": []}
+    jobs = (("nodes", "se3dyn first-simulate job (nodes)"),
+            ("bodies", "se3dyn first-simulate job (bodies)"),
+            ("exu", "EXUDYN process: import, build slider-crank, solve 5 s"))
+    for _, name in jobs:  # fill the bytecode caches (not timed)
+        run_process(cmds[name], repo, cold=False)
     for _ in range(a.processes):
-        for key, name in (("nodes", "se3dyn first-simulate job (nodes)"),
-                          ("bodies", "se3dyn first-simulate job (bodies)"),
-                          ("exu", "EXUDYN process: import, build slider-crank, solve 5 s")):
+        for key, name in jobs:
             wall, inner = run_process(cmds[name], repo, cold=False)
             inner["process_wall_s"] = wall
             fresh[key].append(inner)

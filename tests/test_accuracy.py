@@ -138,6 +138,39 @@ def test_overconstrained_four_bar_names_three_redundant_equations_and_mobility_o
     assert rep2.dof == 1 and rep2.redundant == ()
 
 
+def test_independence_shortcut_agrees_with_the_pivoted_qr():
+    """redundant_equations skips the pivoted QR when one SVD proves every loop equation
+    independent; it may only say so when the QR keeps them all (the QR decides otherwise)."""
+    from se3dyn.analysis import _independent_rows, _jacobian_rows, _pivoted_qr, loop_joints
+
+    def qr_keeps_all(P, rtol):
+        piv, d = _pivoted_qr(P.T)
+        return P.shape[1] >= P.shape[0] and bool(np.all(d > rtol * d[0]))
+
+    cases = []
+    for model in (slider_crank(), sd.examples.slider_crank_bodies(), _four_bar(True),
+                  _four_bar(False)):
+        s = compile_model(model)
+        loops = loop_joints(s)
+        cases.append(_jacobian_rows(s, (6 * loops[:, None] + np.arange(6)).ravel()))
+    rng = np.random.default_rng(3)
+    for k, n in ((5, 8), (6, 6), (8, 5)):  # graded singular values down to ~1e-12
+        U, _ = np.linalg.qr(rng.standard_normal((k, k)))
+        V, _ = np.linalg.qr(rng.standard_normal((n, n)))
+        for smin in (1e-6, 2e-9, 1e-9, 5e-10, 1e-12):
+            S = np.zeros((k, n))
+            np.fill_diagonal(S, np.geomspace(1.0, smin, min(k, n)))
+            cases.append(U @ S @ V.T)
+    shortcuts = 0
+    for P in cases:
+        for rtol in (1e-9, 1e-10):
+            if _independent_rows(P, rtol):
+                shortcuts += 1
+                assert qr_keeps_all(P, rtol)
+    assert shortcuts >= 8  # the slider-crank forms and the isostatic four-bar among them
+    assert _independent_rows(cases[0], 1e-9) and not _independent_rows(cases[2], 1e-9)
+
+
 @pytest.mark.parametrize("formulation", ["index2", "index3"])
 def test_overconstrained_four_bar_moves_like_the_isostatic_one(formulation):
     r = sd.simulate(_four_bar(True), 2.0, 2e-3, formulation=formulation)

@@ -120,6 +120,22 @@ def _pivoted_qr(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return piv, d
 
 
+def _independent_rows(P: np.ndarray, rtol: float) -> bool:
+    """Whether the pivoted QR of ``P^T`` (:func:`_pivoted_qr`) is sure to find all rows of P
+    (k, n) independent, i.e. ``|R_jj| > rtol |R_11|`` for every j < k: one singular value
+    decomposition instead of k Householder steps in Python. The diagonal of the triangular R
+    holds its eigenvalues, whose moduli lie between the extreme singular values of R, which
+    are those of P; and ``|R_11|`` (the largest column norm) is at most the largest. So
+    ``sigma_min > rtol sigma_max`` suffices, with a margin for the rounding of both
+    factorisations (relative errors ~ n eps of sigma_max). Fewer columns than rows or values
+    that are not finite: False (the QR decides, as before)."""
+    k, n = P.shape
+    if k == 0 or n < k or not np.all(np.isfinite(P)):
+        return False
+    sv = np.linalg.svd(P, compute_uv=False)
+    return bool(sv[-1] > (2.0 * rtol + 64.0 * n * np.finfo(float).eps) * sv[0])
+
+
 def loop_joints(s: System) -> np.ndarray:
     """Indices of the joints that lie on closed loops (the 2-core of the joint graph, clamped
     nodes merged into one ground node). Only these can carry redundant constraints: a joint on
@@ -166,9 +182,12 @@ def redundant_equations(s: System, H: np.ndarray | None = None, HJ: np.ndarray |
         return out.copy()
     rows = (6 * loops[:, None] + np.arange(6)).ravel()
     P = _jacobian_rows(s, rows, H, HJ)
-    piv, d = _pivoted_qr(P.T)
-    r = int(np.sum(d > rtol * d[0])) if d.size and d[0] > 0 else 0
-    out = np.sort(rows[piv[r:]])
+    if _independent_rows(P, rtol):
+        out = np.zeros(0, dtype=np.int64)
+    else:
+        piv, d = _pivoted_qr(P.T)
+        r = int(np.sum(d > rtol * d[0])) if d.size and d[0] > 0 else 0
+        out = np.sort(rows[piv[r:]])
     if initial:
         s.pattern["redundant0"] = (initial, out)
     return out.copy()
