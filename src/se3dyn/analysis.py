@@ -120,6 +120,21 @@ def _pivoted_qr(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return piv, d
 
 
+def _full_row_rank(P: np.ndarray, rtol: float) -> bool:
+    """Whether the pivoted QR of ``P^T`` would find no redundant row of P (the usual case),
+    decided by one LAPACK call instead of the QR's loop: for P^T with at least as many rows as
+    columns, every ``|R_kk|`` of its QR, pivoted or not, is >= the smallest singular value of P
+    (R's leading k x k block has the singular values of k columns of P^T, which are >= those of
+    P^T; its last row has norm |R_kk|), and the largest column norm ``|R_00|`` is <= the
+    largest; so ``sigma_min > rtol sigma_max`` means all ``|R_kk| > rtol |R_00|``. The factor 2
+    covers the round-off of both computations (~1e-14 sigma_max here, against rtol ~1e-9).
+    False: undecided (let the QR decide)."""
+    if P.shape[0] == 0 or P.shape[0] > P.shape[1] or not np.isfinite(P).all():
+        return False
+    sv = np.linalg.svd(P, compute_uv=False)
+    return bool(sv[-1] > 2.0 * rtol * sv[0])
+
+
 def loop_joints(s: System) -> np.ndarray:
     """Indices of the joints that lie on closed loops (the 2-core of the joint graph, clamped
     nodes merged into one ground node). Only these can carry redundant constraints: a joint on
@@ -166,9 +181,12 @@ def redundant_equations(s: System, H: np.ndarray | None = None, HJ: np.ndarray |
         return out.copy()
     rows = (6 * loops[:, None] + np.arange(6)).ravel()
     P = _jacobian_rows(s, rows, H, HJ)
-    piv, d = _pivoted_qr(P.T)
-    r = int(np.sum(d > rtol * d[0])) if d.size and d[0] > 0 else 0
-    out = np.sort(rows[piv[r:]])
+    if _full_row_rank(P, rtol):
+        out = np.zeros(0, dtype=np.int64)
+    else:
+        piv, d = _pivoted_qr(P.T)
+        r = int(np.sum(d > rtol * d[0])) if d.size and d[0] > 0 else 0
+        out = np.sort(rows[piv[r:]])
     if initial:
         s.pattern["redundant0"] = (initial, out)
     return out.copy()
