@@ -80,6 +80,8 @@ Output: a table on stdout, copied to ``benchmarks/results/compare_exudyn.txt``; 
 Run (about 15 min on this machine):
     .venv/bin/python benchmarks/compare_exudyn.py [--repeats 15] [--processes 9]
         [--cold-processes 5] [--no-scaling] [--no-chain-reference] [--out PATH]
+        [--only-slider-crank]   (section 1 only: a few seconds; write --out elsewhere to keep
+                                 the full run's results)
 (PASS/MISS is judged on medians; the minimum over the repeats and its ratio are printed beside,
 since on a loaded machine the minimum is the better estimate of the unloaded cost.)
 """
@@ -1037,6 +1039,8 @@ def main(argv) -> int:
     ap.add_argument("--no-chains", action="store_true", help="skip section 2")
     ap.add_argument("--no-chain-reference", action="store_true")
     ap.add_argument("--no-fullnewton-chain", action="store_true")
+    ap.add_argument("--only-slider-crank", action="store_true",
+                    help="section 1 only (slider-crank warm and first simulate, references)")
     ap.add_argument("--out", default=str(here / "results" / "compare_exudyn.json"))
     a = ap.parse_args(argv)
     a.here, a.repo, a.out = here, here.parent, Path(a.out)
@@ -1079,12 +1083,13 @@ def main(argv) -> int:
         save(a, report)
         section_slider_crank(a, report)
         save(a, report)
-        if not a.no_chains:
+        if not (a.no_chains or a.only_slider_crank):
             section_chains(a, report)
             save(a, report)
-        section_processes(a, report)
-        save(a, report)
-        if not a.no_scaling:
+        if not a.only_slider_crank:
+            section_processes(a, report)
+            save(a, report)
+        if not (a.no_scaling or a.only_slider_crank):
             section_scaling(a, report)
             save(a, report)
         env_end = environment(a.repo)

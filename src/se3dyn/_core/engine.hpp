@@ -31,6 +31,23 @@ struct XiProd {
   int k, c1, s1, c2, s2;
 };
 
+// t (r x 6, ld 6) -= X Y^T, X (r x k, ld ldx), Y (6 x k, ld 6): every entry the sum over l in
+// increasing order from 0 that the plain triple loop forms, here with the six columns of a row
+// side by side (through Y^T, k x 6), which the compiler vectorises
+inline void sub_times_T(int r, int k, const double* X, int ldx, const double* Y, double* t) {
+  double YT[36];
+  for (int l = 0; l < k; ++l)
+    for (int c = 0; c < 6; ++c) YT[6 * l + c] = Y[6 * c + l];
+  for (int i = 0; i < r; ++i) {
+    double s[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    for (int l = 0; l < k; ++l) {
+      const double x = X[ldx * i + l];
+      for (int c = 0; c < 6; ++c) s[c] += x * YT[6 * l + c];
+    }
+    for (int c = 0; c < 6; ++c) t[6 * i + c] -= s[c];
+  }
+}
+
 struct Engine {
   Engine() = default;
   Engine(const Engine&) = delete;  // owns its element batches
@@ -196,25 +213,11 @@ struct Engine {
       for (const VelProd& p : velprod) {
         const double* V = velv.data() + p.src;  // ki x kj row-major (src: in velv)
         const double* Bn = &joints->Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
-        double* t = vals + p.target;  // ki x 6
-        for (int i = 0; i < p.ki; ++i)
-          for (int c = 0; c < 6; ++c) {
-            double s = 0.0;
-            for (int l = 0; l < p.kj; ++l) s += V[p.kj * i + l] * Bn[6 * c + l];
-            t[6 * i + c] -= s;
-          }
+        sub_times_T(p.ki, p.kj, V, p.kj, Bn, vals + p.target);  // target: ki x 6
       }
-      for (const XiProd& p : xiprod) {
-        const double* B1 = &joints->Bu[108 * p.c1 + 36 * p.s1];
-        const double* B2 = &joints->Bnu[108 * p.c2 + 36 * p.s2];
-        double* t = vals + p.target;
-        for (int i = 0; i < 6; ++i)
-          for (int c = 0; c < 6; ++c) {
-            double s = 0.0;
-            for (int l = 0; l < p.k; ++l) s += B1[6 * i + l] * B2[6 * c + l];
-            t[6 * i + c] -= s;
-          }
-      }
+      for (const XiProd& p : xiprod)
+        sub_times_T(6, p.k, &joints->Bu[108 * p.c1 + 36 * p.s1], 6,
+                    &joints->Bnu[108 * p.c2 + 36 * p.s2], vals + p.target);
     }
     return X.fscale;
   }
