@@ -675,8 +675,11 @@ def test_sigint_during_start_up_prints_one_line_and_exits_130(tmp_path):
     new process (a missed signal is not what this test is about)."""
     (tmp_path / "m.yaml").write_text(SMALL)
     for _ in range(5):
+        # Ctrl-C as in a shell: SIGINT at its default in the child, whatever this process
+        # (pytest, or a test before) has set; an ignored SIGINT would be inherited
         p = subprocess.Popen([_console_script(), "check", str(tmp_path / "m.yaml")],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         maps = Path(f"/proc/{p.pid}/maps")
         deadline = time.time() + 60
         while time.time() < deadline and p.poll() is None:
