@@ -89,27 +89,27 @@ class ErrorNorm:
             out = np.maximum(out, self._length * np.arccos(c).max(axis=-1))
         return out
 
+    def _squares(self, e: np.ndarray) -> np.ndarray:
+        """(nb,) squared norms of the bodies for an error estimate ``e`` (nq,)."""
+        E = e[self._dof]
+        ew = E[:, 3:]
+        d = E[:, :3] + np.cross(ew, self._com)
+        return np.einsum("ni,ni->n", d, d) + np.einsum("ni,nij,nj->n", ew, self._Jm, ew)
+
     def __call__(self, e: np.ndarray) -> float:
         """Norm (m) of a local error estimate ``e`` of shape (nq,) (the node components, an
         increment ``(e_U, e_Omega)`` per node in its material frame)."""
-        E = e[self._dof]
-        eu, ew = E[:, :3], E[:, 3:]
-        d = eu + np.cross(ew, self._com)
-        sq = np.einsum("ni,ni->n", d, d) + np.einsum("ni,nij,nj->n", ew, self._Jm, ew)
-        out = float(np.sqrt(sq.max(initial=0.0)))
+        out = float(np.sqrt(self._squares(e).max(initial=0.0)))
         if len(self._rot):
             out = max(out, self._length * float(np.abs(e[self._rot]).max()))
         return out
 
     def worst(self, e: np.ndarray) -> int:
         """Index in ``e`` of the largest component of the node with the largest error."""
-        E = e[self._dof]
-        if not len(E):
+        if not len(self._dof):
             return int(np.argmax(np.abs(e)))
-        d = E[:, :3] + np.cross(E[:, 3:], self._com)
-        k = int(np.argmax(np.einsum("ni,ni->n", d, d)
-                          + np.einsum("ni,nij,nj->n", E[:, 3:], self._Jm, E[:, 3:])))
-        return int(self._dof[k][np.argmax(np.abs(E[k]))])
+        k = int(np.argmax(self._squares(e)))
+        return int(self._dof[k][np.argmax(np.abs(e[self._dof[k]]))])
 
 
 def share(tol: float, span: float, t: float, t_start: float, steps: int, h: float) -> float:
