@@ -35,6 +35,9 @@ import numpy as np
 import se3dyn as sd
 from se3dyn import sections
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from chain_scaling import _status_mb  # noqa: E402  (one reader of /proc/self/status)
+
 LENGTH, RADIUS = 2.0, 0.01
 STEEL = dict(E=210e9, nu=0.3, density=7850.0)
 H = 1e-3
@@ -52,14 +55,7 @@ def cantilever(n: int, length: float = LENGTH, radius: float = RADIUS) -> sd.Mod
 
 def hwm_mb() -> float:
     """Peak resident set size of this process (VmHWM, MB)."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return float("nan")
+    return _status_mb("VmHWM")
 
 
 def peak_memory(n: int, t_end: float = 0.1, output_every: int = 10) -> dict:

@@ -157,8 +157,7 @@ def euler_bernoulli_rotating_frequencies(rpm: float, elements: int = 200, *,
     ``EI``, ``length`` and ``hub`` (radius) give another uniform beam.
     """
     om = rpm * 2 * math.pi / 60
-    LENGTH, HUB_RADIUS = length, hub  # noqa: N806  (the names of the formula above)
-    le = LENGTH / elements
+    le = length / elements
     nd = 2 * (elements + 1)
     K, M = np.zeros((nd, nd)), np.zeros((nd, nd))
     l2 = le * le
@@ -173,7 +172,7 @@ def euler_bernoulli_rotating_frequencies(rpm: float, elements: int = 200, *,
         for xi, wg in zip(gp, gw, strict=True):
             s = (xi + 1) / 2
             x = (e + s) * le
-            N = mu * om ** 2 * (HUB_RADIUS * (LENGTH - x) + (LENGTH ** 2 - x ** 2) / 2)
+            N = mu * om ** 2 * (hub * (length - x) + (length ** 2 - x ** 2) / 2)
             dN = np.array([(6 * s ** 2 - 6 * s) / le, 1 - 4 * s + 3 * s ** 2,
                            (6 * s - 6 * s ** 2) / le, 3 * s ** 2 - 2 * s])
             kg += N * np.outer(dN, dN) * wg * le / 2
