@@ -37,7 +37,7 @@ import pytest
 
 import se3dyn as sd
 from se3dyn.analysis import rank_analysis
-from se3dyn.modelfile import load_model
+from se3dyn.modelfile import load_model, loads_model, save_model
 
 FILE = Path(__file__).resolve().parents[1] / "examples" / "a03_andrews_squeezer.yaml"
 
@@ -192,6 +192,11 @@ def test_a03_model_file_is_the_published_mechanism():
     # 7 bodies, 10 hinges: 42 unknowns, 50 equations in 3D, mobility 1, so 9 redundant
     rep = rank_analysis(sd.compile_model(model))
     assert rep.dof == 1 and len(rep.redundant) == 9
+    # written back, the file keeps the initial angles and the attachment points
+    again, _ = loads_model(save_model(model, settings=settings))
+    for a, b in zip(model.joints, again.joints, strict=True):
+        np.testing.assert_array_equal(a.at, b.at)
+        assert (a.initial is None and b.initial is None) or np.array_equal(a.initial, b.initial)
 
 
 def test_a03_converges_at_order_two_to_the_published_solution(runs):

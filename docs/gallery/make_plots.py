@@ -2,12 +2,13 @@
 
 Usage (from the repository root)::
 
-    python3 docs/gallery/make_plots.py [a01 a02 a04 a05] [--a01-t-end T] [--a02-t-end T]
+    python3 docs/gallery/make_plots.py [a01 a02 a03 a04 a05] [--a01-t-end T] [--a02-t-end T]
                                        [--rho-inf R] [--formulation index2|index3] [--no-plot]
 
 Each problem is run from its model file ``examples/<name>.yaml`` with the file's settings and
 compared with the exact / independently computed solution used by ``tests/test_gallery.py``
-(imported from there, so the plots and the tests share one definition). The measured numbers
+(A03: the published reference of ``tests/test_a03_squeezer.py``), imported from there, so the
+plots and the tests share one definition. The measured numbers
 (error against the reference, steps, Newton iterations, wall time, redundant equations left
 out, constraint violation) are printed; the pages in this folder quote them. ``--rho-inf`` and
 ``--formulation`` override the model files' settings (the comparisons quoted on the pages);
@@ -34,6 +35,7 @@ from se3dyn.modelfile import load_model  # noqa: E402
 ROOT = Path(__file__).resolve().parents[2]
 OUT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT / "tests"))
+import test_a03_squeezer as a03ref  # noqa: E402
 import test_gallery as ref  # noqa: E402
 
 OVERRIDE = {}  # settings from the command line (--rho-inf, --formulation)
@@ -155,6 +157,53 @@ def a02(t_end):
     _save(fig, "a02_n_four_bar.png")
 
 
+def a03():
+    model, res = _run("a03_andrews_squeezer")
+    q, qd = a03ref.angles(res)
+    eq, eqd = q[-1] - a03ref.Q_REF, qd[-1] - a03ref.QD_REF
+    print("   at t = 0.03 s, se3dyn - published (angle rad, rate rad/s):")
+    for name, a, b in zip(a03ref.ANGLES, eq, eqd, strict=True):
+        print(f"     {name:8s} {a:+.2e} {b:+.2e}")
+    gap = res.kinetic + res.spring - res.spring[0] - res.work_actuators
+    W = a03ref.PAR["mom"] * (a03ref.Q_REF[0] - a03ref.Q0[0])
+    T_ref = 0.5 * a03ref.QD_REF @ a03ref.mass_matrix(a03ref.Q_REF) @ a03ref.QD_REF
+    print(f"   energy: max |T + V - V0 - W| {np.abs(gap).max():.2e} J (W = {W:.4f} J); "
+          f"T(0.03) {res.kinetic[-1]:.6f} J (published state {T_ref:.6f} J)")
+    s, kw = sd.compile_model(model), dict(rho_inf=res.stats["rho_inf"],
+                                          formulation=res.stats["formulation"])
+    hs = [8e-5, 4e-5, 2e-5, 1e-5, 5e-6]
+    qs = [a03ref.angles(sd.simulate(s, a03ref.T_END, h, **kw))[0][-1] for h in hs]
+    err = [np.abs(x - a03ref.Q_REF).max() for x in qs]
+    extra = [np.abs(b + (b - a) / 3 - a03ref.Q_REF).max()  # Richardson, order 2
+             for a, b in zip(qs[:-1], qs[1:], strict=True)]
+    for i, h in enumerate(hs):
+        order = f", order {math.log2(err[i - 1] / err[i]):.3f}" if i else ""
+        rich = f", Richardson with 2h {extra[i - 1]:.1e} rad" if i else ""
+        print(f"   h = {h:.0e}: max angle error {err[i]:.2e} rad{order}{rich}")
+    fig, ax = plt.subplots(3, 1, figsize=(7, 8))
+    for k, name in enumerate(a03ref.ANGLES):
+        a = ax[0] if k < 2 else ax[1]
+        (line,) = a.plot(res.t * 1e3, q[:, k], label=name)
+        a.plot(a03ref.T_END * 1e3, a03ref.Q_REF[k], "o", mfc="none", color=line.get_color())
+    ax[0].set_ylabel("angle (rad)")
+    ax[0].legend(loc="upper left", fontsize=8, title="o: published at 0.03 s",
+                 title_fontsize=8)
+    ax[1].set_ylabel("angle (rad)")
+    ax[1].set_xlabel("t (ms)")
+    ax[1].set_ylim(-0.75, 1.75)
+    ax[1].legend(loc="upper left", fontsize=8, ncol=5)
+    ax[2].loglog(hs, err, "o-", label="se3dyn at h")
+    ax[2].loglog(hs[1:], extra, "s--", label="Richardson extrapolation (h, 2h)")
+    ax[2].loglog(hs, 3 * err[-1] * (np.array(hs) / hs[-1]) ** 2, "k:", lw=0.8, label="slope 2")
+    ax[2].xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax[2].set_xlabel("h (s)")
+    ax[2].set_ylabel("max angle error at 0.03 s (rad)")
+    ax[2].legend(loc="lower right", fontsize=8)
+    fig.suptitle("A03 Andrews' squeezing mechanism vs the published reference")
+    fig.tight_layout()
+    _save(fig, "a03_andrews_squeezer.png")
+
+
 def a04():
     _, res = _run("a04_bricard")
     P3 = res.node_position("p3")
@@ -207,7 +256,7 @@ def a05():
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("problems", nargs="*", default=["a01", "a02", "a04", "a05"])
+    ap.add_argument("problems", nargs="*", default=["a01", "a02", "a03", "a04", "a05"])
     ap.add_argument("--a02-t-end", type=float, default=20.0,
                     help="A02 horizon (the library's 20 s take long with N = 40)")
     ap.add_argument("--a01-t-end", type=float, help="A01 horizon (default: the model file's)")
@@ -228,7 +277,7 @@ def main():
         elif p == "a01":
             a01(args.a01_t_end)
         else:
-            {"a01": a01, "a04": a04, "a05": a05}[p]()
+            {"a03": a03, "a04": a04, "a05": a05}[p]()
 
 
 if __name__ == "__main__":
