@@ -743,18 +743,14 @@ def _overrides(args) -> dict:
     return {k: getattr(args, k) for k in _OVERRIDES if getattr(args, k) is not None}
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from se3dyn import __version__
-
-    p = _Parser(prog="se3dyn", description="Multibody dynamics on SE(3).")
-    p.add_argument("--version", action="version", version=f"se3dyn {__version__}")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    c = sub.add_parser("check", help="validate model files; counts and rank analysis")
+def _check_args(c) -> None:
     c.add_argument("models", nargs="+", metavar="MODEL")
     c.add_argument("--rank-max", type=int, default=3000,
                    help="skip the rank analysis above this many unknowns (default 3000)")
     c.set_defaults(func=cmd_check)
-    r = sub.add_parser("run", help="simulate a model file and write the results file")
+
+
+def _run_args(r) -> None:
     r.add_argument("model")
     _add_overrides(r)
     r.add_argument("--out", help="folder of the results file (default: out); the file is "
@@ -767,21 +763,25 @@ def build_parser() -> argparse.ArgumentParser:
                    "with --t-end, further than it was planned")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=cmd_run)
-    sw = sub.add_parser("sweep", help="parameter study: many runs on dask.distributed")
+
+
+def _sweep_args(sw) -> None:
     from se3dyn.sweep.cli import add_arguments  # argument declarations only (no dask)
 
     add_arguments(sw)
     _add_overrides(sw)
     sw.set_defaults(func=cmd_sweep)
-    ch = sub.add_parser("channels", help="list the channels of a results file")
-    ch.add_argument("results")
-    ch.set_defaults(func=cmd_channels)
-    inf = sub.add_parser("info", help="status, settings and statistics of a results file")
-    inf.add_argument("results")
-    inf.set_defaults(func=cmd_info)
-    ty = sub.add_parser("types", help="the joint and element types and their fields")
-    ty.set_defaults(func=cmd_types)
-    pl = sub.add_parser("plot", help="plot channels against time (PNG)")
+
+
+def _results_arg(func):
+    def declare(p) -> None:
+        p.add_argument("results")
+        p.set_defaults(func=func)
+
+    return declare
+
+
+def _plot_args(pl) -> None:
     pl.add_argument("results")
     pl.add_argument("channels", nargs="+")
     pl.add_argument("-o", "--output", help="PNG, PDF or SVG file, or a folder (default: a PNG "
@@ -790,14 +790,18 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--x", metavar="CHANNEL", help="plot against this channel instead of time "
                     "(an x-y plot, e.g. a node's z against its x)")
     pl.set_defaults(func=cmd_plot)
-    ex = sub.add_parser("export", help="export channels to CSV, or the motion to glTF")
+
+
+def _export_args(ex) -> None:
     ex.add_argument("results")
     fmt = ex.add_mutually_exclusive_group(required=True)
     fmt.add_argument("--csv", help="CSV file to write")
     fmt.add_argument("--gltf", help="animated glTF 2.0 file to write (.glb or .gltf)")
     ex.add_argument("channels", nargs="*", help="channels (default: all)")
     ex.set_defaults(func=cmd_export)
-    vw = sub.add_parser("view", help="3D viewer page (HTML) of a results file")
+
+
+def _view_args(vw) -> None:
     vw.add_argument("results")
     vw.add_argument("-o", "--output", help="HTML file (default: a temporary file, opened in "
                     "the browser)")
@@ -808,6 +812,37 @@ def build_parser() -> argparse.ArgumentParser:
     vw.add_argument("--trace", action="append", metavar="NODE", help="node traced first "
                     "(repeatable)")
     vw.set_defaults(func=cmd_view)
+
+
+# the subcommands: help line, and the declaration of their arguments
+_COMMANDS = {
+    "check": ("validate model files; counts and rank analysis", _check_args),
+    "run": ("simulate a model file and write the results file", _run_args),
+    "sweep": ("parameter study: many runs on dask.distributed", _sweep_args),
+    "channels": ("list the channels of a results file", _results_arg(cmd_channels)),
+    "info": ("status, settings and statistics of a results file", _results_arg(cmd_info)),
+    "types": ("the joint and element types and their fields",
+              lambda ty: ty.set_defaults(func=cmd_types)),
+    "plot": ("plot channels against time (PNG)", _plot_args),
+    "export": ("export channels to CSV, or the motion to glTF", _export_args),
+    "view": ("3D viewer page (HTML) of a results file", _view_args),
+}
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of the ``se3dyn`` command. With ``command``, only that subcommand's
+    arguments are declared (every subcommand is still listed with its help, all that
+    ``se3dyn --help`` and a misspelt command need): declaring them all cost ``se3dyn run``
+    some 5 ms of its start-up."""
+    from se3dyn import __version__
+
+    p = _Parser(prog="se3dyn", description="Multibody dynamics on SE(3).")
+    p.add_argument("--version", action="version", version=f"se3dyn {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for name, (text, declare) in _COMMANDS.items():
+        sp = sub.add_parser(name, help=text)
+        if command is None or command == name:
+            declare(sp)
     return p
 
 
@@ -835,7 +870,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(argv: list[str] | None) -> int:
     try:
-        parser = build_parser()
+        argv = sys.argv[1:] if argv is None else list(argv)
+        # the subcommand: the first word that is not an option (the top level has no option
+        # that takes a value)
+        parser = build_parser(next((a for a in argv if not a.startswith("-")), None))
         args, extra = parser.parse_known_args(argv)
         if extra:
             # `export RESULTS --csv FILE CHANNEL...`: channels after the option are channels
