@@ -13,19 +13,33 @@ Parameter studies on dask.distributed: ``se3dyn.sweep(...)`` (:mod:`se3dyn.sweep
 first use; the core never imports it).
 """
 
-# ruff: noqa: E402  (the interrupt guard goes before the imports that take time)
+# ruff: noqa: E402  (the command's start-up settings go before the imports that take time)
 
 
-def _quiet_startup_interrupt() -> None:
-    """The ``se3dyn`` command: Ctrl-C while the package loads prints one line and exits with
-    130, no traceback (``se3dyn.cli.main`` restores the default handler once it runs)."""
+def _command_startup() -> None:
+    """The ``se3dyn`` command only (not ``import se3dyn`` in a program), before numpy loads:
+
+    * numpy's OpenBLAS starts its worker threads at import, and each spins (``sched_yield``)
+      for 2^28 cycles, ~0.1 s, before it sleeps: on a machine whose cores are busy that cost
+      the command's start-up 30-40 ms of CPU and up to 0.15 s of wall time (numpy's import
+      0.07 -> 0.23 s at load 3 on 2 cores). ``OPENBLAS_THREAD_TIMEOUT=4`` (2^4 cycles, unless
+      set) puts them to sleep at once; the number of threads, and so every result, is the
+      same, and a BLAS call that uses them wakes them (the engine does not use BLAS). The
+      processes the command starts (sweep workers) inherit the setting.
+    * Ctrl-C while the package loads prints one line and exits with 130, no traceback
+      (``se3dyn.cli.main`` restores the default handler once it runs).
+    """
     import os
-    import signal
     import sys
+
+    if os.path.basename(sys.argv[0] if sys.argv else "") not in ("se3dyn", "se3dyn.exe"):
+        return
+    os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
+
+    import signal
     import threading
 
-    if (os.path.basename(sys.argv[0] if sys.argv else "") not in ("se3dyn", "se3dyn.exe")
-            or threading.current_thread() is not threading.main_thread()):
+    if threading.current_thread() is not threading.main_thread():
         return
 
     def interrupted(signum, frame):
@@ -39,7 +53,7 @@ def _quiet_startup_interrupt() -> None:
         pass
 
 
-_quiet_startup_interrupt()
+_command_startup()
 
 from se3dyn import examples, lie
 from se3dyn.errors import ModelError, NewtonError, Se3dynError, SimulationError
@@ -49,7 +63,6 @@ from se3dyn.kinematics import Assembly, AssemblyError, KinematicsResult, assembl
 from se3dyn.model import PD, JointSpec, LoadSpec, Model, ModelBuilder, NodeSpec
 from se3dyn.results import Results
 from se3dyn.simulate import simulate
-from se3dyn.statics import StaticResult, static_equilibrium
 from se3dyn.system import System, compile_model
 from se3dyn.timefunc import Callable, Component, Constant, Ramp, Sine, Step, Table
 
@@ -65,10 +78,16 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    # se3dyn.sweep: the opt-in sweep layer, imported on first use only (PEP 562)
-    if name == "sweep":
-        import importlib
+# imported on first use (PEP 562): statics, which a run does not need, and se3dyn.sweep, the
+# opt-in sweep layer. (kinematics stays eager: its function shares the module's name)
+_LAZY = {"static_equilibrium": "se3dyn.statics", "StaticResult": "se3dyn.statics",
+         "sweep": "se3dyn.sweep"}
 
-        return importlib.import_module("se3dyn.sweep")
-    raise AttributeError(f"module 'se3dyn' has no attribute {name!r}")
+
+def __getattr__(name: str):
+    if name not in _LAZY:
+        raise AttributeError(f"module 'se3dyn' has no attribute {name!r}")
+    import importlib
+
+    mod = importlib.import_module(_LAZY[name])
+    return mod if name == "sweep" else getattr(mod, name)
