@@ -25,11 +25,11 @@ side by side as :meth:`Results.joint_coordinates` gives them.
 
 from __future__ import annotations
 
-import difflib
 import re
 
 import numpy as np
 
+from se3dyn.errors import close_matches
 from se3dyn.results import Results
 
 __all__ = ["list_channels", "get_channel", "channel_unit", "escape_name", "unescape_name",
@@ -152,7 +152,7 @@ def _beam_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
 
 def _unknown(res: Results, name: str, why: str = "") -> KeyError:
     valid = list_channels(res)
-    close = difflib.get_close_matches(str(name), valid, n=3, cutoff=0.5)
+    close = close_matches(str(name), valid, n=3, cutoff=0.5)
     msg = f"unknown channel {name!r}"
     if why:
         msg += f" ({why})"

@@ -107,3 +107,11 @@ def _short_repr(x: Any, limit: int = 120) -> str:
     except Exception:  # pragma: no cover - repr of exotic objects
         s = object.__repr__(x)
     return s if len(s) <= limit else s[: limit - 3] + "..."
+
+
+def close_matches(word: str, possibilities, n: int = 1, cutoff: float = 0.6) -> list[str]:
+    """``difflib.get_close_matches`` for the "did you mean" hints (difflib is imported only
+    when a name is wrong, not at start-up)."""
+    import difflib
+
+    return difflib.get_close_matches(word, possibilities, n=n, cutoff=cutoff)

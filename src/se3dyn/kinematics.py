@@ -25,7 +25,6 @@ centroid of all nodes), rotations are left in radians.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -35,7 +34,7 @@ import numpy as np
 
 from se3dyn import lie
 from se3dyn._lazy import LazyModule
-from se3dyn.errors import ModelError, SimulationError
+from se3dyn.errors import ModelError, SimulationError, close_matches
 from se3dyn.model import Model
 from se3dyn.results import node_accelerations, node_dofs
 from se3dyn.system import LinearSolver, System, compile_model, evaluate, matrix_values, step_inputs
@@ -73,7 +72,7 @@ def _as_system(obj: Any, where: str) -> System:
 
 
 def _unknown_name(kind: str, name: Any, valid: list[str]) -> str:
-    close = difflib.get_close_matches(str(name), valid, n=1)
+    close = close_matches(str(name), valid, n=1)
     hint = f"did you mean '{close[0]}'? " if close else ""
     shown = ", ".join(repr(v) for v in valid[:20]) + (" ..." if len(valid) > 20 else "")
     return f"unknown {kind} {name!r}; {hint}valid: {shown}"

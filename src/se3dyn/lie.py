@@ -109,15 +109,16 @@ def _c4_series() -> np.ndarray:
 
 
 def _bernoulli_abs(n: int) -> float:
-    # |B_n| for even n via the Akiyama-Tanigawa algorithm on exact fractions.
-    from fractions import Fraction
-
-    a = [Fraction(0)] * (n + 1)
+    # |B_n| for even n via the Akiyama-Tanigawa algorithm, exact: the fractions are kept as
+    # integers over their common denominator L (the recurrence is linear), and the integer
+    # division rounds correctly, as float(Fraction) does (no fractions import at start-up)
+    L = math.lcm(*range(1, n + 2))
+    a = [0] * (n + 1)
     for m in range(n + 1):
-        a[m] = Fraction(1, m + 1)
+        a[m] = L // (m + 1)
         for j in range(m, 0, -1):
             a[j - 1] = j * (a[j - 1] - a[j])
-    return abs(float(a[0]))
+    return abs(a[0]) / L
 
 
 def _c5_series() -> np.ndarray:

@@ -23,14 +23,13 @@ body with several joints then needs a single node; without ``at`` a joint is exa
 
 from __future__ import annotations
 
-import difflib
 import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from se3dyn.errors import ModelError
+from se3dyn.errors import ModelError, close_matches
 from se3dyn.joints import JOINT_SYNONYMS, JOINT_TYPES, is_abelian, unit_vector
 from se3dyn.timefunc import Component, TimeFunction, as_timefunc
 from se3dyn.visuals import VisualSpec, make_visual
@@ -331,7 +330,7 @@ def _bounded(a: np.ndarray, item: str, fld: str, v: Any) -> np.ndarray:
 
 
 def _unknown(kind: str, name: str, valid: list[str]) -> str:
-    close = difflib.get_close_matches(str(name), valid, n=1)
+    close = close_matches(str(name), valid, n=1)
     hint = f"; did you mean '{close[0]}'?" if close else ""
     shown = ", ".join(repr(v) for v in valid[:20]) + (" ..." if len(valid) > 20 else "")
     return f"unknown {kind} {name!r}{hint} (valid: {shown})"
@@ -622,7 +621,7 @@ class ModelBuilder:
         if isinstance(type, str):
             type = JOINT_SYNONYMS.get(type, type)  # revolute -> hinge, ball -> spherical, ...
         if not isinstance(type, str) or type not in jt_keys:
-            close = difflib.get_close_matches(str(type), jt_keys + list(JOINT_SYNONYMS), n=1)
+            close = close_matches(str(type), jt_keys + list(JOINT_SYNONYMS), n=1)
             hint = ""
             if close:
                 c = close[0]

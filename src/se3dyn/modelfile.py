@@ -34,7 +34,6 @@ came. Regenerate the schema with ``python -m se3dyn.modelfile schema docs/model-
 
 from __future__ import annotations
 
-import difflib
 import json
 import math
 import os
@@ -49,7 +48,7 @@ import numpy as np
 import yaml
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
-from se3dyn.errors import ModelError
+from se3dyn.errors import ModelError, close_matches
 from se3dyn.joints import JOINT_TYPES
 from se3dyn.model import Model, ModelBuilder
 from se3dyn.timefunc import Constant, Ramp, Sine, Step, Table
@@ -396,7 +395,7 @@ class Str(_Type):
             ctx.fail(node, item, fld, expected)
         v = str(node.value)
         if self.choices and v not in self.choices:
-            close = difflib.get_close_matches(v, self.choices, n=1)
+            close = close_matches(v, self.choices, n=1)
             ctx.fail(node, item, fld, expected, v, f"did you mean '{close[0]}'?" if close else "")
         return v
 
@@ -594,7 +593,7 @@ class TimeFunc(_Type):
         knode, vnode = node.value[0]
         kind = str(knode.value) if isinstance(knode, ScalarNode) else ""
         if kind not in _TF_KINDS:
-            close = difflib.get_close_matches(kind, _TF_KINDS, n=1)
+            close = close_matches(kind, _TF_KINDS, n=1)
             ctx.fail(knode, item, fld, "a time function kind: " + ", ".join(_TF_KINDS),
                      _Got(repr(kind)), f"did you mean '{close[0]}'?" if close else "")
         obj = _section(ctx, vnode, kind, item, f"{fld}.{kind}.")
@@ -881,7 +880,7 @@ def _section(ctx: _Ctx, node: Node, sec: str, item: str, prefix: str) -> _Obj:
         obj.lines[key] = ctx.line(k)
         f = fields.get(key)
         if f is None:
-            close = difflib.get_close_matches(key, list(fields), n=1)
+            close = close_matches(key, list(fields), n=1)
             ctx.fail(k, item, prefix + key, f"a {sec} field: " + ", ".join(fields),
                      _Got(f"unknown field {key!r}"),
                      f"did you mean '{close[0]}'?" if close else "")
@@ -1201,7 +1200,7 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
         sim = {}
         for key, val in settings.items():
             if key not in known:
-                close = difflib.get_close_matches(str(key), list(known), n=1)
+                close = close_matches(str(key), list(known), n=1)
                 raise ModelError("simulation", str(key), "one of " + ", ".join(known), key,
                                  f"did you mean '{close[0]}'?" if close else "")
             t = known[key].type

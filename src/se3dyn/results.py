@@ -5,12 +5,11 @@ Writing files and plotting are separate layers; this module only holds arrays.
 
 from __future__ import annotations
 
-import difflib
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from se3dyn.errors import ModelError, UnknownNameError
+from se3dyn.errors import ModelError, UnknownNameError, close_matches
 from se3dyn.system import System  # noqa: F401  (type of the usual layout)
 
 __all__ = ["Results"]
@@ -98,7 +97,7 @@ class Results:
                 raise ValueError(name)
             return names.index(name)
         except ValueError:
-            close = difflib.get_close_matches(str(name), names, n=1)
+            close = close_matches(str(name), names, n=1)
             hint = f"; did you mean '{close[0]}'?" if close else ""
             raise UnknownNameError(
                 f"unknown node {name!r}{hint} (valid: {', '.join(names)})") from None
@@ -114,7 +113,7 @@ class Results:
         if name in names:
             return [names.index(name)]
         valid = [n for n in names if ":" not in n] + list(comp)
-        close = difflib.get_close_matches(str(name), valid, n=1)
+        close = close_matches(str(name), valid, n=1)
         hint = f"; did you mean '{close[0]}'?" if close else ""
         raise UnknownNameError(f"unknown joint {name!r}{hint} (valid: {', '.join(valid)})")
 

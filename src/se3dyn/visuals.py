@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from se3dyn.errors import ModelError
+from se3dyn.errors import ModelError, close_matches
 
 __all__ = ["VisualSpec", "SHAPES", "MESH_SUFFIXES", "COLORS", "make_visual", "visual_to_dict",
            "axis_rotation"]
@@ -160,9 +160,7 @@ def make_visual(name: str, node: str, shape: str, *, size: Any = None, color: An
     if not isinstance(name, str) or not name:
         raise ModelError("visual", "name", "a non-empty string", name)
     if shape not in SHAPES:
-        import difflib
-
-        close = difflib.get_close_matches(str(shape), list(SHAPES), n=1)
+        close = close_matches(str(shape), list(SHAPES), n=1)
         raise ModelError(f"visual {name!r}", "shape", "one of " + ", ".join(SHAPES), shape,
                          f"did you mean '{close[0]}'?" if close else "")
     item = f"visual {name!r} ({shape})"
