@@ -230,3 +230,31 @@ def test_every_malformed_file_of_the_corpus_is_rejected_by_the_command(tmp_path)
         if line is not None:
             assert f"line {line}:" in mine[0], mine[0]
     assert f"{len(files)} of {len(files)} model files are invalid" in p.stderr
+
+
+def test_a_run_imports_no_module_it_does_not_use(tmp_path):
+    # the `run` path of the command (as the console script calls it): scipy, matplotlib and the
+    # opt-in layers stay out, and the package's lazy names still resolve afterwards
+    code = ("import sys; sys.argv[0] = 'se3dyn'; from se3dyn.cli import main; "
+            f"assert main(['run', {str(SLIDER)!r}, '--out', {str(tmp_path)!r}, '--quiet']) == 0; "
+            "bad = ('scipy', 'matplotlib', 'dask', 'se3dyn.viewer', 'se3dyn.sweep', "
+            "'se3dyn.statics'); print(sorted(m for m in sys.modules if m.startswith(bad))); "
+            "import se3dyn; print(se3dyn.static_equilibrium.__name__, se3dyn.kinematics.__name__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip().splitlines()
+    assert out[-2:] == ["[]", "static_equilibrium kinematics"]
+
+
+@pytest.mark.parametrize("argv0, preset, expect", [
+    ("se3dyn", None, "4"), ("se3dyn", "12", "12"), ("python", None, "None")])
+def test_the_command_lets_idle_blas_threads_sleep_unless_told_otherwise(argv0, preset, expect):
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_THREAD_TIMEOUT"}
+    if preset is not None:
+        env["OPENBLAS_THREAD_TIMEOUT"] = preset
+    code = (f"import os, sys; sys.argv[0] = {argv0!r}; import se3dyn; "
+            "print(os.environ.get('OPENBLAS_THREAD_TIMEOUT'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env=env).stdout.strip()
+    assert out == expect
