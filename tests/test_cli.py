@@ -245,16 +245,22 @@ def test_a_run_imports_no_module_it_does_not_use(tmp_path):
     assert out[-2:] == ["[]", "static_equilibrium kinematics"]
 
 
-@pytest.mark.parametrize("argv0, preset, expect", [
-    ("se3dyn", None, "4"), ("se3dyn", "12", "12"), ("python", None, "None")])
-def test_the_command_lets_idle_blas_threads_sleep_unless_told_otherwise(argv0, preset, expect):
+@pytest.mark.parametrize("argv, preset, expect", [
+    (["se3dyn", "run"], None, "4 frozen"), (["se3dyn", "run"], "12", "12 frozen"),
+    (["se3dyn", "sweep"], None, "4 not frozen"), (["python"], None, "None not frozen")])
+def test_the_command_lets_idle_blas_threads_sleep_and_skips_the_exit_collections(argv, preset,
+                                                                                 expect):
+    # the se3dyn command only: OPENBLAS_THREAD_TIMEOUT=4 unless set, and every object frozen
+    # at exit (gc.freeze in the last atexit handler), except for sweep
     import os
 
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_THREAD_TIMEOUT"}
     if preset is not None:
         env["OPENBLAS_THREAD_TIMEOUT"] = preset
-    code = (f"import os, sys; sys.argv[0] = {argv0!r}; import se3dyn; "
-            "print(os.environ.get('OPENBLAS_THREAD_TIMEOUT'))")
+    code = ("import atexit, gc, os, sys; atexit.register(lambda: print("
+            "'frozen' if gc.get_freeze_count() else 'not frozen')); "
+            f"sys.argv = {argv!r}; import se3dyn; "
+            "print(os.environ.get('OPENBLAS_THREAD_TIMEOUT'), end=' ')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, env=env).stdout.strip()
     assert out == expect

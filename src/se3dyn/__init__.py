@@ -26,6 +26,12 @@ def _command_startup() -> None:
       set) puts them to sleep at once; the number of threads, and so every result, is the
       same, and a BLAS call that uses them wakes them (the engine does not use BLAS). The
       processes the command starts (sweep workers) inherit the setting.
+    * At exit, the interpreter's last garbage collections walk every object numpy, h5py and
+      se3dyn made (50-80 ms of the command's wall time): the objects are frozen first
+      (``gc.freeze`` in the last atexit handler; all of them go with the process). The
+      handlers registered later, the teardown of the modules and the finalizers of the
+      objects that no cycle holds run as before. Not for ``sweep``: dask shuts its
+      machinery down as usual.
     * Ctrl-C while the package loads prints one line and exits with 130, no traceback
       (``se3dyn.cli.main`` restores the default handler once it runs).
     """
@@ -35,6 +41,11 @@ def _command_startup() -> None:
     if os.path.basename(sys.argv[0] if sys.argv else "") not in ("se3dyn", "se3dyn.exe"):
         return
     os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "4")
+    if "sweep" not in sys.argv[1:2]:
+        import atexit
+        import gc
+
+        atexit.register(gc.freeze)  # registered first: runs last
 
     import signal
     import threading
