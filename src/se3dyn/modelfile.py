@@ -257,6 +257,11 @@ class _Ctx:
 
 
 class _Type:
+    """A field type of the format. The types, :class:`Field` and :class:`ElementSection` are
+    frozen dataclasses that compare by identity (the schema never compares them, and each
+    method a dataclass generates is compiled at every start-up); the types without
+    parameters are plain classes."""
+
     text = ""
 
     def schema(self) -> dict:
@@ -264,6 +269,9 @@ class _Type:
 
     def convert(self, ctx: _Ctx, node: Node, item: str, fld: str) -> Any:
         raise NotImplementedError
+
+
+_schema_type = dataclass(frozen=True, eq=False)
 
 
 def _num(ctx, node, item, fld, expected="a finite number") -> float:
@@ -290,7 +298,7 @@ def _numlist(ctx, node, item, fld, expected, lo=0, hi=None) -> list[float]:
 _NUMBER = {"type": "number"}
 
 
-@dataclass(frozen=True)
+@_schema_type
 class Num(_Type):
     """A finite number; optional bounds; ``integer`` for counts."""
 
@@ -336,7 +344,6 @@ class Num(_Type):
         return x
 
 
-@dataclass(frozen=True)
 class Version(_Type):
     text = f"integer, {FORMAT_VERSION}"
 
@@ -354,7 +361,6 @@ class Version(_Type):
         return v
 
 
-@dataclass(frozen=True)
 class Bool(_Type):
     text = "true / false"
 
@@ -368,7 +374,7 @@ class Bool(_Type):
         return v
 
 
-@dataclass(frozen=True)
+@_schema_type
 class Str(_Type):
     """A string, optionally one of ``choices``; ``ref`` for a node name (strings or integers)."""
 
@@ -400,7 +406,7 @@ class Str(_Type):
         return v
 
 
-@dataclass(frozen=True)
+@_schema_type
 class Vec(_Type):
     """``n`` numbers (``n`` None: ``lo``..``hi`` numbers)."""
 
@@ -421,7 +427,7 @@ class Vec(_Type):
         return _numlist(ctx, node, item, fld, f"a list of {self.text}", lo, hi)
 
 
-@dataclass(frozen=True)
+@_schema_type
 class Mat(_Type):
     """A list of ``rmin``..``rmax`` rows of ``cols`` numbers each (``cols`` None: 0..6, all rows
     of equal length); ``flat``: a single list of ``rmin`` numbers is accepted too (k = 1)."""
@@ -463,7 +469,7 @@ class Mat(_Type):
         return out
 
 
-@dataclass(frozen=True)
+@_schema_type
 class MatList(_Type):
     """A list of ``lo``..``hi`` matrices of ``rows`` x ``cols`` numbers (lists of rows)."""
 
@@ -487,7 +493,7 @@ class MatList(_Type):
         return [m.convert(ctx, x, item, f"{fld}[{i}]") for i, x in enumerate(node.value)]
 
 
-@dataclass(frozen=True)
+@_schema_type
 class OneOf(_Type):
     """The first alternative whose YAML shape matches (scalar / list / list of lists)."""
 
@@ -519,7 +525,7 @@ class OneOf(_Type):
         ctx.fail(node, item, fld, self.text)
 
 
-@dataclass(frozen=True)
+@_schema_type
 class Section(_Type):
     """A mapping whose fields are ``FIELDS[name]``."""
 
@@ -538,7 +544,7 @@ class Section(_Type):
         return _section(ctx, node, self.name, item, f"{fld}." if fld else "")
 
 
-@dataclass(frozen=True)
+@_schema_type
 class Named(_Type):
     """A mapping from names (keys, order kept) to ``FIELDS[section]`` mappings."""
 
@@ -571,7 +577,6 @@ class Named(_Type):
         return out
 
 
-@dataclass(frozen=True)
 class TimeFunc(_Type):
     """A number or list (constant) or ``{kind: {fields}}`` with kind in constant, step, ramp,
     table, sine."""
@@ -607,7 +612,6 @@ class TimeFunc(_Type):
                                  f"{fld}.{kind}.{e.field}", e.expected, e.got) from None
 
 
-@dataclass(frozen=True)
 class Color(_Type):
     """A colour: a string (``#rrggbb``, ``#rgb`` or a name, checked by the builder) or 3
     numbers in [0, 1]."""
@@ -627,7 +631,7 @@ class Color(_Type):
         return str(node.value)
 
 
-@dataclass(frozen=True)
+@_schema_type
 class Field:
     """One field of a section: name, type, default (``None``: absent), description."""
 
@@ -643,7 +647,7 @@ _M33 = Mat(3, 3, 3)
 _VALUE = OneOf((Num(), Vec(None, 1, 6)))
 
 
-@dataclass(frozen=True)
+@_schema_type
 class ElementSection:
     """The model-file section of an element type, declared by its module in
     :mod:`se3dyn.elements` as ``model_file(mf) -> ElementSection`` (``mf``: this module, for
@@ -826,7 +830,7 @@ _SECTION_DOC = {
 }
 
 
-@dataclass
+@dataclass(eq=False)
 class _Obj:
     values: dict = field(default_factory=dict)
     lines: dict = field(default_factory=dict)
