@@ -234,15 +234,18 @@ def test_every_malformed_file_of_the_corpus_is_rejected_by_the_command(tmp_path)
 
 def test_a_run_imports_no_module_it_does_not_use(tmp_path):
     # the `run` path of the command (as the console script calls it): scipy, matplotlib and the
-    # opt-in layers stay out, and the package's lazy names still resolve afterwards
-    code = ("import sys; sys.argv[0] = 'se3dyn'; from se3dyn.cli import main; "
+    # opt-in layers stay out, the package's lazy names still resolve afterwards, and the
+    # garbage collector, paused while the command loads, runs again
+    code = ("import gc, sys; sys.argv[0] = 'se3dyn'; from se3dyn.cli import main; "
+            "print(gc.isenabled()); "
             f"assert main(['run', {str(SLIDER)!r}, '--out', {str(tmp_path)!r}, '--quiet']) == 0; "
             "bad = ('scipy', 'matplotlib', 'dask', 'se3dyn.viewer', 'se3dyn.sweep', "
             "'se3dyn.statics'); print(sorted(m for m in sys.modules if m.startswith(bad))); "
-            "import se3dyn; print(se3dyn.static_equilibrium.__name__, se3dyn.kinematics.__name__)")
+            "import se3dyn; print(se3dyn.static_equilibrium.__name__, se3dyn.kinematics.__name__,"
+            " gc.isenabled())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip().splitlines()
-    assert out[-2:] == ["[]", "static_equilibrium kinematics"]
+    assert out[0] == "False" and out[-2:] == ["[]", "static_equilibrium kinematics True"]
 
 
 @pytest.mark.parametrize("argv, preset, expect", [

@@ -53,6 +53,20 @@ def _load(path: str):
         raise _Usage(str(exc)) from None
 
 
+def _loaded() -> None:
+    """The modules of the command are loaded: the garbage collector, paused while they loaded
+    (the ``se3dyn`` command only, ``se3dyn._command_startup``), resumes, their objects frozen
+    first (``gc.freeze``: they live as long as the process, no collection walks them again)."""
+    import se3dyn
+
+    if se3dyn._GC_PAUSED:
+        import gc
+
+        se3dyn._GC_PAUSED = False
+        gc.freeze()
+        gc.enable()
+
+
 def cmd_check(args) -> int:
     """Validate model files and print their counts and rank analysis (exit 2 if any is bad)."""
     bad = 0
@@ -281,6 +295,7 @@ def cmd_run(args) -> int:
                              f"or --resume {path} to continue its run") from None
             raise _Usage(str(exc)) from None
         cp = None
+    _loaded()  # (the results file's writer made: h5py loaded)
     quiet = args.quiet or not sys.stderr.isatty()
     t_from = cp.state.t if cp is not None else float(cfg.get("t_start", 0.0))
     prog = _Progress(t_from, float(cfg["t_end"]), not quiet, cp.steps if cp is not None else 0)
@@ -881,6 +896,8 @@ def _main(argv: list[str] | None) -> int:
                 args.channels = list(args.channels) + extra
             else:
                 parser.error("unrecognized arguments: " + " ".join(extra))
+        if args.command != "run":  # (run: once it has loaded the model file and h5py)
+            _loaded()
         return int(args.func(args))
     except _Usage as exc:
         _err(str(exc))
