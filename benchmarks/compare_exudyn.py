@@ -766,8 +766,11 @@ def readme_job_breakdown(a) -> dict:
     top-level imports and the CLI's own 'wall time' (model compile + simulate + HDF5 writing)."""
     import re
 
-    argv = [sys.executable, "-X", "importtime", "-m", "se3dyn.cli", "run",
-            str(a.repo / "examples" / "slider_crank.yaml"), "--out", "{tmp}", "--quiet"]
+    from pathlib import Path
+
+    # the console script itself (its process settings are made for the `se3dyn` command only)
+    argv = [sys.executable, "-X", "importtime", str(Path(sys.executable).parent / "se3dyn"),
+            "run", str(a.repo / "examples" / "slider_crank.yaml"), "--out", "{tmp}", "--quiet"]
     wall, _, out, err = run_process(argv, a.repo, cold=False, full=True)
     top = {}     # self import time summed per top-level package, s
     for line in err.splitlines():
