@@ -56,7 +56,10 @@ Timings and the targets of issue 12 (PASS/MISS printed beside each):
    Python bytecode cache either (``PYTHONPYCACHEPREFIX`` = a new empty directory, for both codes
    alike: every module, the standard library included, is compiled from source); "warm" is a new
    process with the bytecode caches filled. The operating system's file cache cannot be emptied
-   on this shared machine. Also ``python -c "import se3dyn"`` / ``"import exudyn"``. Every
+   on this shared machine. Also ``python -c "import se3dyn"`` / ``"import exudyn"``, and, for
+   reference, EXUDYN's process given the process settings the ``se3dyn`` command makes for
+   itself (``se3dyn._command_startup``: idle BLAS threads asleep, the garbage collector paused
+   while the modules load and the objects frozen at exit), which compares the work alone. Every
    subprocess of this script writes bytecode caches as Python does by default:
    ``PYTHONDONTWRITEBYTECODE`` is removed from their environment (set in some shells, it kept
    the caches of se3dyn's own modules, which an editable install runs from the source tree,
@@ -417,12 +420,20 @@ def exu_chain(n_links: int, t_end: float, mode: str = "defaults", h: float = CHA
             "equations": exu_size(mbs)}
 
 
-def exu_process_job() -> None:
+def exu_process_job(same_settings: bool = False) -> None:
     """Body of EXUDYN's whole-process run (``python -c``): import, build the slider-crank, solve
-    5 s at its defaults; prints the inner timings as one JSON line."""
+    5 s at its defaults; prints the inner timings as one JSON line. ``same_settings``: the
+    process settings the ``se3dyn`` command makes for itself (``se3dyn._command_startup``;
+    the caller set the rest before numpy loaded): the collector resumes here, the modules'
+    objects frozen."""
     t0 = time.perf_counter()
     import exudyn  # noqa: F401
     import exudyn.utilities  # noqa: F401
+    if same_settings:
+        import gc
+
+        gc.freeze()
+        gc.enable()
     t1 = time.perf_counter()
     SC, mbs, s_rod, s_crank = exu_slider_crank_build()
     t2 = time.perf_counter()
@@ -461,6 +472,10 @@ def process_commands(here, repo) -> dict:
     cli = str(Path(py).parent / "se3dyn")
     exu_job = f"import sys; sys.path.insert(0, {str(here)!r}); import compare_exudyn as c; " \
               "c.exu_process_job()"
+    # EXUDYN's process given the se3dyn command's process settings (idle BLAS threads asleep,
+    # the collector paused while loading, the objects frozen at exit): the work compared alone
+    same = ("import atexit, gc, os; os.environ.setdefault('OPENBLAS_THREAD_TIMEOUT', '4'); "
+            "gc.disable(); atexit.register(gc.freeze); " + exu_job.replace("job()", "job(True)"))
     return {
         "python -c pass": [py, "-c", "pass"],
         "python -c 'import se3dyn'": [py, "-c", "import se3dyn"],
@@ -469,6 +484,7 @@ def process_commands(here, repo) -> dict:
             [cli, "run", str(repo / "examples" / "slider_crank.yaml"), "--out", "{tmp}",
              "--quiet"],
         "EXUDYN process: import, build slider-crank, solve 5 s": [py, "-c", exu_job],
+        "  the same, with the se3dyn command's process settings": [py, "-c", same],
         "se3dyn first-simulate job (nodes)":
             [py, "-c", SE3_FIRST_JOB.format(fn="slider_crank")],
         "se3dyn first-simulate job (bodies)":
@@ -725,7 +741,8 @@ def section_processes(a, report) -> None:
     cmds = process_commands(a.here, a.repo)
     names = ["python -c pass", "python -c 'import se3dyn'", "python -c 'import exudyn'",
              "se3dyn run examples/slider_crank.yaml --out DIR --quiet",
-             "EXUDYN process: import, build slider-crank, solve 5 s"]
+             "EXUDYN process: import, build slider-crank, solve 5 s",
+             "  the same, with the se3dyn command's process settings"]
     res = {}
     for cold, n in ((True, a.cold_processes), (False, a.processes)):
         tag = "cold" if cold else "warm"
@@ -756,7 +773,14 @@ def section_processes(a, report) -> None:
           f"median of {a.cold_processes}; warm = new process, caches filled, median of "
           f"{a.processes} [{load_str()}; cold {res['cold']['load_average']}, warm "
           f"{res['warm']['load_average']}]")
+    same = names[5]
+    rs = res["warm"][se3]["median_s"] / res["warm"][same]["median_s"]
+    rs_min = min(res["warm"][se3]["all_s"]) / min(res["warm"][same]["all_s"])
+    print(f"  warm, against EXUDYN's process given the se3dyn command's process settings "
+          f"(OPENBLAS_THREAD_TIMEOUT=4, collector paused while loading, objects frozen at "
+          f"exit): {rs:.2f} (medians; minima {rs_min:.2f}), the work of the two alone")
     res["ratio_cold"], res["ratio_warm"] = rc, rw
+    res["ratio_warm_same_settings"], res["ratio_warm_same_settings_of_minima"] = rs, rs_min
     res["readme_job_breakdown"] = readme_job_breakdown(a)
     report["processes"] = res
 
