@@ -713,6 +713,30 @@ def test_isotropic_spherical_spring_is_a_harmonic_oscillator():
     assert 3.0 < err[0.01] / err[0.005] < 5.0
 
 
+@pytest.mark.parametrize("typ", ["spherical", "planar"])
+def test_anisotropic_spring_on_a_non_abelian_joint_conserves_energy(typ):
+    # a spring on the log coordinates alpha of a non-abelian joint, V = (alpha - alpha0)^T K
+    # (alpha - alpha0) / 2, exerts T_A(alpha)^-T K (alpha - alpha0), the gradient of V along the
+    # joint's motion: undamped (rho_inf = 1), kinetic + spring energy is conserved up to the
+    # scheme's O(h^2) error. (The isotropic spring above cannot tell K alpha from it:
+    # T(theta)^T theta = theta; with a reference and unequal stiffnesses it can, by O(1).)
+    drift = {}
+    for h in (0.01, 0.005):
+        mb = sd.ModelBuilder()
+        mb.node("ground", fixed=True)
+        kw = dict(normal=(0.0, 0.0, 1.0)) if typ == "planar" else {}
+        w0 = (0.0, 0.0, 2.0) if typ == "planar" else (1.0, -2.0, 1.5)
+        v0 = (0.3, -0.2, 0.0) if typ == "planar" else None
+        mb.node("b", mass=1.0, inertia=(0.02, 0.03, 0.04), velocity=v0, angular_velocity=w0)
+        mb.joint("j", typ, "ground", "b", stiffness=(0.5, 1.0, 1.5), reference=(0.4, -0.3, 0.2),
+                 **kw)
+        res = sd.simulate(mb.build(), 2.0, h, rho_inf=1.0)
+        assert np.abs(res.joint_coordinates("j")).max() > 0.5  # large rotations and slides
+        E = res.kinetic + res.spring
+        drift[h] = np.ptp(E) / E[0]
+    assert drift[0.005] < 1e-4 and 3.5 < drift[0.01] / drift[0.005] < 4.5, drift
+
+
 # ---------------------------------------------------------------------------------------------
 # A chain with a moving hinge against the Lagrange equations in minimal coordinates
 # ---------------------------------------------------------------------------------------------
