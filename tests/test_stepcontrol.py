@@ -108,9 +108,27 @@ def test_share_is_the_tolerance_per_mean_step_and_the_controller_keeps_even_step
     assert total == pytest.approx(tol, rel=1e-12)
     # an error at its share keeps the step; a growth below 30 % is not taken; rejected steps
     # shrink; the step changes by at most a factor of 2 and at least 1/5
-    assert stepcontrol.next_step(h, stepcontrol.SAFETY ** 3, True) == h
+    # (the error-to-share ratio goes as h^6: error c h^3, share ~ h^-3)
+    assert stepcontrol.next_step(h, stepcontrol.SAFETY ** 6, True) == h
     assert stepcontrol.next_step(h, 0.5, True) == h
-    assert stepcontrol.next_step(h, 0.1, True) == pytest.approx(h * 0.9 * 10 ** (1 / 3))
+    assert stepcontrol.next_step(h, 0.01, True) == pytest.approx(h * 0.9 * 100 ** (1 / 6))
     assert stepcontrol.next_step(h, 1e-12, True) == 2 * h
     assert stepcontrol.next_step(h, 1e12, True) == pytest.approx(0.2 * h)
     assert stepcontrol.next_step(h, 1.0001, False) <= 0.9 * h
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(1e-3, 1e3), st.floats(1e-3, 1e3))
+def test_steps_at_their_share_go_as_the_error_coefficient_to_the_minus_sixth(c1, c2):
+    # a step of error c h^3 exactly at its share (same mean step so far): h ~ c^(-1/6), so
+    # a phase whose local errors are 64 times larger gets steps half as long
+    tol, span, t, k = 1e-4, 1.0, 0.5, 7
+    h_bar = t / k
+
+    def at_share(c):
+        return (tol * h_bar ** 4 / (span * c)) ** (1 / 6)
+
+    for c in (c1, c2):
+        h = at_share(c)
+        assert c * h ** 3 == pytest.approx(stepcontrol.share(tol, span, t, 0.0, k, h), rel=1e-9)
+    assert at_share(c1) / at_share(c2) == pytest.approx((c2 / c1) ** (1 / 6), rel=1e-12)

@@ -725,7 +725,7 @@ def run_report(stats: dict) -> list[str]:
     if stats.get("error_estimate") is not None and stats.get("tol") is not None:
         out.append(f"adaptive steps: local error estimates add up to "
                    f"{stats['error_estimate']:.3e} m (tol {stats['tol']:g} m); the global "
-                   "error grows beyond it where the motion amplifies errors (docs/accuracy.md)")
+                   "error can exceed it where the motion amplifies errors (docs/accuracy.md)")
     if "energy_balance_error" in stats:
         err, scale = stats["energy_balance_error"], stats["energy_scale"]
         rel = f"{100 * err / scale:.3g} % of" if scale > 0 else "with no"
@@ -745,7 +745,8 @@ def _add_overrides(p: argparse.ArgumentParser) -> None:
                    help="stabilized index-2 (default) or the paper's index-3 form")
     p.add_argument("--tol", type=_positive("pos"),
                    help="adaptive steps: the local position errors (m, RMS over each "
-                        "body's mass) add up to TOL over the run (docs/accuracy.md)")
+                        "body's mass) add up to TOL over a run of even difficulty "
+                        "(docs/accuracy.md)")
     p.add_argument("--output-step", type=_positive("pos"),
                    help="store results every OUTPUT_STEP seconds (dense output)")
     p.add_argument("--initial-velocities", choices=("project", "strict"),

@@ -769,8 +769,9 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("redundant", Str(("drop", "error")), "drop", "Redundant constraint equations: "
               "left out with zero multipliers, or an error."),
         Field("tol", Num(exclusive_minimum=0), None, "Adaptive time stepping: the local "
-              "position errors (m, RMS over each body's mass) add up to `tol` over the run "
-              "(docs/accuracy.md); `step` is then the initial step."),
+              "position errors (m, RMS over each body's mass) add up to `tol` over a run of "
+              "even difficulty; where it varies, the steps vary as the -1/6th power of the "
+              "local error (docs/accuracy.md); `step` is then the initial step."),
         Field("h_min", Num(exclusive_minimum=0), "1e-12 x duration", "Smallest adaptive step "
               "(s)."),
         Field("h_max", Num(exclusive_minimum=0), "duration / 10", "Largest adaptive step (s)."),
