@@ -20,7 +20,7 @@
 // process or another one, continues bit for bit: the ordering and the patterns of the sparse LU
 // come from a generic matrix of the model (probe()), not from the values the run happened to
 // start with, and refactorisations reuse the pivot sequence of the last full factorisation:
-// first that of a generic matrix (a function of the model: nothing to keep), after a
+// first that of the generic matrix (a function of the model: nothing to keep), after a
 // refactorisation failed (a pivot fallen too small) that of a run's matrix, whose values are
 // then the solver's memory.
 #pragma once
@@ -102,7 +102,7 @@ struct Stepper {
     phi.assign(E->nm, 0.0);
     psi.assign(E->nm, 0.0);
     // the ordering and the entries kept in the factors' patterns from a generic matrix
-    probe(kGeneric);
+    probe();
     set_dropped();
     std::vector<char> keep(nnz);
     for (long p = 0; p < nnz; ++p) keep[p] = vals[src[p]] != 0.0;  // NaN counts as nonzero
@@ -112,10 +112,9 @@ struct Stepper {
   }
 
   // The first reference of the refactorisations: a full factorisation of the generic matrix
-  // with the coefficients of a step (the solver memory is then the model's own: nothing to keep
-  // in a State)
+  // (the solver memory is then the model's own: nothing to keep in a State)
   int probe_reference() {
-    probe(kStep);
+    probe();
     set_dropped();
     int code = lu.factor(vals.data());
     have_ref = code == 0;
@@ -125,24 +124,11 @@ struct Stepper {
     return code;
   }
 
-  // Coefficients (cC, cK, cv) of a probe's iteration matrix and the scale of its increments n:
-  // generic ones (kGeneric) for the pattern and the ordering; for the pivots of the first
-  // reference those of a step of 1 ms of the default scheme (rho_inf = 0.9: cC = gamma'/beta'
-  // = 0.50 h, cK = 1/beta' = 0.25 h^2, cv = 1/gamma' = 0.50 h, increments h v), so that the
-  // pivots are chosen among the magnitudes the refactorisations meet: where the generic matrix
-  // weighs C_T and K_T like M, threshold pivoting leaves the diagonal blocks more often and the
-  // factors fill more (1000-link chain, index 2: 12 % fewer multiply-adds per refactorisation;
-  // the same from h = 0.1 ms to 10 ms; docs/performance.md)
-  struct ProbeScale {
-    double cC, cK, cv, n;
-  };
-  static constexpr ProbeScale kGeneric{0.7, 0.3, 0.6, 0.3}, kStep{5e-4, 2.5e-7, 5e-4, 1e-3};
-
   // The iteration matrix at a pseudo-random state of the model (frames, increments, velocities,
-  // accelerations, multipliers, inputs drawn from a fixed sequence; coefficients `sc`): an entry
-  // of the pattern that is zero there is zero in every state (the kernels write exact zeros
-  // only where a term is absent), one that is nonzero there may be nonzero in some state.
-  void probe(const ProbeScale& sc) {
+  // accelerations, multipliers, inputs drawn from a fixed sequence; generic coefficients): an
+  // entry of the pattern that is zero there is zero in every state (the kernels write exact
+  // zeros only where a term is absent), one that is nonzero there may be nonzero in some state.
+  void probe() {
     Engine& G = *E;
     uint64_t x = 0x9E3779B97F4A7C15ull;
     auto rnd = [&x]() {  // splitmix64, uniform in [-1, 1)
@@ -164,13 +150,13 @@ struct Stepper {
     }
     for (auto* a : {&an, &n, &v, &vd, &lam, &u})
       for (double& c : *a) c = rnd();
-    for (double& ni : n) ni *= sc.n;
+    for (double& c : n) c *= 0.3;
     G.load_frames(H4.data());
     bool stab = index2 && nm > 0;
     Engine::Out o{r.data(), phi.data(), stab ? psi.data() : nullptr, al.data(), vals.data(),
                   nullptr};
-    G.evaluate(an.data(), n.data(), v.data(), vd.data(), lam.data(), u.data(), 1.0, sc.cC, sc.cK,
-               stab, sc.cv, false, o);
+    G.evaluate(an.data(), n.data(), v.data(), vd.data(), lam.data(), u.data(), 1.0, 0.7, 0.3,
+               stab, 0.6, false, o);
   }
 
   // dropped (redundant) equations: identity rows and columns
