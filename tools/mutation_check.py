@@ -138,7 +138,7 @@ MUTATIONS = (
     M("beam-Tinv", K + "beam.hpp", "mTv<6, 6>(Ti, f, y);",
       "for (int i = 0; i < 6; ++i) y[i] = f[i];", "residual",
       "T(d)^-T of the section forces on the nodes"),
-    M("beam-geometric", K + "beam.hpp", "for (int i = 0; i < 36; ++i) inner[i] += M1[i];", "",
+    M("beam-geometric", K + "beam.hpp", "for (int i = 0; i < 36; ++i) inner[i] -= M1[i];", "",
       "tangent", "derivative of T(d)^-T at fixed section forces (geometric stiffness)"),
     M("beam-lambda", K + "beam.hpp", "t1[i] = Y[i] - Lam[i];", "t1[i] = Y[i];", "tangent",
       "Lambda(y) term of the rows of node A (rotation of A_r^T y)"),
