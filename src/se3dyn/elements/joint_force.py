@@ -73,7 +73,7 @@ def _orthonormal_axes(rng):
 def examples(rng):
     """Spring, damper, actuator and PD law on abelian joints (hinge, cylindrical); spring,
     damper and actuator on non-abelian ones (spherical, planar; they take no PD law), whose
-    spring acts on the log coordinates through T_A(alpha)^-T (Eq. (62)): anisotropic stiffness
+    spring (Eq. (62) on the log coordinates) acts through T_A(alpha)^-T: anisotropic stiffness
     and a nonzero reference, so that the derivative of T_A^-T at fixed force is exercised (an
     isotropic spring without reference cannot tell it from K alpha: T(theta)^T theta = theta)."""
     import se3dyn as sd

@@ -9,7 +9,7 @@
 // itself, so T_A is its restriction and A^+ T(A alpha)^-1 A = T_A^-1). Exact tangent: the
 // unknowns n_j move the joint frame by H_J = H_Jn exp(A n_j) (Eq. (38)), so by Eqs. (23), (27)
 //   d alpha = T_A^-1 A^+ T(A n_j) A d n_j,
-// and, with y = T_A^-T K (alpha - alpha0) and d(T_A^-T) y = -T_A^-T d(T_A^T) y,
+// and, with f = K (alpha - alpha0), y = T_A^-T f and d(T_A^-T) f = -T_A^-T d(T_A^T) y,
 //   dg = T_A^-T (K - G) d alpha,  G = d(T_A^T y)/d alpha at fixed y = A^T DTt(A alpha, A^+T y) A,
 // DTt(x, p) = d(T(x)^T p)/dx (dtt_apply, lie.hpp). The G term is the non-abelian part: it
 // vanishes with y (no spring load) and is O(|alpha| |y|).
