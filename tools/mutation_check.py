@@ -82,15 +82,14 @@ MUTATIONS = (
       "target rate of a PD law (kd acts on v, not on v - rate_ref)"),
     M("joint-spring-TA", K + "joint_force.hpp", "for (int c = 0; c < k; ++c) fs[c] = y[c];", "",
       "residual", "T_A(alpha)^-T of a spring on a non-abelian joint"),
-    M("joint-spring-TA-tangent", K + "joint_force.hpp", "t2[6 * i + c] = X.cK * s + (i == c",
-      "t2[6 * i + c] = 0.0 * s + (i == c", "tangent",
-      "stiffness T_A^-T K T_A^-1 of a spring on a non-abelian joint",
-      "the tangent of a spring on a non-abelian joint (spherical, planar) is not the exact "
-      "derivative of its force T_A(alpha)^-T K (alpha - alpha0): it lacks the derivative of "
-      "T_A^-T at fixed force, so no finite-difference check covers it (the examples of "
-      "se3dyn.elements.joint_force are abelian joints) and only Newton's rate of convergence "
-      "depends on it. The force itself is checked (`joint-spring-TA`). An exact tangent and a "
-      "non-abelian example in joint_force.examples would let the contract test kill it."),
+    M("joint-spring-TA-tangent", K + "joint_force.hpp",
+      "KG[6 * i + c] = (i == c ? K[6 * e + c] : 0.0) - G[6 * i + c];",
+      "KG[6 * i + c] = -G[6 * i + c];", "tangent",
+      "stiffness T_A^-T K T_A^-1 of a spring on a non-abelian joint"),
+    M("joint-spring-TA-geometric", K + "joint_force.hpp",
+      "KG[6 * i + c] = (i == c ? K[6 * e + c] : 0.0) - G[6 * i + c];",
+      "KG[6 * i + c] = (i == c ? K[6 * e + c] : 0.0);", "tangent",
+      "derivative -T_A^-T G T_A^-1 of T_A^-T at fixed force (spring on a non-abelian joint)"),
     M("pd-kd-tangent", K + "joint_force.hpp", "X.cC * (C[6 * e + c] + kd[6 * e + c])",
       "X.cC * C[6 * e + c]", "tangent", "kd of a PD law in the damping matrix"),
     M("actuator-power", K + "joint_force.hpp", "X.energy[P_ACTUATOR] += tpd[c] * v[c];", "",
@@ -139,7 +138,7 @@ MUTATIONS = (
     M("beam-Tinv", K + "beam.hpp", "mTv<6, 6>(Ti, f, y);",
       "for (int i = 0; i < 6; ++i) y[i] = f[i];", "residual",
       "T(d)^-T of the section forces on the nodes"),
-    M("beam-geometric", K + "beam.hpp", "for (int i = 0; i < 36; ++i) inner[i] += M1[i];", "",
+    M("beam-geometric", K + "beam.hpp", "for (int i = 0; i < 36; ++i) inner[i] -= M1[i];", "",
       "tangent", "derivative of T(d)^-T at fixed section forces (geometric stiffness)"),
     M("beam-lambda", K + "beam.hpp", "t1[i] = Y[i] - Lam[i];", "t1[i] = Y[i];", "tangent",
       "Lambda(y) term of the rows of node A (rotation of A_r^T y)"),

@@ -65,8 +65,17 @@ def _unit(rng):
     return v / np.linalg.norm(v)
 
 
+def _orthonormal_axes(rng):
+    Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return Q.T
+
+
 def examples(rng):
-    """Spring, damper, actuator and PD law on abelian joints (hinge, cylindrical)."""
+    """Spring, damper, actuator and PD law on abelian joints (hinge, cylindrical); spring,
+    damper and actuator on non-abelian ones (spherical, planar; they take no PD law), whose
+    spring (Eq. (62) on the log coordinates) acts through T_A(alpha)^-T: anisotropic stiffness
+    and a nonzero reference, so that the derivative of T_A^-T at fixed force is exercised (an
+    isotropic spring without reference cannot tell it from K alpha: T(theta)^T theta = theta)."""
     import se3dyn as sd
 
     out = []
@@ -81,5 +90,14 @@ def examples(rng):
                  actuator=sd.Sine(tuple(rng.normal(size=k)), 1.3),
                  control=sd.PD(kp=tuple(rng.uniform(1, 2, k)), kd=tuple(rng.uniform(0, 1, k)),
                                target=sd.Ramp(tuple(rng.normal(size=k)), 0.1, 2.0)))
+        out.append(mb.build())
+    for typ in ("spherical", "planar"):
+        mb = sd.ModelBuilder()
+        mb.node("g", fixed=True)
+        mb.node("b", position=(0.3, 0.1, 0.0), mass=1.5, inertia=(1, 1.2, 1.4))
+        kw = dict(axes=_orthonormal_axes(rng)) if typ == "spherical" else dict(normal=_unit(rng))
+        mb.joint("j", typ, "g", "b", stiffness=tuple(rng.uniform(1, 3, 3)),
+                 reference=tuple(rng.normal(size=3)), damping=tuple(rng.uniform(0.1, 1, 3)),
+                 actuator=sd.Sine(tuple(rng.normal(size=3)), 1.3), **kw)
         out.append(mb.build())
     return out

@@ -18,7 +18,7 @@
 // multibody paper).
 // Exact linearisation: delta A_r = -ad(delta h_r) A_r, so delta(A_r^T y) = A_r^T (delta y -
 // Lambda(y) delta h_r) with ad(x)^T p = Lambda(p) x; delta(T^-1 z) = -T^-1 DT(d, T^-1 z) delta d
-// with DT(x, z) = d(T(x) z)/dx (dt_apply below); and T(x)^T = Pi T(-x) Pi (Pi swapping the
+// with DT(x, z) = d(T(x) z)/dx (dt_apply, lie.hpp); and T(x)^T = Pi T(-x) Pi (Pi swapping the
 // translation and rotation halves, from ad(x)^T = -Pi ad(x) Pi), so
 //   d(T^-T(d) f)/dd at fixed f = T^-T(d) Pi DT(-d, Pi y).
 #pragma once
@@ -27,77 +27,6 @@
 #include "context.hpp"
 
 namespace se3dyn {
-
-// d'(t)/t and e'(t)/t of the coefficients d, e of lie.hpp (t = |w|): (h - c - 4d)/t^2 and
-// (-d - 5e)/t^2, by the term-wise derivative of their series below the cut-off
-inline void coeffs_dp_ep(double t2, const Coeffs& k, double& dp, double& ep) {
-  const Series& S = series();
-  if (std::sqrt(t2) < S.cut) {
-    dp = ep = 0.0;
-    double p = 1.0;
-    for (int j = 0; j + 1 < SERIES_TERMS; ++j) {
-      dp += 2.0 * (j + 1) * S.d[j + 1] * p;
-      ep += 2.0 * (j + 1) * S.e[j + 1] * p;
-      p *= t2;
-    }
-    return;
-  }
-  dp = (k.h - k.c - 4.0 * k.d) / t2;
-  ep = (-k.d - 5.0 * k.e) / t2;
-}
-
-// D (3x3, ld ldD at D) += d(T_SO(3)(w) a)/dw = d (w x a) w^T + h hat(a) + e (w x (w x a)) w^T
-//                          - c (hat(w x a) + hat(w) hat(a))
-inline void add_dtso(const double* w, const double* a, const Coeffs& k, double* D, int ld) {
-  double wa[3], wwa[3], W[9], A[9], WA[9], H[9];
-  cross(w, a, wa);
-  cross(w, wa, wwa);
-  hat3(w, W);
-  hat3(a, A);
-  hat3(wa, H);
-  mm<3, 3, 3>(W, A, WA);
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      D[ld * i + j] += k.d * wa[i] * w[j] + k.h * A[3 * i + j] + k.e * wwa[i] * w[j] -
-                       k.c * (H[3 * i + j] + WA[3 * i + j]);
-}
-
-// DT (6x6) = d(T(x) z)/dx for the tangent operator T of Eqs. (21)-(22), x = (u, w)
-inline void dt_apply(const double* x, const double* z, double* DT) {
-  const double* u = x;
-  const double* w = x + 3;
-  const double* zU = z;
-  const double* zO = z + 3;
-  Coeffs k = coeffs(w, true);
-  double dp, ep;
-  coeffs_dp_ep(dot3(w, w), k, dp, ep);
-  std::memset(DT, 0, 36 * sizeof(double));
-  add_dtso(w, zO, k, DT, 6);            // d(C zO)/du = d(T_SO3 zO)/dw
-  add_dtso(w, zO, k, DT + 21, 6);       // bottom-right: d(T_SO3 zO)/dw
-  add_dtso(w, zU, k, DT + 3, 6);        // top-right: d(T_SO3 zU)/dw + d(C zO)/dw
-  double wz[3], wwz[3], uz[3], uwz[3], wuz[3], U[9], Z[9], W[9], UZ[9], WZ[9], Huz[9], Hwz[9];
-  cross(w, zO, wz);
-  cross(w, wz, wwz);
-  cross(u, zO, uz);
-  cross(u, wz, uwz);
-  cross(w, uz, wuz);
-  hat3(u, U);
-  hat3(zO, Z);
-  hat3(w, W);
-  hat3(uz, Huz);
-  hat3(wz, Hwz);
-  mm<3, 3, 3>(U, Z, UZ);
-  mm<3, 3, 3>(W, Z, WZ);
-  double wu = dot3(w, u);
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) {
-      int q = 3 * i + j;
-      DT[6 * i + 3 + j] += k.d * uz[i] * w[j] + k.e * (uwz[i] + wuz[i]) * w[j] -
-                           k.c * (UZ[q] + Huz[q]) + (k.d * wz[i] + k.e * wwz[i]) * u[j] +
-                           wu * (dp * wz[i] * w[j] + ep * wwz[i] * w[j] - k.d * Z[q] -
-                                 k.e * (Hwz[q] + WZ[q]));
-    }
-}
 
 struct Beams : ElementBatch {
   std::vector<int> fa, fb;              // (n,) node frames
@@ -210,21 +139,11 @@ struct Beams : ElementBatch {
       }
       double inner[36];
       mm<6, 6, 6>(KL, Ti, inner);
-      {  // geometric part from the derivative of T^-T at fixed f
-        double md[6], py[6], DTm[36], PD[36];
-        for (int i = 0; i < 6; ++i) md[i] = -d[i];
-        for (int i = 0; i < 3; ++i) {
-          py[i] = y[3 + i];
-          py[3 + i] = y[i];
-        }
-        dt_apply(md, py, DTm);
-        for (int i = 0; i < 3; ++i)
-          for (int j = 0; j < 6; ++j) {
-            PD[6 * i + j] = DTm[6 * (3 + i) + j];
-            PD[6 * (3 + i) + j] = DTm[6 * i + j];
-          }
+      {  // geometric part from the derivative of T^-T at fixed f: Pi DT(-d, Pi y) = -dT^T y/dd
+        double PD[36];
+        dtt_apply(d, y, PD);
         mm<6, 6, 6>(PD, Ti, M1);
-        for (int i = 0; i < 36; ++i) inner[i] += M1[i];
+        for (int i = 0; i < 36; ++i) inner[i] -= M1[i];
       }
       if (damped[e]) {
         double Qc[36], adv[36], DTd[36];

@@ -4,8 +4,15 @@
 //
 // On abelian joints alpha are the relative coordinates of Eq. (60) (d alpha = d n_j), so the
 // tangent is diag(cK (K + kp) + cC (C + kd)) (Eqs. (63), (65)). On non-abelian joints springs
-// act on the log coordinates alpha = A^+ log(H_J0^-1 H_J) through T_A(alpha)^-T K (alpha -
-// alpha0), T_A = A^+ T(A alpha) A.
+// act on the log coordinates alpha = A^+ log(H_J0^-1 H_J) through g = T_A(alpha)^-T K (alpha -
+// alpha0), T_A = A^+ T(A alpha) A (T of Eqs. (21)-(22) maps the subalgebra spanned by A to
+// itself, so T_A is its restriction and A^+ T(A alpha)^-1 A = T_A^-1). Exact tangent: the
+// unknowns n_j move the joint frame by H_J = H_Jn exp(A n_j) (Eq. (38)), so by Eqs. (23), (27)
+//   d alpha = T_A^-1 A^+ T(A n_j) A d n_j,
+// and, with f = K (alpha - alpha0), y = T_A^-T f and d(T_A^-T) f = -T_A^-T d(T_A^T) y,
+//   dg = T_A^-T (K - G) d alpha,  G = d(T_A^T y)/d alpha at fixed y = A^T DTt(A alpha, A^+T y) A,
+// DTt(x, p) = d(T(x)^T p)/dx (dtt_apply, lie.hpp). The G term is the non-abelian part: it
+// vanishes with y (no spring load) and is O(|alpha| |y|).
 #pragma once
 #include <vector>
 
@@ -115,29 +122,53 @@ struct JointForces : ElementBatch {
         Bc[7 * c] = X.cC * (C[6 * e + c] + kd[6 * e + c]);
       }
       if (nonab[e]) {
-        // d alpha = T_A(alpha)^-1 A^+ T(A n_j) A d n_j for log coordinates
-        double TAn[36], t1[36], t2[36];
+        // Bk = cK [T_A^-T (K - G) + diag(kp)] J, J = d alpha / d n_j = T_A^-1 A^+ T(A n_j) A
+        // (the header; fs holds y = T_A^-T K (alpha - alpha0) here)
+        const double* Ae = &A[36 * e];
+        const double* Ap = &Apinv[36 * e];
         const double* TAJ = &X.S->TA[36 * fr];
+        double TAn[36], J[36], nA[6] = {0}, p[6] = {0}, Dt[36], DA[36], G[36], KG[36], M[36];
         for (int i = 0; i < k; ++i)
           for (int c = 0; c < k; ++c) {
             double s = 0.0;
-            for (int l = 0; l < 6; ++l) s += Apinv[36 * e + 6 * i + l] * TAJ[6 * l + c];
+            for (int l = 0; l < 6; ++l) s += Ap[6 * i + l] * TAJ[6 * l + c];
             TAn[6 * i + c] = s;
           }
-        // Knon = T_A^-T K T_A^-1 TAn (+ kp on the diagonal as before)
         for (int i = 0; i < k; ++i)
           for (int c = 0; c < k; ++c) {
             double s = 0.0;
-            for (int l = 0; l < k; ++l) s += TAi[6 * l + i] * K[6 * e + l] * TAi[6 * l + c];
-            t1[6 * i + c] = s;
+            for (int l = 0; l < k; ++l) s += TAi[6 * i + l] * TAn[6 * l + c];
+            J[6 * i + c] = s;
+          }
+        // G = A^T DTt(A alpha, A^+T y) A
+        for (int i = 0; i < 6; ++i)
+          for (int c = 0; c < k; ++c) {
+            nA[i] += Ae[6 * i + c] * al[c];
+            p[i] += Ap[6 * c + i] * fs[c];
+          }
+        dtt_apply(nA, p, Dt);
+        cols_times(6, k, Dt, Ae, DA);
+        for (int i = 0; i < k; ++i)
+          for (int c = 0; c < k; ++c) {
+            double s = 0.0;
+            for (int l = 0; l < 6; ++l) s += Ae[6 * l + i] * DA[6 * l + c];
+            G[6 * i + c] = s;
+          }
+        // M = T_A^-T (K - G) + diag(kp)
+        for (int i = 0; i < k; ++i)
+          for (int c = 0; c < k; ++c) KG[6 * i + c] = (i == c ? K[6 * e + c] : 0.0) - G[6 * i + c];
+        for (int i = 0; i < k; ++i)
+          for (int c = 0; c < k; ++c) {
+            double s = 0.0;
+            for (int l = 0; l < k; ++l) s += TAi[6 * l + i] * KG[6 * l + c];
+            M[6 * i + c] = s + (i == c ? kp[6 * e + c] : 0.0);
           }
         for (int i = 0; i < k; ++i)
           for (int c = 0; c < k; ++c) {
             double s = 0.0;
-            for (int l = 0; l < k; ++l) s += t1[6 * i + l] * TAn[6 * l + c];
-            t2[6 * i + c] = X.cK * s + (i == c ? X.cK * kp[6 * e + c] : 0.0);
+            for (int l = 0; l < k; ++l) s += M[6 * i + l] * J[6 * l + c];
+            Bk[6 * i + c] = X.cK * s;
           }
-        for (int i = 0; i < 36; ++i) Bk[i] = t2[i];
       }
       double Bt[36];
       for (int i = 0; i < 36; ++i) Bt[i] = Bk[i] + Bc[i];
