@@ -1,9 +1,10 @@
 """Adaptive time stepping (``simulate(..., tol=...)``) and dense output.
 
 The step-size control (:mod:`se3dyn.stepcontrol`) holds every step's local error estimate
-``(beta - 1/6) h^2 (a_{n+1} - a_n)``, measured per body as the RMS over its mass of the errors of
-its material points, to the step's share ``tol * h_bar / (t_end - t_start)`` of the tolerance,
-so that the local errors add up to ``tol`` over the run. Where errors neither grow nor decay
+``(1/6 - beta - (alpha_m - alpha_f) / 2) h^2 (a_{n+1} - a_n)``, measured per body as the RMS
+over its mass of the errors of its material points, to the step's share
+``tol (h_bar / span) (h_bar / h)^3`` of the tolerance, so that the local errors of a run of
+even difficulty add up to ``tol`` (steps ~ local error^(-1/6)). Where errors neither grow nor decay
 along the motion (the undamped pendulum) the global error is then a fixed fraction of ``tol``;
 with damping it is smaller. Checked against closed-form solutions and a converged reference;
 tolerances here are those of the run, not fitted to our output.
@@ -80,8 +81,10 @@ def test_adaptive_slider_crank_error_is_proportional_to_the_tolerance():
     # on the slider-crank the global error is the local errors propagated by a mechanism that
     # speeds up and amplifies them (fixed steps show the same growth), so it is not bounded by
     # tol; what a sound controller must give is tolerance proportionality: the local error of
-    # the second-order scheme is O(h^3), a step's share of tol is O(h), so h ~ tol^(1/3) and
-    # the error ~ h^2 ~ tol^(2/3): ten times tighter, 10^(2/3) = 4.6 times smaller
+    # the second-order scheme is c h^3 and a step's share tol (h_bar / T)(h_bar / h)^3, so with
+    # every step scaled alike h ~ tol^(1/2) and the global error ~ h^2 ~ tol once the steps
+    # are many; this short run (a few hundred steps, from a first step of 1 ms) must lose at
+    # least the square root of a ten times tighter tol (3.2) and not gain beyond 10^0.85
     T = 0.5
     ref = sd.simulate(slider_crank(), T, 2.5e-4, output_every=40)
     errs = []
