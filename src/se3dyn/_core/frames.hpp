@@ -85,18 +85,26 @@ inline void rows_to_unknowns(const FrameTables& T, int f, const double* X, doubl
     }
 }
 
+// out (r x c) = op(X) op(Y) with inner dimension n, op(Z) = Z^T where tZ; every matrix stored
+// row-major with leading dimension 6 (the joint blocks of k <= 6 unknowns)
+inline void prod6(int r, int n, int c, const double* X, bool tX, const double* Y, bool tY,
+                  double* out) {
+  for (int i = 0; i < r; ++i)
+    for (int j = 0; j < c; ++j) {
+      double s = 0.0;
+      for (int l = 0; l < n; ++l)
+        s += (tX ? X[6 * l + i] : X[6 * i + l]) * (tY ? Y[6 * j + l] : Y[6 * l + j]);
+      out[6 * i + j] = s;
+    }
+}
+
 // Column map: out (r x k_g, ld 6) = X (r x 6, ld 6) Y_g with Y_g (6 x k_g, ld 6)
 inline void cols_times(int r, int kg, const double* X, const double* Y, double* out) {
   if (r == 6 && kg == 6) {  // node frames: fixed sizes (unrolled)
     mm<6, 6, 6>(X, Y, out);
     return;
   }
-  for (int i = 0; i < r; ++i)
-    for (int c = 0; c < kg; ++c) {
-      double s = 0.0;
-      for (int l = 0; l < 6; ++l) s += X[6 * i + l] * Y[6 * l + c];
-      out[6 * i + c] = s;
-    }
+  prod6(r, 6, kg, X, false, Y, false, out);
 }
 
 // vals[off : off + kr*kc] += s * X[:kr, :kc]  (X with ld 6)

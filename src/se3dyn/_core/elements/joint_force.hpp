@@ -128,18 +128,8 @@ struct JointForces : ElementBatch {
         const double* Ap = &Apinv[36 * e];
         const double* TAJ = &X.S->TA[36 * fr];
         double TAn[36], J[36], nA[6] = {0}, p[6] = {0}, Dt[36], DA[36], G[36], KG[36], M[36];
-        for (int i = 0; i < k; ++i)
-          for (int c = 0; c < k; ++c) {
-            double s = 0.0;
-            for (int l = 0; l < 6; ++l) s += Ap[6 * i + l] * TAJ[6 * l + c];
-            TAn[6 * i + c] = s;
-          }
-        for (int i = 0; i < k; ++i)
-          for (int c = 0; c < k; ++c) {
-            double s = 0.0;
-            for (int l = 0; l < k; ++l) s += TAi[6 * i + l] * TAn[6 * l + c];
-            J[6 * i + c] = s;
-          }
+        prod6(k, 6, k, Ap, false, TAJ, false, TAn);  // A^+ T(A n_j) A
+        prod6(k, k, k, TAi, false, TAn, false, J);
         // G = A^T DTt(A alpha, A^+T y) A
         for (int i = 0; i < 6; ++i)
           for (int c = 0; c < k; ++c) {
@@ -148,27 +138,15 @@ struct JointForces : ElementBatch {
           }
         dtt_apply(nA, p, Dt);
         cols_times(6, k, Dt, Ae, DA);
-        for (int i = 0; i < k; ++i)
-          for (int c = 0; c < k; ++c) {
-            double s = 0.0;
-            for (int l = 0; l < 6; ++l) s += Ae[6 * l + i] * DA[6 * l + c];
-            G[6 * i + c] = s;
-          }
+        prod6(k, 6, k, Ae, true, DA, false, G);
         // M = T_A^-T (K - G) + diag(kp)
         for (int i = 0; i < k; ++i)
           for (int c = 0; c < k; ++c) KG[6 * i + c] = (i == c ? K[6 * e + c] : 0.0) - G[6 * i + c];
+        prod6(k, k, k, TAi, true, KG, false, M);
+        for (int c = 0; c < k; ++c) M[7 * c] += kp[6 * e + c];
+        prod6(k, k, k, M, false, J, false, Bk);
         for (int i = 0; i < k; ++i)
-          for (int c = 0; c < k; ++c) {
-            double s = 0.0;
-            for (int l = 0; l < k; ++l) s += TAi[6 * l + i] * KG[6 * l + c];
-            M[6 * i + c] = s + (i == c ? kp[6 * e + c] : 0.0);
-          }
-        for (int i = 0; i < k; ++i)
-          for (int c = 0; c < k; ++c) {
-            double s = 0.0;
-            for (int l = 0; l < k; ++l) s += M[6 * i + l] * J[6 * l + c];
-            Bk[6 * i + c] = X.cK * s;
-          }
+          for (int c = 0; c < k; ++c) Bk[6 * i + c] *= X.cK;
       }
       double Bt[36];
       for (int i = 0; i < 36; ++i) Bt[i] = Bk[i] + Bc[i];
