@@ -12,8 +12,11 @@ What is asserted:
   massless nodes are eliminated exactly by the discrete equations too, so the two trajectories
   agree to round-off and Newton tolerance (1e-9 over 100-200 steps). The stabilized index-2 form
   corrects the increments by ``B_n^T xi``, a Euclidean projection in the space of *all* unknowns
-  (massless nodes included), so its discrete solution depends on the parametrisation: there the
-  two models differ by O(h^2), a small part of the discretisation error, and agree as h -> 0.
+  (massless nodes included), so with the rigid joints kept (``condense=False``) its discrete
+  solution depends on the parametrisation: there the two models differ by O(h^2), a small part
+  of the discretisation error, and agree as h -> 0. By default the rigid joints are condensed
+  for the time loop (:mod:`se3dyn.condense`) and both forms agree to Newton tolerance in both
+  formulations.
   Checked on the slider-crank of Sec. 11 (``examples.slider_crank_bodies`` vs
   ``examples.slider_crank``), on an N-link spherical pendulum chain, on a universal joint.
 * The constraints are Eq. (55) between the attachment frames, computed here independently from
@@ -90,16 +93,19 @@ def test_slider_crank_bodies_has_the_paper_sizes_minus_the_auxiliary_nodes():
         np.testing.assert_array_equal(s.joint_H0[j], np.eye(4))
 
 
+@pytest.mark.parametrize("condense", [True, False])
 @pytest.mark.parametrize("formulation", ["index3", "index2"])
-def test_slider_crank_bodies_moves_like_the_paper_model(formulation):
+def test_slider_crank_bodies_moves_like_the_paper_model(formulation, condense):
     h, T = 1e-2, 1.0
-    run = lambda m, hh: sd.simulate(m, T, hh, rho_inf=0.9, formulation=formulation)  # noqa: E731
+    run = lambda m, hh: sd.simulate(m, T, hh, rho_inf=0.9,  # noqa: E731
+                                    formulation=formulation, condense=condense)
     paper = run(sd.examples.slider_crank(), h)
     bodies = run(sd.examples.slider_crank_bodies(), h)
     np.testing.assert_array_equal(paper.t, bodies.t)
     dx, dR, da = _max_diff(paper, bodies, "368")
     print(f"{formulation}: h={h}: positions {dx:.2e} m, rotations {dR:.2e}, hinge 1 {da:.2e} rad")
-    if formulation == "index3":
+    assert paper.stats["condensed"] == (["2", "3", "5", "6"] if condense else [])
+    if formulation == "index3" or condense:
         # identical discrete equations for the bodies: round-off and Newton tolerances
         # (1e-10 relative per step) accumulated over 100 steps
         assert max(dx, dR, da) <= 1e-9
@@ -181,10 +187,13 @@ def _tips(res_rigid, res_off, n):
     return tip_r, tip_o
 
 
+@pytest.mark.parametrize("condense", [True, False])
 @pytest.mark.parametrize("formulation", ["index3", "index2"])
-def test_spherical_chain_with_offsets_moves_like_the_chain_with_rigid_joints(formulation):
+def test_spherical_chain_with_offsets_moves_like_the_chain_with_rigid_joints(formulation,
+                                                                              condense):
     n, T, h = 5, 0.2, 1e-3
-    run = lambda m, hh: sd.simulate(m, T, hh, rho_inf=0.9, formulation=formulation)  # noqa: E731
+    run = lambda m, hh: sd.simulate(m, T, hh, rho_inf=0.9,  # noqa: E731
+                                    formulation=formulation, condense=condense)
     rigid, off = run(_chain_rigid(n), h), run(_chain_offsets(n), h)
     tip_r, tip_o = _tips(rigid, off, n)
     d = np.abs(tip_r - tip_o).max()
@@ -192,7 +201,7 @@ def test_spherical_chain_with_offsets_moves_like_the_chain_with_rigid_joints(for
              for i in range(n))
     print(f"{formulation}: tip {d:.2e} m, link frames {dH:.2e}")
     assert np.abs(tip_r[-1] - tip_r[0]).max() > 0.05  # the chain has fallen a good way
-    if formulation == "index3":
+    if formulation == "index3" or condense:
         assert d <= 1e-9 and dH <= 1e-9
         return
     # index-2: O(h^2) difference (module docstring), well below the discretisation error

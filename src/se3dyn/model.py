@@ -140,6 +140,10 @@ class JointSpec:
     composite: str | None = None
     at: np.ndarray | None = None
     initial: np.ndarray | None = None
+    #: Internal (never given by users): the compiled joint of a condensed model
+    #: (:mod:`se3dyn.condense`), ``(X_A, X_B, H_J0, A)`` with the attachment frames (4, 4) on its
+    #: nodes, the initial joint transformation and A (6, k) in the attachment frame of node B.
+    frames: tuple | None = None
 
     @property
     def k(self) -> int:
@@ -281,6 +285,22 @@ class Model:
     beams: tuple[BeamSpec, ...] = ()
     bushings: tuple[BushingSpec, ...] = ()
 
+    def __post_init__(self):
+        # immutable for good: the arrays of every spec are read-only (a model compiles once,
+        # :func:`se3dyn.system.system_of`, so a change in place would go unseen)
+        _read_only(self.gravity)
+        for spec in (*self.nodes, *self.joints, *self.loads, *self.springs, *self.beams,
+                     *self.bushings, *self.visuals):
+            for value in vars(spec).values():
+                _read_only(value)
+
+    def __getstate__(self) -> dict:
+        # the compiled system kept with the model (system_of) is not part of the model
+        return {k: v for k, v in self.__dict__.items() if k != "_system"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+
     def node(self, name: str) -> NodeSpec:
         """The node called ``name`` (KeyError listing valid names otherwise)."""
         for n in self.nodes:
@@ -302,6 +322,14 @@ class Model:
     @property
     def joint_names(self) -> list[str]:
         return [j.name for j in self.joints]
+
+
+def _read_only(value) -> None:
+    if isinstance(value, np.ndarray):
+        value.setflags(write=False)
+    elif isinstance(value, tuple):
+        for v in value:
+            _read_only(v)
 
 
 #: Largest magnitude accepted for a number of a model (positions, lengths, masses, stiffnesses,

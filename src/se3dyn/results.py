@@ -196,3 +196,30 @@ class Results:
         from se3dyn.viewer import show  # an opt-in layer: imported only here
 
         return show(self, height=height, **kwargs)
+
+
+def _get_lam(self) -> np.ndarray:
+    fill = self.__dict__.get("_lam_fill")
+    if fill is not None:  # computed when first asked for (se3dyn.condense)
+        self.__dict__["_lam_fill"] = None
+        fill(self)
+    return self.__dict__["_lam"]
+
+
+def _set_lam(self, value) -> None:
+    self.__dict__["_lam"] = value
+    self.__dict__["_lam_fill"] = None
+
+
+#: ``lam`` (n, nm): a stored array, or one with columns computed on first access (the
+#: multipliers of rigid joints condensed for the time loop, :mod:`se3dyn.condense`):
+#: ``results.defer_multipliers(fill)`` registers ``fill(results)``, which completes
+#: ``results.__dict__["_lam"]`` in place.
+Results.lam = property(_get_lam, _set_lam, doc="multipliers (n, nm)")
+
+
+def _defer(self, fill) -> None:
+    self.__dict__["_lam_fill"] = fill
+
+
+Results.defer_multipliers = _defer

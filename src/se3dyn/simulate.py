@@ -12,11 +12,12 @@ import numpy as np
 
 from se3dyn import stepcontrol
 from se3dyn.analysis import equation_name
+from se3dyn.condense import condensation
 from se3dyn.errors import ModelError, NewtonError, SimulationError
 from se3dyn.integrator import GeneralizedAlpha, State, energies, interpolate, step_inputs
 from se3dyn.model import Model
 from se3dyn.results import Results
-from se3dyn.system import System, Workspace, compile_model
+from se3dyn.system import System, Workspace, input_table, system_of
 
 __all__ = ["simulate", "check_settings", "energy_balance_check", "SCALARS"]
 
@@ -86,8 +87,10 @@ class _Recorder:
     _FIELDS = ("t", "H", "v", "vd", "lam", "alpha", "scal")
 
     def __init__(self, s: System, capacity: int, sink=None, limit: int | None = None, *,
-                 store: bool = True, on_rows=None):
+                 store: bool = True, on_rows=None, cond=None):
         self.s = s
+        self.cond = cond  # rows of cond.reduced, passed on as rows of cond.full (condense)
+        self.out_system = s if cond is None else cond.full
         self.sink = sink
         self.on_rows = on_rows
         self.store = store
@@ -154,7 +157,12 @@ class _Recorder:
         self.n += 1
         self.total += 1
         if self.sink is not None:
-            self.sink(st, dict(zip(SCALARS, self.scal[i].tolist(), strict=True)))
+            self.sink_row(st, self.scal[i])
+
+    def sink_row(self, st: State, scal: np.ndarray) -> None:
+        """Pass a stored row on to ``on_output`` (as a state of the model's own system)."""
+        self.sink(st if self.cond is None else self.cond.expand(st),
+                  dict(zip(SCALARS, scal.tolist(), strict=True)))
 
     def added(self, count: int) -> None:
         """``count`` rows were written into the buffer by the compiled loop."""
@@ -177,16 +185,25 @@ class _Recorder:
         sm["iterations"] = max(sm["iterations"], int(c[:, 6].max()))
         self.summarized = hi
 
-    def _block(self, lo: int, hi: int, stats: dict | None = None) -> Results:
+    def _block(self, lo: int, hi: int, stats: dict | None = None, copy: bool = True
+               ) -> Results:
         c = self.scal[lo:hi]
-        cp = lambda x: x[lo:hi].copy()  # noqa: E731
-        return Results(system=self.s, t=cp(self.t), H=cp(self.H), v=cp(self.v),
-                       vd=cp(self.vd), lam=cp(self.lam), alpha=cp(self.alpha),
-                       kinetic=c[:, 0].copy(), potential=c[:, 1].copy(), spring=c[:, 2].copy(),
-                       work_actuators=c[:, 3].copy(), work_loads=c[:, 4].copy(),
-                       dissipation=c[:, 5].copy(), iterations=c[:, 6].astype(int),
-                       residual=c[:, 7].copy(), constraint=c[:, 8].copy(),
-                       stats=stats if stats is not None else {})
+        cp = (lambda x: x[lo:hi].copy()) if copy else (lambda x: x[lo:hi])  # noqa: E731
+        rows = dict(t=cp(self.t), H=cp(self.H), v=cp(self.v), vd=cp(self.vd),
+                    lam=cp(self.lam), alpha=cp(self.alpha))
+        if self.cond is not None:
+            rows["H"], rows["v"], rows["vd"], rows["alpha"], rows["lam"] = (
+                self.cond.expand_rows(rows["H"], rows["v"], rows["vd"], rows["alpha"],
+                                      rows["lam"]))
+        out = Results(system=self.out_system, **rows,
+                      kinetic=c[:, 0].copy(), potential=c[:, 1].copy(), spring=c[:, 2].copy(),
+                      work_actuators=c[:, 3].copy(), work_loads=c[:, 4].copy(),
+                      dissipation=c[:, 5].copy(), iterations=c[:, 6].astype(int),
+                      residual=c[:, 7].copy(), constraint=c[:, 8].copy(),
+                      stats=stats if stats is not None else {})
+        if self.cond is not None and len(self.cond.rigid):
+            out.defer_multipliers(self.cond.fill_multipliers)
+        return out
 
     def emit(self, checkpoint: Checkpoint | None = None, force: bool = True) -> None:
         """Pass the new rows (and the checkpoint reached after them) on to ``on_rows``; in a
@@ -198,6 +215,8 @@ class _Recorder:
             return
         self._summarize()
         checkpoint, self.pending = self.pending, None
+        if checkpoint is not None and self.cond is not None:
+            checkpoint = dataclasses.replace(checkpoint, state=self.cond.expand(checkpoint.state))
         if self.on_rows is not None and (self.n > self.sent or checkpoint is not None):
             self.on_rows(self._block(self.sent, self.n), checkpoint)
         self.sent = self.n
@@ -236,19 +255,12 @@ class _Recorder:
                 out = first if first is not None else last
                 out.stats = stats
                 return out
-            return Results(system=self.s, stats=stats, **{
+            return Results(system=self.out_system, stats=stats, **{
                 f.name: np.concatenate([getattr(first, f.name), getattr(last, f.name)])
                 for f in dataclasses.fields(Results) if f.name not in ("system", "stats")})
         # in place: the trimmed arrays become the results (no copy of the rows)
         self._resize(n)
-        c = self.scal
-        out = Results(system=self.s, t=self.t, H=self.H, v=self.v, vd=self.vd, lam=self.lam,
-                      alpha=self.alpha, kinetic=c[:, 0].copy(), potential=c[:, 1].copy(),
-                      spring=c[:, 2].copy(), work_actuators=c[:, 3].copy(),
-                      work_loads=c[:, 4].copy(), dissipation=c[:, 5].copy(),
-                      iterations=c[:, 6].astype(int), residual=c[:, 7].copy(),
-                      constraint=c[:, 8].copy(), stats=stats)
-        return out
+        return self._block(0, n, stats, copy=False)
 
 
 def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float = 0.9,
@@ -262,7 +274,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
              on_output: Callable[[State, dict], None] | None = None,
              on_rows: Callable[[Results, Checkpoint | None], None] | None = None,
              store: bool = True,
-             initial_state: State | Checkpoint | None = None) -> Results:
+             initial_state: State | Checkpoint | None = None,
+             condense: bool = True) -> Results:
     """Simulate a model from ``t_start`` to ``t_end`` (Eqs. (38)-(46)), with a fixed step or,
     when ``tol`` is given, with adaptive steps.
 
@@ -383,15 +396,16 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         ``result`` attribute holds the results up to the last converged step, and the message
         names the time, the step, the norms and the worst item.
     """
-    s = model if isinstance(model, System) else compile_model(model)
+    s = system_of(model)
     t_end, step, t_start, output_every, span, opt = _settings(
         t_end, step, t_start, output_every, tol, h_min, h_max, output_step)
     for fld, val in (("progress", progress), ("on_output", on_output), ("on_rows", on_rows)):
         if val is not None and not callable(val):
             raise ModelError("simulate", fld, "a callable or None", val)
-    if not isinstance(store, bool | np.bool_):
-        raise ModelError("simulate", "store", "True or False", store)
-    store = bool(store)
+    for fld, val in (("store", store), ("condense", condense)):
+        if not isinstance(val, bool | np.bool_):
+            raise ModelError("simulate", fld, "True or False", val)
+    store, condense = bool(store), bool(condense)
     adaptive = opt["tol"] is not None
     k0 = 0  # steps before the first one of this call (fixed steps from an initial_state)
     first_step = None
@@ -429,26 +443,40 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     else:
         capacity = (max(1, math.ceil(span / step - 1e-9)) // output_every + 2
                     - k0 // output_every)
-    # storage grows as the run goes (doubling, up to the rows expected)
-    rec = _Recorder(s, min(capacity, _INITIAL_ROWS), on_output,
-                    None if adaptive and grid is None else capacity, store=store,
-                    on_rows=on_rows)
     wall0 = time.perf_counter()
     ws = Workspace(s)  # this run's engine and steppers, shared with no other run
     if initial_state is None:
         st = integ.init(s, t_start, ws=ws)
     else:
         st = initial_state
-    solver = integ.solver(s, st)
     e = energies(s, st, step_inputs(s, st.t), ws)
     # (a continued run starts from a state, not from the model's velocities)
     v_report = _velocity_report(s, st, e["kinetic"], ws) if initial_state is None else {}
+    model_system, redundant_names = s, [equation_name(s, r) for r in st.dropped]
+    # rigid joints condensed for the time loop (se3dyn.condense): the steps run on the
+    # reduced system, the stored rows are the model's own
+    cond = condensation(s) if condense else None
+    if cond is not None:
+        reduced = cond.restrict(st if initial_state is not None
+                                else dataclasses.replace(st, solver=None))
+        if reduced is None:  # a redundant equation of a rigid joint: kept as it is
+            cond = None
+        else:
+            s, st = cond.reduced, reduced
+            ws = Workspace(s)
+    # storage grows as the run goes (doubling, up to the rows expected)
+    rec = _Recorder(s, min(capacity, _INITIAL_ROWS), on_output,
+                    None if adaptive and grid is None else capacity, store=store,
+                    on_rows=on_rows, cond=cond)
+    solver = integ.solver(s, st)
     rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
     stats = dict(steps=0, rejected=0, newton_iterations=0, rho_inf=rho_inf, step=step,
                  t_start=t_start, t_end=t_end, tol_residual=tol_residual,
-                 tol_constraint=tol_constraint, unknowns=s.nq, multipliers=s.nm,
-                 matrix_size=solver.N, formulation=formulation,
-                 redundant=[equation_name(s, r) for r in st.dropped],
+                 tol_constraint=tol_constraint, unknowns=model_system.nq,
+                 multipliers=model_system.nm, matrix_size=solver.N, formulation=formulation,
+                 redundant=redundant_names,
+                 condensed=[] if cond is None else [model_system.joint_names[j]
+                                                     for j in cond.rigid],
                  linear_solver="dense LU" if solver.dense else "sparse LU (SuperLU)",
                  adaptive=adaptive, tol=opt["tol"], h_min_used=math.inf, h_max_used=0.0,
                  **v_report)
@@ -468,7 +496,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
 
     def fail(exc: SimulationError):
         stats.update(steps=i - k0, failed=True, wall_time=time.perf_counter() - wall0,
-                     final_state=st)
+                     final_state=st if cond is None else cond.expand(st))
         if grid is None and rec.n and rec.last_time() != st.t:
             e = energies(s, st, step_inputs(s, st.t), ws)
             rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
@@ -579,7 +607,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         rec.emit(cp, force=st.t >= t_end or (not adaptive and i >= nsteps))
     rec.emit()
     stats.update(steps=i - k0, failed=False, wall_time=time.perf_counter() - wall0,
-                 final_state=st)
+                 final_state=st if cond is None else cond.expand(st))
     res = rec.results(stats)
     _energy_check(res)
     return res
@@ -691,7 +719,7 @@ def check_settings(model: Model | System, **settings) -> None:
                          ", ".join(settings), str(exc)) from None
     b.apply_defaults()
     a = b.arguments
-    s = model if isinstance(model, System) else compile_model(model)
+    s = system_of(model)
     t_end, step, t_start, output_every, span, opt = _settings(
         a["t_end"], a["step"], a["t_start"], a["output_every"], a["tol"], a["h_min"],
         a["h_max"], a["output_step"])
@@ -874,7 +902,7 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int,
                 row = State(t=float(rec.t[r]), H=rec.H[r], HJ=np.zeros((0, 4, 4)), v=rec.v[r],
                             vd=rec.vd[r], a=rec.vd[r], lam=rec.lam[r], alpha=rec.alpha[r])
                 # (read-only views of the recorder's rows)
-                rec.sink(row, dict(zip(SCALARS, rec.scal[r].tolist(), strict=True)))
+                rec.sink_row(row, rec.scal[r])
         cp = None
         if status == 0 and i > k0 and i % cpe == 0 and (i < nsteps or regular_end):
             cp = Checkpoint(state(), i, stats["step"], stats["newton_iterations"], 0, rec.total)

@@ -37,8 +37,8 @@ sla = LazyModule("scipy.linalg")
 sp = LazyModule("scipy.sparse")
 spla = LazyModule("scipy.sparse.linalg")
 
-__all__ = ["System", "JointGroup", "compile_model", "Evaluation", "evaluate", "matrix_values",
-           "LinearSolver", "pattern", "step_inputs", "input_table"]
+__all__ = ["System", "JointGroup", "compile_model", "system_of", "Evaluation", "evaluate",
+           "matrix_values", "LinearSolver", "pattern", "step_inputs", "input_table"]
 
 _COMP6 = ("U_x", "U_y", "U_z", "Omega_x", "Omega_y", "Omega_z")
 
@@ -228,10 +228,16 @@ def compile_model(model: Model) -> System:
         joint_XA[sel] = lie.inverse(H0[ja[sel]]) @ P
         joint_XB[sel] = lie.inverse(H0[jb[sel]]) @ P
         joint_H0[sel] = np.eye(4)
+    for jj, j in enumerate(joints):  # joints of a condensed model (se3dyn.condense)
+        if j.frames is not None:
+            joint_XA[jj], joint_XB[jj], joint_H0[jj] = j.frames[:3]
     # A in the material frame of node B: e -> (R_B0^T e_U, R_B0^T e_Omega); with ``at`` the
     # attachment frame of B has the inertial orientation at t0, so A is already material
     A_mat = []
     for jj, j in enumerate(joints):
+        if j.frames is not None:
+            A_mat.append(np.array(j.frames[3], dtype=float))
+            continue
         if has_at[jj]:
             A_mat.append(np.array(j.A, dtype=float))
             continue
@@ -301,6 +307,19 @@ def compile_model(model: Model) -> System:
     _lump_beam_masses(sysd, model, nidx)
     sysd["inputs"] = _Inputs(sysd, model)
     return System(**sysd)
+
+
+def system_of(model: Model | System) -> System:
+    """The compiled system of a model, compiled on first use and kept with the (immutable)
+    model, so that simulating one model again costs no compilation; a System is returned as
+    it is."""
+    if isinstance(model, System):
+        return model
+    s = model.__dict__.get("_system") if isinstance(model, Model) else None
+    if s is None:
+        s = compile_model(model)
+        object.__setattr__(model, "_system", s)
+    return s
 
 
 def _node_com(nodes, H0: np.ndarray) -> np.ndarray:

@@ -221,6 +221,26 @@ NB_MODULE(_engine, m) {
           "Hn"_a, "alpha_n"_a, "n"_a, "v"_a, "vd"_a, "lam"_a, "u"_a, "H"_a, "r"_a, "phi"_a,
           "alpha"_a, "psi"_a.none(), "vals"_a.none(), "energy"_a.none(), "cM"_a, "cC"_a, "cK"_a,
           "index2"_a, "cv"_a, "all_logs"_a, "arhs"_a.none() = nb::none())
+      .def("residual_rows", [](Engine& E, CArr H, CArr alpha, CArr v, CArr vd, CArr lam,
+                               CArr U, DArr r, long rows) {
+        // r (rows, nq): the residual of the equations of motion (Eq. (36)) of every stored row:
+        // frames H (rows, F, 4, 4), coordinates, velocities, accelerations, multipliers and
+        // inputs of that row (no increment); for the reactions of condensed rigid joints
+        int F = E.T.F, nq = E.nq, nm = E.nm, nu = E.nu;
+        size_t R = size_t(rows < 0 ? 0 : rows);
+        const double* h = cptr(H, R * 16 * F, "H");
+        const double *al = cptr(alpha, R * nq, "alpha"), *vv = cptr(v, R * nq, "v"),
+                     *aa = cptr(vd, R * nq, "vd"), *ll = cptr(lam, R * nm, "lam"),
+                     *uu = cptr(U, R * nu, "U");
+        double* ro = ptr(r, R * nq, "r");
+        std::vector<double> zero(nq, 0.0), phi(nm), out_alpha(nq);
+        for (size_t i = 0; i < R; ++i) {
+          E.load_frames(h + i * 16 * F);
+          Engine::Out o{ro + i * nq, phi.data(), nullptr, out_alpha.data(), nullptr, nullptr};
+          E.evaluate(al + i * nq, zero.data(), vv + i * nq, aa + i * nq, ll + i * nm, uu + i * nu,
+                     1.0, 0.0, 0.0, false, 0.0, false, o);
+        }
+      })
       .def("BnT", [](Engine& E, CArr Hn, CArr xi, DArr out) {
         // out (nq,) = B_n^T xi with B_n the constraint gradient at the frames Hn (Eq. (58))
         E.load_frames(cptr(Hn, 16 * E.T.F, "Hn"));

@@ -1,0 +1,417 @@
+"""Condensation of rigid joints for the time loop: nodes joined by rigid joints move as one body.
+
+A rigid joint (Table 1, k = 0) keeps the relative transformation of its nodes constant:
+``H_B = H_A C`` with a constant ``C``. The paper's models use them to build a body from several
+nodes (the slider-crank of Sec. 11 joins its auxiliary massless nodes 2, 4, 5, 7 to the bodies
+3 and 6 by the rigid joints (2), (3), (5), (6)); robot descriptions join sensor and tool frames
+by fixed joints. Each rigid joint costs 6 unknowns and 6 multipliers (12 more with the
+stabilized index-2 form) in every step, for a motion that is known in closed form.
+
+**What is condensed.** The nodes joined by rigid joints form groups (a spanning forest of the
+rigid joints). Every group becomes one node of a *reduced* model: its root node's frame, the
+group's whole mass with its centre of mass (``com``) and its inertia about it (parallel-axis
+rule, Sec. 6); every other element attached to a member of the group (joints, point
+spring-dampers, bushings, loads) is attached to the root at the same material place (joints
+through their attachment frames, ``X -> C X``; the others through their points, which are
+given in the inertial frame of the initial configuration). The time loop runs on the reduced
+model; every stored row is expanded back to the model's own nodes and joints:
+
+* frames ``H_i = H_root C_i``, velocities, accelerations and the generalized-alpha variable
+  ``v_i = Ad(C_i^-1) v_root`` (Eqs. (3)-(6) for a constant ``C``);
+* the multipliers of a condensed rigid joint from the equations of motion (Eq. (36)) of the
+  nodes it carries, member by member from the leaves of its group: the rows of the members
+  in ``r(q, v, vd) + B^T lambda = 0`` are a square system in the rigid joints' multipliers,
+  with the constant gradient of Eq. (58) (``H_J`` of a rigid joint is constant). They are
+  computed when first asked for (:attr:`Results.lam`), by the compiled element kernels of the
+  full model.
+
+**Same discrete motion.** The Lie-group update keeps ``H_B = H_A C``: ``H_A exp(n_A) C =
+H_A C exp(Ad(C^-1) n_A)`` (Eq. (38)), so with the index-3 form the reduced run computes the
+paper's discrete solution (up to the Newton tolerances). The stabilized index-2 form corrects
+the increments by ``B_n^T xi``, a projection in the space of the unknowns: with the auxiliary
+nodes counted, it depends on how a body was split into nodes (a difference of O(h^2), see
+``tests/test_offsets.py``); condensed, it does not: a body built from several rigidly joined
+nodes then moves exactly as the same body built as one node with ``com=`` and ``at=``.
+
+**Not condensed** (kept as joints): a rigid joint that would join two groups that each hold a
+fixed node, a beam node or a node loaded in its body frame with another orientation than the
+root's (these cannot be moved to another node), and every group in which another element
+(or a further rigid joint, closing a loop) connects two of its nodes. ``simulate(...,
+condense=False)`` keeps every rigid joint.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from se3dyn import lie
+from se3dyn.model import Model, NodeSpec
+
+__all__ = ["Condensation", "condensation"]
+
+
+def _groups(model: Model, cand: list[int], pinned: set, nidx: dict) -> tuple[np.ndarray, list]:
+    """Union-find over the candidate rigid joints: (root of every node (M,), joints used)."""
+    parent = list(range(len(model.nodes)))
+    pin = [n.name in pinned for n in model.nodes]
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    used = []
+    for j in cand:
+        js = model.joints[j]
+        a, b = find(nidx[js.node_a]), find(nidx[js.node_b])
+        if a == b or (pin[a] and pin[b]):
+            continue  # closes a loop (the group is dropped below) / two nodes that stay
+        if pin[b] or (not pin[a] and model.nodes[b].mass > model.nodes[a].mass):
+            a, b = b, a
+        parent[b] = a  # a: the pinned node, else the heavier one
+        used.append(j)
+    return np.array([find(i) for i in range(len(parent))], np.int64), used
+
+
+def _pinned(model: Model) -> set:
+    """Nodes that must stay the root of their group: fixed and beam nodes."""
+    out = {n.name for n in model.nodes if n.fixed}
+    for b in model.beams:
+        out.update(b.nodes)
+    return out
+
+
+def _ends(model: Model) -> list[tuple[str, str, str]]:
+    """(kind and name, node a, node b) of every element that connects two nodes."""
+    out = [(f"joint '{j.name}'", j.node_a, j.node_b) for j in model.joints]
+    out += [(f"spring '{s.name}'", s.node_a, s.node_b) for s in model.springs]
+    out += [(f"bushing '{b.name}'", b.node_a, b.node_b) for b in model.bushings]
+    return out
+
+
+def _composite_inertia(nodes: list[NodeSpec]) -> tuple[float, np.ndarray, np.ndarray | None]:
+    """Mass, inertia about the centre of mass (inertial frame) and centre of mass of rigidly
+    joined nodes (parallel-axis rule); the centre None when the group has no mass."""
+    m = np.array([n.mass for n in nodes], float)
+    c = np.array([n.position if n.com is None else n.com for n in nodes], float)
+    M = float(m.sum())
+    J = np.sum([n.inertia for n in nodes], axis=0)
+    if M <= 0.0:
+        return 0.0, J, None
+    com = (m[:, None] * c).sum(axis=0) / M
+    d = c - com
+    J = J + np.einsum("n,nij->ij", m, np.einsum("nk,nk->n", d, d)[:, None, None] * np.eye(3)
+                      - np.einsum("ni,nj->nij", d, d))
+    return M, 0.5 * (J + J.T), com
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Condensation:
+    """A compiled system, the system of its condensed model and the maps between their
+    states (see the module docstring).
+
+    Attributes
+    ----------
+    full, reduced : System
+    rigid : ndarray (nr,) int            the condensed rigid joints (indices in ``full``)
+    node_root : ndarray (M,) int         the reduced node of every node
+    node_C : ndarray (M, 4, 4)           ``H_i = H_root C_i``
+    node_Ad : ndarray (M, 6, 6)          ``Ad(C_i^-1)``: ``v_i = Ad(C_i^-1) v_root``
+    root_full : ndarray (Mr,) int        the node of every reduced node
+    joint_full : ndarray (mr,) int       the joint of every reduced joint
+    dof_full : ndarray (nq_r,) int       the unknown of every reduced unknown
+    mult_full : ndarray (nm_r,) int      the multiplier of every reduced multiplier
+    member_dofs : ndarray (6 nr,) int    the unknowns of the nodes the rigid joints carry
+    rigid_mult : ndarray (6 nr,) int     the multipliers of the rigid joints
+    G_inv : ndarray (6 nr, 6 nr)         inverse of the rigid joints' multipliers' (constant)
+                                         contribution to the rows ``member_dofs``
+    """
+
+    full: object
+    reduced: object
+    rigid: np.ndarray
+    node_root: np.ndarray
+    node_C: np.ndarray
+    node_Ad: np.ndarray
+    root_full: np.ndarray
+    joint_full: np.ndarray
+    dof_full: np.ndarray
+    mult_full: np.ndarray
+    member_dofs: np.ndarray
+    rigid_mult: np.ndarray
+    G_inv: np.ndarray
+
+    # -- states ---------------------------------------------------------------------------------
+    @property
+    def members(self) -> np.ndarray:
+        """The nodes that are not the root of their group (indices in ``full``)."""
+        return np.flatnonzero(self.root_full[self.node_root] != np.arange(len(self.node_root)))
+
+    def restrict(self, st):
+        """The reduced state of a state of the full system (exact copies of the roots'
+        values), or None when a dropped (redundant) equation belongs to a condensed joint."""
+        from se3dyn.integrator import State
+
+        inv = np.full(self.full.nm, -1, np.int64)
+        inv[self.mult_full] = np.arange(len(self.mult_full))
+        dropped = inv[np.asarray(st.dropped, np.int64)]
+        if np.any(dropped < 0):
+            return None
+        d = self.dof_full
+        return State(t=st.t, H=st.H[self.root_full], HJ=st.HJ[self.joint_full], v=st.v[d],
+                     vd=st.vd[d], a=st.a[d], lam=st.lam[self.mult_full], alpha=st.alpha[d],
+                     work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated,
+                     power=st.power, dropped=dropped, h_last=st.h_last, solver=st.solver)
+
+    def expand_rows(self, H, v, vd, alpha, lam, a=None) -> tuple:
+        """Rows of the reduced system (leading axis n) as rows of the full system: frames
+        (n, M, 4, 4), v, vd (, a), alpha (n, nq) and the multipliers (n, nm), the condensed
+        rigid joints' multipliers zero (see :meth:`rigid_multipliers`)."""
+        f, r = self.full, self.reduced
+        n = len(H)
+        Hf = H[:, self.node_root]  # the roots' frames exactly, the members' from them
+        mem = self.members
+        Hf[:, mem] = np.matmul(Hf[:, mem], self.node_C[mem])
+        outs = []
+        for x in (v, vd, alpha) + ((a,) if a is not None else ()):
+            y = np.zeros((n, f.nq))
+            y[:, self.dof_full] = x
+            outs.append(y)
+        # members' velocities and accelerations: Ad(C^-1) of their root's (alpha: 0 on nodes)
+        free = f.node_free
+        roots = self.node_root[free]
+        moving = r.node_dofadr[roots] >= 0
+        members = free[moving & (self.root_full[roots] != free)]
+        if len(members):
+            src = r.node_dofadr[self.node_root[members]][:, None] + np.arange(6)
+            dst = f.node_dofadr[members][:, None] + np.arange(6)
+            for x, y in zip((v, vd) + ((a,) if a is not None else ()), outs[:2] + outs[3:],
+                            strict=True):
+                y[:, dst] = np.matmul(self.node_Ad[members], x[:, src][..., None])[..., 0]
+        L = np.zeros((n, f.nm))
+        L[:, self.mult_full] = lam
+        return (Hf, *outs[:3], L) + ((outs[3],) if a is not None else ())
+
+    def expand(self, st, inputs=None):
+        """The full system's state of a reduced state, the rigid joints' multipliers included
+        (``inputs``: :func:`se3dyn.system.step_inputs` of the full system at ``st.t``)."""
+        from se3dyn.integrator import State
+        from se3dyn.system import step_inputs
+
+        f = self.full
+        H, v, vd, alpha, lam, a = (x[0] for x in self.expand_rows(
+            st.H[None], st.v[None], st.vd[None], st.alpha[None], st.lam[None], st.a[None]))
+        if len(st.HJ) == self.reduced.m:
+            HJ = f.joint_H0.copy()
+            HJ[self.joint_full] = st.HJ
+        else:  # (the rows the compiled loop passes on carry no joint frames)
+            HJ = self.joint_frames(H[None])[0]
+        u = (inputs or step_inputs(f, st.t))["u"]
+        self.rigid_multipliers(H[None], HJ[None], alpha[None], v[None], vd[None], lam[None],
+                               u[None])
+        return State(t=st.t, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
+                     work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated,
+                     power=st.power, dropped=self.mult_full[np.asarray(st.dropped, np.int64)],
+                     h_last=st.h_last, solver=st.solver)
+
+    # -- reactions ------------------------------------------------------------------------------
+    def joint_frames(self, H: np.ndarray) -> np.ndarray:
+        """(n, m, 4, 4) joint transformations of rows of full frames (n, M, 4, 4): the
+        condensed ones constant, the others ``H_J = (H_A X_A)^-1 H_B X_B`` (Eq. (7))."""
+        f = self.full
+        HA = H[:, f.joint_a] @ f.joint_XA
+        HB = H[:, f.joint_b] @ f.joint_XB
+        HJ = lie.inverse(HA) @ HB
+        HJ[:, self.rigid] = f.joint_H0[self.rigid]
+        return HJ
+
+    def fill_multipliers(self, res) -> None:
+        """Complete the multipliers of results of the full system (the deferred columns of
+        :attr:`se3dyn.results.Results.lam`), in blocks of rows."""
+        from se3dyn.system import input_table
+
+        lam = res.__dict__["_lam"]
+        for lo in range(0, len(res.t), 4096):
+            sl = slice(lo, lo + 4096)
+            U, _ = input_table(self.full, np.asarray(res.t[sl], float))
+            self.rigid_multipliers(res.H[sl], self.joint_frames(res.H[sl]), res.alpha[sl],
+                                   res.v[sl], res.vd[sl], lam[sl], U)
+
+    def rigid_multipliers(self, H, HJ, alpha, v, vd, lam, U, ws=None) -> None:
+        """Fill in the multipliers of the condensed rigid joints of rows (n, ...) of the full
+        system (``lam`` (n, nm), in place) from the rows of the equations of motion of the
+        nodes they carry (Eq. (36)); ``U`` (n, nu) the inputs of the rows."""
+        if not len(self.rigid) or not len(H):
+            return
+        from se3dyn.system import _engine
+
+        f = self.full
+        eng, _ = _engine(f, ws)
+        n = len(H)
+        F = np.ascontiguousarray(np.concatenate([H, HJ], axis=1), float)
+        lam[:, self.rigid_mult] = 0.0
+        r = np.empty((n, f.nq))
+        c = lambda x: np.ascontiguousarray(x, float)  # noqa: E731
+        eng.residual_rows(F, c(alpha), c(v), c(vd), c(lam), c(U), r, n)
+        # (term by term: the same sums whatever the number of rows, where BLAS or einsum
+        # round a single row and a block of rows differently)
+        rm = r[:, self.member_dofs]
+        out = np.zeros((n, len(self.rigid_mult)))
+        for k in range(rm.shape[1]):
+            out -= rm[:, k:k + 1] * self.G_inv[:, k]
+        lam[:, self.rigid_mult] = out
+
+
+def condensation(s, enabled: bool = True) -> Condensation | None:
+    """The condensation of the rigid joints of a compiled system (built once, kept with the
+    system), or None when there is nothing to condense."""
+    if not enabled:
+        return None
+    if "condensation" not in s.pattern:
+        s.pattern["condensation"] = _build(s)
+    return s.pattern["condensation"]
+
+
+def _build(s) -> Condensation | None:
+    from se3dyn.system import compile_model, evaluate, step_inputs
+
+    model = s.model
+    nidx = {name: i for i, name in enumerate(s.node_names)}
+    cand = [j for j, js in enumerate(model.joints)
+            if js.type == "rigid" and js.k == 0 and js.composite is None]
+    if not cand:
+        return None
+    pinned = _pinned(model)
+    ends = _ends(model)
+    while True:
+        root, used = _groups(model, cand, pinned, nidx)
+        usedset = set(used)
+        bad = set()
+        for j, (item, a, b) in enumerate(ends):
+            if root[nidx[a]] == root[nidx[b]] and j not in usedset:
+                bad.add(int(root[nidx[a]]))  # closes a loop inside a group
+        R0 = s.node_H0[:, :3, :3]
+        for ld in model.loads:  # body-frame loads on members turned against their root
+            i = nidx[ld.node]
+            body = ((ld.force is not None and ld.force_frame == "body")
+                    or (ld.torque is not None and ld.torque_frame == "body"))
+            if body and root[i] != i and not np.array_equal(R0[i], R0[root[i]]):
+                bad.add(int(root[i]))
+        if not bad:
+            break
+        cand = [j for j in cand if root[nidx[model.joints[j].node_a]] not in bad]
+    if not used:
+        return None
+    rigid = np.array(sorted(used), np.int64)
+    roots = [i for i in range(s.M) if root[i] == i]
+    rpos = {i: k for k, i in enumerate(roots)}
+    node_root = np.array([rpos[int(root[i])] for i in range(s.M)], np.int64)
+    H0 = s.node_H0
+    C = lie.inverse(H0[root]) @ H0
+    C[roots] = np.eye(4)
+
+    # the reduced model: one node per group, the elements moved to the roots
+    nodes = []
+    for i in roots:
+        grp = [model.nodes[k] for k in range(s.M) if root[k] == i]
+        n0 = model.nodes[i]
+        if len(grp) == 1:
+            nodes.append(n0)
+            continue
+        M, J, com = _composite_inertia(grp)
+        nodes.append(dataclasses.replace(n0, mass=M, inertia=J, com=com,
+                                         fixed=any(g.fixed for g in grp)))
+    name_of = lambda k: s.node_names[int(root[k])]  # noqa: E731
+    A_mat = {}
+    for g in s.groups:
+        for q, jid in enumerate(g.ids):
+            A_mat[int(jid)] = g.A[q]
+    rset = set(rigid.tolist())
+    joints = []
+    for j, js in enumerate(model.joints):
+        if j in rset:
+            continue
+        a, b = s.joint_a[j], s.joint_b[j]
+        if root[a] == a and root[b] == b:
+            joints.append(js)
+            continue
+        joints.append(dataclasses.replace(
+            js, node_a=name_of(a), node_b=name_of(b),
+            frames=(C[a] @ s.joint_XA[j], C[b] @ s.joint_XB[j], s.joint_H0[j].copy(),
+                    A_mat[j])))
+    loads = []
+    for ld in model.loads:
+        i = nidx[ld.node]
+        if root[i] == i:
+            loads.append(ld)
+            continue
+        loads.append(dataclasses.replace(
+            ld, node=name_of(i), at=H0[i, :3, 3].copy() if ld.at is None else ld.at))
+    springs = tuple(dataclasses.replace(sp, node_a=name_of(nidx[sp.node_a]),
+                                        node_b=name_of(nidx[sp.node_b]))
+                    for sp in model.springs)
+    bushings = tuple(dataclasses.replace(b, node_a=name_of(nidx[b.node_a]),
+                                         node_b=name_of(nidx[b.node_b]))
+                     for b in model.bushings)
+    red = Model(nodes=tuple(nodes), joints=tuple(joints), loads=tuple(loads),
+                gravity=model.gravity, composites=model.composites, name=model.name,
+                springs=springs, visuals=(), beams=model.beams, bushings=bushings)
+    r = compile_model(red)
+
+    root_full = np.array(roots, np.int64)
+    jnames = list(s.joint_names)
+    joint_full = np.array([jnames.index(n) for n in r.joint_names], np.int64)
+    dof_full = np.empty(r.nq, np.int64)
+    for k, i in enumerate(roots):
+        if r.node_dofadr[k] >= 0:
+            dof_full[r.node_dofadr[k] + np.arange(6)] = s.node_dofadr[i] + np.arange(6)
+    for k, j in enumerate(joint_full):
+        if r.joint_k[k]:
+            dof_full[r.joint_dofadr[k] + np.arange(r.joint_k[k])] = (
+                s.joint_dofadr[j] + np.arange(s.joint_k[j]))
+    mult_full = (s.joint_multadr[joint_full][:, None] + np.arange(6)).reshape(-1)
+
+    # the rigid joints' multipliers: the rows of the nodes they carry (node B or A, whichever
+    # is further from the root), their gradient constant; G from the residual's linearity
+    member = []
+    for j in rigid:
+        a, b = s.joint_a[j], s.joint_b[j]
+        member.append(b if _depth(b, rigid, s, root) > _depth(a, rigid, s, root) else a)
+    member_dofs = (s.node_dofadr[np.array(member, np.int64)][:, None]
+                   + np.arange(6)).reshape(-1)
+    rigid_mult = (s.joint_multadr[rigid][:, None] + np.arange(6)).reshape(-1)
+    nr = len(rigid_mult)
+    z, zl = np.zeros(s.nq), np.zeros(s.nm)
+    inputs = step_inputs(s, 0.0)
+    r0 = evaluate(s, s.node_H0, s.joint_H0, s.alpha0, z, z, z, zl, inputs).r
+    G = np.empty((nr, nr))
+    for k in range(nr):
+        lk = zl.copy()
+        lk[rigid_mult[k]] = 1.0
+        G[:, k] = (evaluate(s, s.node_H0, s.joint_H0, s.alpha0, z, z, z, lk, inputs).r
+                   - r0)[member_dofs]
+    return Condensation(full=s, reduced=r, rigid=rigid, node_root=node_root, node_C=C,
+                        node_Ad=lie.adjoint_inv(C), root_full=root_full, joint_full=joint_full,
+                        dof_full=dof_full, mult_full=mult_full, member_dofs=member_dofs,
+                        rigid_mult=rigid_mult, G_inv=np.linalg.inv(G))
+
+
+def _depth(i: int, rigid: np.ndarray, s, root: np.ndarray) -> int:
+    """Distance of node i from its group's root along the condensed rigid joints."""
+    adj: dict = {}
+    for j in rigid:
+        a, b = int(s.joint_a[j]), int(s.joint_b[j])
+        adj.setdefault(a, []).append(b)
+        adj.setdefault(b, []).append(a)
+    r0 = int(root[i])
+    depth, todo = {r0: 0}, [r0]
+    while todo:
+        x = todo.pop()
+        for y in adj.get(x, ()):
+            if y not in depth:
+                depth[y] = depth[x] + 1
+                todo.append(y)
+    return depth[int(i)]
