@@ -780,6 +780,9 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("initial_velocities", Str(("project", "strict")), "project", "Initial "
               "velocities the joints do not allow: projected onto the velocity constraints "
               "(reported per node in the run summary and the results' stats), or refused."),
+        Field("condense", Bool(), True, "Nodes joined by rigid joints move as one body in the "
+              "time loop (fewer unknowns; every node's motion and every joint's reactions are "
+              "still reported); false keeps the rigid joints as constraints."),
     ),
     "constant": (
         Field("value", _VALUE, None, "f(t) = value (required).", True),

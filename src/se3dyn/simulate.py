@@ -376,6 +376,17 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         is a multiple of ``output_every`` (the last step of a run is shortened to land on
         ``t_end`` otherwise). An adaptive run continues to its own ``t_end`` only (``tol``
         and ``h_max`` are per run length).
+    condense : bool
+        Nodes joined by rigid joints move as one body in the time loop (default): the steps
+        run on a reduced model with one node per group (its mass, centre of mass and inertia
+        combined, the other elements attached at the same material places), which has the
+        paper's discrete motion with the index-3 form and, with the index-2 form, the motion
+        of the same bodies built as one node each (``com=``, ``at=``); every stored row is the
+        model's own (the frames, velocities and accelerations of every node; the multipliers
+        of the condensed joints from the equations of motion of the nodes they carry,
+        computed when first asked for). ``stats["condensed"]`` names the condensed joints,
+        ``stats["matrix_size"]`` is the size of the matrix solved. See
+        :mod:`se3dyn.condense` for what is kept as a joint.
 
     Returns
     -------
