@@ -290,7 +290,7 @@ def _build(s) -> Condensation | None:
         root, used = _groups(model, cand, pinned, nidx)
         usedset = set(used)
         bad = set()
-        for j, (item, a, b) in enumerate(ends):
+        for j, (_item, a, b) in enumerate(ends):
             if root[nidx[a]] == root[nidx[b]] and j not in usedset:
                 bad.add(int(root[nidx[a]]))  # closes a loop inside a group
         R0 = s.node_H0[:, :3, :3]

@@ -17,7 +17,7 @@ from se3dyn.errors import ModelError, NewtonError, SimulationError
 from se3dyn.integrator import GeneralizedAlpha, State, energies, interpolate, step_inputs
 from se3dyn.model import Model
 from se3dyn.results import Results
-from se3dyn.system import System, Workspace, input_table, system_of
+from se3dyn.system import System, Workspace, system_of
 
 __all__ = ["simulate", "check_settings", "energy_balance_check", "SCALARS"]
 
