@@ -124,10 +124,16 @@ class Condensation:
     joint_full : ndarray (mr,) int       the joint of every reduced joint
     dof_full : ndarray (nq_r,) int       the unknown of every reduced unknown
     mult_full : ndarray (nm_r,) int      the multiplier of every reduced multiplier
-    member_dofs : ndarray (6 nr,) int    the unknowns of the nodes the rigid joints carry
-    rigid_mult : ndarray (6 nr,) int     the multipliers of the rigid joints
-    G_inv : ndarray (6 nr, 6 nr)         inverse of the rigid joints' multipliers' (constant)
-                                         contribution to the rows ``member_dofs``
+    order : ndarray (nr,) int            the condensed joints from the leaves to the roots
+                                         (indices into ``rigid``)
+    child_dofs, parent_dofs : ndarray (nr, 6) int
+                                         the unknowns of the node each rigid joint carries
+                                         (the one further from the root) and of the other one
+                                         (-1 where that is the root or fixed)
+    child_inv, parent_block : ndarray (nr, 6, 6)
+                                         the inverse of the joint's (constant) contribution
+                                         ``d r / d lambda`` to the rows of its child, and its
+                                         contribution to the rows of its parent
     """
 
     full: object
@@ -140,9 +146,11 @@ class Condensation:
     joint_full: np.ndarray
     dof_full: np.ndarray
     mult_full: np.ndarray
-    member_dofs: np.ndarray
-    rigid_mult: np.ndarray
-    G_inv: np.ndarray
+    order: np.ndarray
+    child_dofs: np.ndarray
+    parent_dofs: np.ndarray
+    child_inv: np.ndarray
+    parent_block: np.ndarray
 
     # -- states ---------------------------------------------------------------------------------
     @property
@@ -252,17 +260,25 @@ class Condensation:
         eng, _ = _engine(f, ws)
         n = len(H)
         F = np.ascontiguousarray(np.concatenate([H, HJ], axis=1), float)
-        lam[:, self.rigid_mult] = 0.0
+        mult = f.joint_multadr[self.rigid][:, None] + np.arange(6)
+        lam[:, mult] = 0.0
         r = np.empty((n, f.nq))
         c = lambda x: np.ascontiguousarray(x, float)  # noqa: E731
         eng.residual_rows(F, c(alpha), c(v), c(vd), c(lam), c(U), r, n)
-        # (term by term: the same sums whatever the number of rows, where BLAS or einsum
-        # round a single row and a block of rows differently)
-        rm = r[:, self.member_dofs]
-        out = np.zeros((n, len(self.rigid_mult)))
-        for k in range(rm.shape[1]):
-            out -= rm[:, k:k + 1] * self.G_inv[:, k]
-        lam[:, self.rigid_mult] = out
+
+        def times(x, D):  # x (n, 6) -> x D^T, term by term: the same sums whatever the
+            out = np.zeros((len(x), 6))  # number of rows (BLAS and einsum round a single
+            for k in range(6):  # row and a block of rows differently)
+                out += x[:, k:k + 1] * D[:, k]
+            return out
+
+        # member by member from the leaves: r_child + D_child lambda + (the child's own
+        # children's contributions, added to r before) = 0
+        for q in self.order:
+            lq = -times(r[:, self.child_dofs[q]], self.child_inv[q])
+            lam[:, mult[q]] = lq
+            if self.parent_dofs[q, 0] >= 0:
+                r[:, self.parent_dofs[q]] += times(lq, self.parent_block[q])
 
 
 def condensation(s, enabled: bool = True) -> Condensation | None:
@@ -374,44 +390,62 @@ def _build(s) -> Condensation | None:
                 s.joint_dofadr[j] + np.arange(s.joint_k[j]))
     mult_full = (s.joint_multadr[joint_full][:, None] + np.arange(6)).reshape(-1)
 
-    # the rigid joints' multipliers: the rows of the nodes they carry (node B or A, whichever
-    # is further from the root), their gradient constant; G from the residual's linearity
-    member = []
-    for j in rigid:
-        a, b = s.joint_a[j], s.joint_b[j]
-        member.append(b if _depth(b, rigid, s, root) > _depth(a, rigid, s, root) else a)
-    member_dofs = (s.node_dofadr[np.array(member, np.int64)][:, None]
-                   + np.arange(6)).reshape(-1)
-    rigid_mult = (s.joint_multadr[rigid][:, None] + np.arange(6)).reshape(-1)
-    nr = len(rigid_mult)
+    # the rigid joints' multipliers: the rows of the node each carries (the end further from
+    # the root) and of its other end, by the residual's linearity in lambda (constant blocks:
+    # H_J of a rigid joint is constant, Eq. (58)); joints sharing no node perturbed together
+    depth = _depths(rigid, s, root)
+    a_, b_ = s.joint_a[rigid], s.joint_b[rigid]
+    child = np.where(depth[b_] > depth[a_], b_, a_)
+    parent = np.where(depth[b_] > depth[a_], a_, b_)
+    dofs = lambda i: s.node_dofadr[i][:, None] + np.arange(6)  # noqa: E731
+    child_dofs = dofs(child)
+    parent_dofs = np.where((root[parent] != parent)[:, None], dofs(parent), -1)
+    nr = len(rigid)
+    Dc, Dp = np.zeros((nr, 6, 6)), np.zeros((nr, 6, 6))
     z, zl = np.zeros(s.nq), np.zeros(s.nm)
     inputs = step_inputs(s, 0.0)
-    r0 = evaluate(s, s.node_H0, s.joint_H0, s.alpha0, z, z, z, zl, inputs).r
-    G = np.empty((nr, nr))
-    for k in range(nr):
-        lk = zl.copy()
-        lk[rigid_mult[k]] = 1.0
-        G[:, k] = (evaluate(s, s.node_H0, s.joint_H0, s.alpha0, z, z, z, lk, inputs).r
-                   - r0)[member_dofs]
+    ev = lambda lam: evaluate(s, s.node_H0, s.joint_H0, s.alpha0, z, z, z, lam,  # noqa: E731
+                              inputs).r
+    r0 = ev(zl)
+    todo = list(range(nr))
+    while todo:
+        batch, used_nodes, rest = [], set(), []
+        for q in todo:
+            ends = {int(child[q]), int(parent[q])}
+            (rest if ends & used_nodes else batch).append(q)
+            if q in batch:
+                used_nodes |= ends
+        todo = rest
+        for k in range(6):
+            lk = zl.copy()
+            lk[s.joint_multadr[rigid[batch]] + k] = 1.0
+            d = ev(lk) - r0
+            for q in batch:
+                Dc[q, :, k] = d[child_dofs[q]]
+                if parent_dofs[q, 0] >= 0:
+                    Dp[q, :, k] = d[parent_dofs[q]]
     return Condensation(full=s, reduced=r, rigid=rigid, node_root=node_root, node_C=C,
                         node_Ad=lie.adjoint_inv(C), root_full=root_full, joint_full=joint_full,
-                        dof_full=dof_full, mult_full=mult_full, member_dofs=member_dofs,
-                        rigid_mult=rigid_mult, G_inv=np.linalg.inv(G))
+                        dof_full=dof_full, mult_full=mult_full,
+                        order=np.argsort(-depth[child], kind="stable"), child_dofs=child_dofs,
+                        parent_dofs=parent_dofs, child_inv=np.linalg.inv(Dc), parent_block=Dp)
 
 
-def _depth(i: int, rigid: np.ndarray, s, root: np.ndarray) -> int:
-    """Distance of node i from its group's root along the condensed rigid joints."""
+def _depths(rigid: np.ndarray, s, root: np.ndarray) -> np.ndarray:
+    """(M,) distance of every node from its group's root along the condensed rigid joints."""
     adj: dict = {}
     for j in rigid:
         a, b = int(s.joint_a[j]), int(s.joint_b[j])
         adj.setdefault(a, []).append(b)
         adj.setdefault(b, []).append(a)
-    r0 = int(root[i])
-    depth, todo = {r0: 0}, [r0]
-    while todo:
-        x = todo.pop()
-        for y in adj.get(x, ()):
-            if y not in depth:
-                depth[y] = depth[x] + 1
-                todo.append(y)
-    return depth[int(i)]
+    depth = np.zeros(s.M, np.int64)
+    for r0 in {int(root[i]) for i in adj}:
+        seen, todo = {r0}, [r0]
+        while todo:
+            x = todo.pop()
+            for y in adj.get(x, ()):
+                if y not in seen:
+                    seen.add(y)
+                    depth[y] = depth[x] + 1
+                    todo.append(y)
+    return depth
