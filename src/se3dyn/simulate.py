@@ -215,7 +215,7 @@ class _Recorder:
             return
         self._summarize()
         checkpoint, self.pending = self.pending, None
-        if checkpoint is not None and self.cond is not None:
+        if checkpoint is not None and self.cond is not None and self.on_rows is not None:
             checkpoint = dataclasses.replace(checkpoint, state=self.cond.expand(checkpoint.state))
         if self.on_rows is not None and (self.n > self.sent or checkpoint is not None):
             self.on_rows(self._block(self.sent, self.n), checkpoint)
