@@ -191,6 +191,17 @@ def test_restart_of_a_condensed_run_is_bit_exact():
     assert st.H.shape == (len(m.nodes), 4, 4) and st.lam.shape == (full.system.nm,)
 
 
+def test_a_run_that_kept_its_rigid_joints_continues_as_it_was():
+    """A state of a run with ``condense=False`` carries that run's solver memory: continued
+    with the default setting, it continues that run bit for bit (nothing condensed)."""
+    m = sd.examples.slider_crank()
+    full = sd.simulate(m, 0.6, 1e-2, condense=False)
+    half = sd.simulate(m, 0.3, 1e-2, condense=False)
+    rest = sd.simulate(m, 0.6, 1e-2, initial_state=half.stats["final_state"])
+    assert rest.stats["condensed"] == []
+    assert np.array_equal(rest.H, full.H[len(half.t) - 1:])
+
+
 def test_dense_output_of_a_condensed_run():
     m = sd.examples.slider_crank()
     kw = dict(formulation="index3", output_step=0.05)

@@ -160,9 +160,15 @@ class Condensation:
 
     def restrict(self, st):
         """The reduced state of a state of the full system (exact copies of the roots'
-        values), or None when a dropped (redundant) equation belongs to a condensed joint."""
+        values), or None when a dropped (redundant) equation belongs to a condensed joint or
+        the state's solver memory is that of a run that kept the rigid joints."""
         from se3dyn.integrator import State
+        from se3dyn.system import layout_of
 
+        if st.solver is not None:  # a state of a run that kept its rigid joints: continued so
+            lay = layout_of(self.reduced)
+            if len(st.solver.ref) not in (lay.nvals, lay.nvals2):
+                return None
         inv = np.full(self.full.nm, -1, np.int64)
         inv[self.mult_full] = np.arange(len(self.mult_full))
         dropped = inv[np.asarray(st.dropped, np.int64)]
