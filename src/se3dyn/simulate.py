@@ -568,11 +568,13 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             rec.add(new, e["kinetic"], e["potential"], e["spring"], info.iterations,
                     info.residual, info.constraint)
             stored = i % output_every == 0 or adaptive
-        st = new
+        prev, st = st, new
         if progress is not None:
             progress(st.t, i)
         if adaptive:
-            h = min(opt["h_max"], stepcontrol.next_step(h, err, accepted=True))
+            cs = (stepcontrol.coefficient(norm, prev, integ.params),
+                  stepcontrol.coefficient(norm, st, integ.params))
+            h = min(opt["h_max"], stepcontrol.next_step(h, err, accepted=True, c=cs))
         cp = None
         if stored and regular and i % cpe == 0:
             cp = Checkpoint(st, i, h, stats["newton_iterations"], stats["rejected"], rec.total)

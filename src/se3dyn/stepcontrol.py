@@ -134,13 +134,45 @@ def share(tol: float, span: float, t: float, t_start: float, steps: int, h: floa
     return max(tol * (h_bar / span) * (h_bar / h) ** 3, 1e-300)
 
 
-def next_step(h: float, ratio: float, accepted: bool) -> float:
+def coefficient(norm: ErrorNorm, st, params: tuple[float, float, float, float]) -> float | None:
+    """The local error coefficient ``c`` (a step's error ``c h^3``, m/s^3) at the state ``st``,
+    from ``a - vd = (alpha_m - alpha_f) h_last q^(3)`` (Eq. (43): ``a`` approximates ``vd`` at
+    ``t + (alpha_m - alpha_f) h``): ``|1/6 - beta - (alpha_m - alpha_f)/2| |q^(3)|`` in the
+    norm ``norm``. None where ``a - vd`` carries no information: the initial state
+    (``h_last = 0``) and ``alpha_m = alpha_f`` (rho_inf = 1).
+
+    Parameters
+    ----------
+    norm : ErrorNorm
+    st : State
+    params : (alpha_m, alpha_f, gamma, beta) of the integrator
+    """
+    am, af, _, b = params
+    d = am - af
+    if not st.h_last > 0 or abs(d) < 1e-9:
+        return None
+    e = np.asarray(st.a, dtype=float) - np.asarray(st.vd, dtype=float)
+    return abs(1.0 / 6.0 - b - 0.5 * d) * norm(e) / (abs(d) * st.h_last)
+
+
+def next_step(h: float, ratio: float, accepted: bool,
+              c: tuple[float | None, float | None] | None = None) -> float:
     """The step after one of size ``h`` whose error was ``ratio`` times its share (a ratio that
     goes as ``h^6``, see the module; unbounded by ``h_min``/``h_max``: the caller clips). A
-    rejected step always shrinks."""
+    rejected step always shrinks.
+
+    ``c``: the error coefficients (:func:`coefficient`) of the states at the start and the end
+    of the accepted step. With both known, a ratio within ``[KEEP_BELOW^-6, 1]`` and a change
+    of at most a factor ``KEEP_BELOW``, the step *tracks* the state: ``h (c_0 / c_1)^(1/6)``,
+    so that ``h c^(1/6)`` stays what it was (steps as ``c^(-1/6)`` of the current state, not of
+    the run's history); otherwise the rule below."""
     f = SAFETY * max(ratio, 1e-10) ** (-1.0 / 6.0)
     if not accepted:
         return h * min(SAFETY, max(SHRINK_MIN, f))
+    if c is not None and c[0] is not None and c[1] is not None and c[1] > 0:
+        g = (c[0] / c[1]) ** (1.0 / 6.0)
+        if KEEP_BELOW ** -6 <= ratio <= 1.0 and 1.0 / KEEP_BELOW <= g <= KEEP_BELOW:
+            return h * g
     f = min(GROW_MAX, max(SHRINK_MIN, f))
     if 1.0 <= f < KEEP_BELOW:
         f = 1.0
