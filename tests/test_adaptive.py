@@ -115,7 +115,8 @@ def test_undamped_pendulum_error_is_a_fixed_fraction_of_tol_with_fewer_steps(tol
     global error is the sum of the local errors, which the controller holds to tol."""
     from se3dyn.modelfile import load_model
 
-    model, settings = load_model(Path(__file__).parents[1] / "examples" / "a01_simple_pendulum.yaml")
+    model, settings = load_model(
+        Path(__file__).parents[1] / "examples" / "a01_simple_pendulum.yaml")
     T = 10.0
     r = sd.simulate(model, T, 1e-3, tol=tol, output_step=0.01, rho_inf=settings["rho_inf"])
     e = float(np.linalg.norm(r.node_position("P1")[:, :2] - _pendulum_exact_p1(r.t), axis=1).max())
