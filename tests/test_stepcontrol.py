@@ -5,6 +5,7 @@ controller's rules."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -132,3 +133,47 @@ def test_steps_at_their_share_go_as_the_error_coefficient_to_the_minus_sixth(c1,
         h = at_share(c)
         assert c * h ** 3 == pytest.approx(stepcontrol.share(tol, span, t, 0.0, k, h), rel=1e-9)
     assert at_share(c1) / at_share(c2) == pytest.approx((c2 / c1) ** (1 / 6), rel=1e-12)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(0.8, 1.25), min_size=1, max_size=30))
+def test_tracked_steps_are_a_function_of_the_current_error_coefficient(factors):
+    # while the error stays within [1.3^-6, 1] of its share, h c^(1/6) is kept: the step is
+    # h_0 (c_0 / c_n)^(1/6) whatever the path of the coefficients (no history, no dead band)
+    h0 = h = 1e-3
+    c0 = c = 50.0
+    for f in factors:
+        h = stepcontrol.next_step(h, 0.5, True, c=(c, c * f))
+        c *= f
+    assert h == pytest.approx(h0 * (c0 / c) ** (1 / 6), rel=1e-9)
+
+
+def test_the_rule_applies_where_tracking_has_no_footing():
+    h = 1e-3
+    rule = stepcontrol.next_step(h, 0.01, True)
+    # an error far below its share (rescale), a jump of the coefficient, no coefficient
+    assert stepcontrol.next_step(h, 0.01, True, c=(10.0, 10.0)) == rule
+    assert stepcontrol.next_step(h, 0.5, True, c=(10.0, 1.0)) == h  # 47 % growth: rule's band
+    assert stepcontrol.next_step(h, 0.5, True, c=(None, 1.0)) == h
+    assert stepcontrol.next_step(h, 0.5, True, c=(10.0, 11.0)) == pytest.approx(
+        h * (10 / 11) ** (1 / 6))
+
+
+def test_the_state_coefficient_predicts_the_next_steps_local_error():
+    # a - vd = (alpha_m - alpha_f) h q''' of a state gives the error c h^3 that the next
+    # step's estimate (1/6 - beta - (alpha_m - alpha_f)/2) h^2 (a_{n+1} - a_n) measures
+    s = sd.compile_model(sd.examples.slider_crank())
+    integ = sd.GeneralizedAlpha(rho_inf=0.9)
+    norm = stepcontrol.ErrorNorm(s)
+    h = 2e-4
+    st0 = integ.init(s, 0.0)
+    ratios = []
+    for k in range(400):
+        st1, info = integ.step(s, st0, h)
+        if k >= 20:  # (past the start, where a - vd has not settled)
+            ratios.append(stepcontrol.coefficient(norm, st0, integ.params) * h ** 3
+                          / norm(info.error))
+        st0 = dataclasses.replace(st1, t=st0.t + h)
+    assert np.median(ratios) == pytest.approx(1.0, abs=0.05)
+    assert stepcontrol.coefficient(norm, integ.init(s, 0.0), integ.params) is None
+    assert stepcontrol.coefficient(norm, st0, sd.GeneralizedAlpha(rho_inf=1.0).params) is None

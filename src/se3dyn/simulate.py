@@ -314,9 +314,12 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         vary as the local error's -1/6th power, half as much as under the classical rule of
         equal error per step, which measured more steps than a fixed step of the same
         accuracy on mechanisms with short violent phases. Rejected steps are repeated with a
-        smaller step, the next step is ``h (share / error)^(1/6)`` (safety 0.9, at most
-        doubled, kept when it would grow by less than 30 %). A step whose Newton iterations
-        fail is retried with h / 4. The sum of the accepted estimates is
+        smaller step; while the error stays within ``[1.3^-6, 1]`` of its share the next step
+        tracks the state, ``h (c_n / c_{n+1})^(1/6)`` with ``c`` the error coefficient that
+        ``a - vd`` of the states at the step's ends give (rho_inf < 1), so that the steps
+        follow the motion, not its history; otherwise it is ``h (share / error)^(1/6)``
+        (safety 0.9, at most doubled, kept when it would grow by less than 30 %). A step whose
+        Newton iterations fail is retried with h / 4. The sum of the accepted estimates is
         ``stats["error_estimate"]``. The global error is a fraction of ``tol`` where errors
         neither grow nor decay along the motion (the undamped pendulum) or decay, and larger
         where the motion amplifies them (an accelerating mechanism, a fast top, a mechanism
@@ -607,11 +610,13 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             rec.add(new, e["kinetic"], e["potential"], e["spring"], info.iterations,
                     info.residual, info.constraint)
             stored = i % output_every == 0 or adaptive
-        st = new
+        prev, st = st, new
         if progress is not None:
             progress(st.t, i)
         if adaptive:
-            h = min(opt["h_max"], stepcontrol.next_step(h, err, accepted=True))
+            cs = (stepcontrol.coefficient(norm, prev, integ.params),
+                  stepcontrol.coefficient(norm, st, integ.params))
+            h = min(opt["h_max"], stepcontrol.next_step(h, err, accepted=True, c=cs))
         cp = None
         if stored and regular and i % cpe == 0:
             cp = Checkpoint(st, i, h, stats["newton_iterations"], stats["rejected"], rec.total)
