@@ -209,3 +209,65 @@ def test_dense_output_of_a_condensed_run():
     b = sd.simulate(m, 0.5, 1e-2, condense=False, **kw)
     np.testing.assert_array_equal(a.t, b.t)
     _compare(a, b, ("2", "4", "6", "8"))
+
+
+def _every_element_on_members(rng):
+    """Two bodies, each built from a massive node and rigidly joined satellite nodes (turned
+    against it), with every element type attached to the satellites: a hinge with a spring,
+    damper and PD law (no ``at``: the satellite's own frame), a spherical joint with ``at``, a
+    point spring-damper, a bushing, loads at a point (inertial force, inertial torque) and a
+    beam whose end node is the root of a third group."""
+    R = lambda: lie.exp_so3(rng.normal(size=3) * 0.5)  # noqa: E731
+    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -G))
+    mb.node("g", fixed=True)
+    mb.node("b1", position=(0.3, 0.0, -0.1), mass=1.0, inertia=(0.01, 0.012, 0.014),
+            orientation=R())
+    mb.node("s1", position=(0.0, 0.0, -0.05), orientation=R())  # massless satellite
+    mb.node("t1", position=(0.5, 0.1, -0.1), mass=0.3, inertia=(0.002, 0.002, 0.003),
+            orientation=R())
+    mb.joint("w1", "rigid", "b1", "s1")
+    mb.joint("w2", "rigid", "t1", "b1")  # a member as node A
+    mb.joint("h", "hinge", "g", "s1", axis=(0.0, 1.0, 0.0), stiffness=2.0, damping=0.1,
+             control=sd.PD(kp=1.0, kd=0.05, target=sd.Sine(0.2, 1.5)))
+    mb.node("b2", position=(0.6, 0.2, -0.3), mass=0.8, inertia=(0.01, 0.01, 0.012),
+            orientation=R())
+    mb.node("s2", position=(0.55, 0.15, -0.2), mass=0.1, inertia=(1e-3, 1e-3, 1e-3),
+            orientation=R())
+    mb.joint("w3", "rigid", "s2", "b2")
+    mb.joint("sph", "spherical", "t1", "s2", at=(0.52, 0.12, -0.15))
+    mb.spring_damper("sd", "s1", "s2", stiffness=30.0, damping=0.5, length=0.5)
+    mb.bushing("bu", "t1", "b2", at=(0.58, 0.18, -0.25), stiffness=5.0, damping=0.05)
+    mb.load("f", "s2", force=sd.Sine((0.5, 0.0, 1.0), 2.0), torque=(0.0, 0.02, 0.0),
+            at=(0.6, 0.1, -0.2), torque_frame="inertial")
+    mb.node("e", position=(0.6, 0.2, -0.6), mass=0.05, inertia=(1e-4, 1e-4, 1e-4))
+    mb.node("m", position=(0.65, 0.2, -0.6), mass=0.2, inertia=(1e-3, 1e-3, 1e-3),
+            orientation=R())
+    mb.joint("w4", "rigid", "e", "m")  # e is a beam node: the root of its group
+    mb.beam("beam", "b2", "e", elements=2, EA=50.0, GA=(20.0, 20.0), GJ=0.5, EI=(0.5, 0.6),
+            mass_per_length=0.2, rotary_inertia=(2e-4, 1e-4, 1e-4), damping=0.01)
+    return mb.build()
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_every_element_type_on_condensed_members(seed):
+    from se3dyn.elements import REGISTRY
+
+    m = _every_element_on_members(np.random.default_rng(seed))
+    kw = dict(rho_inf=0.8, formulation="index3")
+    a = sd.simulate(m, 0.3, 1e-3, **kw)
+    b = sd.simulate(m, 0.3, 1e-3, condense=False, **kw)
+    assert a.stats["condensed"] == ["w1", "w2", "w3", "w4"]
+    # every element type of the library is in the model (a new one must be added here)
+    s = a.system
+    assert set(REGISTRY) <= {"body", "joint", "joint_force", "load", "spring_damper",
+                             "bushing", "beam"}
+    assert s.model.springs and s.model.bushings and s.model.loads and s.model.beams
+    moved = max(np.abs(b.node_position(n)[-1] - b.node_position(n)[0]).max()
+                for n in s.node_names)
+    assert moved > 1e-2
+    _compare(a, b, s.node_names, tol_x=1e-8, tol_v=1e-6)
+    scale = np.abs(b.lam).max()
+    np.testing.assert_allclose(a.lam, b.lam, rtol=0, atol=1e-7 * scale)
+    for f in ("kinetic", "potential", "spring", "work_actuators", "work_loads", "dissipation"):
+        np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=1e-7,
+                                   atol=1e-9 * max(1.0, np.abs(getattr(b, f)).max()))
