@@ -29,7 +29,9 @@ from dataclasses import dataclass
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 K = "src/se3dyn/_core/elements/"
 DEFAULT_TESTS = ("tests/test_elements.py", "tests/test_physics.py", "tests/test_new_elements.py",
-                 "tests/test_bushing.py", "tests/test_beam.py", "tests/test_offsets.py")
+                 "tests/test_bushing.py", "tests/test_beam.py", "tests/test_offsets.py",
+                 "tests/test_condense.py")
+C = "src/se3dyn/condense.py"
 
 
 @dataclass(frozen=True)
@@ -148,6 +150,36 @@ MUTATIONS = (
       "elastic energy L eps^T K eps / 2 of a beam element"),
     M("beam-dissipation", K + "beam.hpp", "X.energy[P_DISSIPATION] += Le * wd;", "", "energy",
       "power dissipated by the strain-rate damping of a beam"),
+    # condensation of rigid joints for the time loop (se3dyn/condense.py)
+    M("condense-parallel-axis", C, "J = J + np.einsum(", "J = J + 0 * np.einsum(", "reduction",
+      "parallel-axis terms of the combined inertia of a group"),
+    M("condense-com", C, "return M, 0.5 * (J + J.T), com", "return M, 0.5 * (J + J.T), None",
+      "reduction", "centre of mass of a group (put at its root node)"),
+    M("condense-joint-frame-a", C, "frames=(C[a] @ s.joint_XA[j]", "frames=(s.joint_XA[j]",
+      "reduction", "attachment frame of a joint on a member (node A) moved to the root"),
+    M("condense-joint-frame-b", C, "C[b] @ s.joint_XB[j], s.joint_H0",
+      "s.joint_XB[j], s.joint_H0", "reduction",
+      "attachment frame of a joint on a member (node B) moved to the root"),
+    M("condense-load-point", C, "at=H0[i, :3, 3].copy() if ld.at is None else ld.at",
+      "at=ld.at", "reduction", "point of a load on a member"),
+    M("condense-member-frames", C, "Hf[:, mem] = np.matmul(Hf[:, mem], self.node_C[mem])",
+      "pass", "output", "members' frames H_root C in the expanded rows"),
+    M("condense-member-velocities", C,
+      "y[:, dst] = np.matmul(self.node_Ad[members], x[:, src][..., None])[..., 0]",
+      "y[:, dst] = x[:, src]", "output", "Ad(C^-1) of the members' velocities"),
+    M("condense-reaction-parent", C,
+      "r[:, self.parent_dofs[q]] += times(lq, self.parent_block[q])", "pass", "output",
+      "a rigid joint's reaction on its parent member (leaf-first recovery)"),
+    M("condense-reaction-order", C, 'order=np.argsort(-depth[child], kind="stable")',
+      'order=np.argsort(depth[child], kind="stable")', "output",
+      "leaf-first order of the reaction recovery"),
+    M("condense-body-load-check", C,
+      "            if body and root[i] != i and not np.array_equal(R0[i], R0[root[i]]):\n"
+      "                bad.add(int(root[i]))", "            pass", "reduction",
+      "refusal to move a body-frame load to a turned root"),
+    M("condense-loop-check", C,
+      "                bad.add(int(root[nidx[a]]))  # closes a loop inside a group",
+      "                pass", "reduction", "refusal to condense a group closed by a loop"),
 )
 
 

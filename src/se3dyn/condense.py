@@ -344,8 +344,8 @@ def _build(s) -> Condensation | None:
             nodes.append(n0)
             continue
         M, J, com = _composite_inertia(grp)
-        nodes.append(dataclasses.replace(n0, mass=M, inertia=J, com=com,
-                                         fixed=any(g.fixed for g in grp)))
+        # (a fixed node is always its group's root: the group is fixed)
+        nodes.append(dataclasses.replace(n0, mass=M, inertia=J, com=com))
     name_of = lambda k: s.node_names[int(root[k])]  # noqa: E731
     A_mat = {}
     for g in s.groups:
