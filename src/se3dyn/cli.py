@@ -733,6 +733,9 @@ def run_report(stats: dict) -> list[str]:
             err > 0.1 * scale and err > 1e-12) else ""
         out.append(f"energy balance error {err:.3e} J ({rel} the energy in play, "
                    f"{scale:.3e} J){warn}")
+    if stats.get("condensed_until") is not None:
+        out.append(f"rigid joints condensed until t = {stats['condensed_until']:.9g} s, kept "
+                   "from there (a step of the condensed model did not converge)")
     return out
 
 

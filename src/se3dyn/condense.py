@@ -245,14 +245,17 @@ class Condensation:
     def fill_multipliers(self, res) -> None:
         """Complete the multipliers of results of the full system (the deferred columns of
         :attr:`se3dyn.results.Results.lam`), in blocks of rows."""
+        self.fill_rows(res.t, res.H, res.alpha, res.v, res.vd, res.__dict__["_lam"])
+
+    def fill_rows(self, t, H, alpha, v, vd, lam) -> None:
+        """The same for rows of the full system given as arrays (``lam`` (n, nm) in place)."""
         from se3dyn.system import input_table
 
-        lam = res.__dict__["_lam"]
-        for lo in range(0, len(res.t), 4096):
+        for lo in range(0, len(t), 4096):
             sl = slice(lo, lo + 4096)
-            U, _ = input_table(self.full, np.asarray(res.t[sl], float))
-            self.rigid_multipliers(res.H[sl], self.joint_frames(res.H[sl]), res.alpha[sl],
-                                   res.v[sl], res.vd[sl], lam[sl], U)
+            U, _ = input_table(self.full, np.asarray(t[sl], float))
+            self.rigid_multipliers(H[sl], self.joint_frames(H[sl]), alpha[sl], v[sl], vd[sl],
+                                   lam[sl], U)
 
     def rigid_multipliers(self, H, HJ, alpha, v, vd, lam, U, ws=None) -> None:
         """Fill in the multipliers of the condensed rigid joints of rows (n, ...) of the full

@@ -226,6 +226,24 @@ class _Recorder:
                 self.first = self._block(0, 1)
             self._move_last_to_front()
 
+    def uncondense(self) -> None:
+        """The run goes on with the rigid joints kept: the rows held become the model's own
+        (their rigid joints' multipliers computed now), and so will the next ones."""
+        c, n, cap = self.cond, self.n, len(self.t)
+        rows = c.expand_rows(self.H[:n], self.v[:n], self.vd[:n], self.alpha[:n], self.lam[:n])
+        c.fill_rows(self.t[:n], rows[0], rows[3], rows[1], rows[2], rows[4])
+        for name, arr in zip(("H", "v", "vd", "alpha", "lam"), rows, strict=True):
+            new = np.zeros((cap,) + arr.shape[1:])
+            new[:n] = arr
+            setattr(self, name, new)
+        if self.pending is not None:
+            self.pending = dataclasses.replace(self.pending,
+                                               state=c.expand(self.pending.state))
+        self.s = self.out_system = c.full
+        self.cond = None
+        s = self.s
+        self.row_bytes = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
+
     def _move_last_to_front(self) -> None:
         """(store=False) Keep only the last row, at the front of the buffer."""
         for name in self._FIELDS:
@@ -508,6 +526,19 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     if k0 % cpe == 0:  # the start is a checkpoint too
         rec.pending = Checkpoint(st, k0, h, 0, 0, 1)
 
+    def uncondense() -> None:
+        # a step of the reduced system failed: the run goes on with the rigid joints kept
+        # (a condensed run never fails where the model itself goes on; stats say from when)
+        nonlocal s, st, ws, solver, cond, norm
+        stats["condensed_until"] = st.t
+        full = dataclasses.replace(cond.expand(st), solver=None)
+        rec.uncondense()
+        s, st, cond = model_system, full, None
+        ws = Workspace(s)
+        solver = integ.solver(s, st)
+        if adaptive:
+            norm = stepcontrol.ErrorNorm(s)
+
     def fail(exc: SimulationError):
         stats.update(steps=i - k0, failed=True, wall_time=time.perf_counter() - wall0,
                      final_state=st if cond is None else cond.expand(st))
@@ -532,6 +563,12 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
 
         st, i, fac, hs = _run_compiled(s, integ, st, times, k0, nsteps, output_every, cpe,
                                        rec, progress, stats, ws)
+        if i < nsteps and cond is not None:
+            uncondense()
+            st, i, fac2, hs2 = _run_compiled(s, integ, st, times, i, nsteps, output_every,
+                                             cpe, rec, progress, stats, ws)
+            fac += fac2
+            hs = (min(hs[0], hs2[0]), max(hs[1], hs2[1]))
         stats["factorizations"] = fac
         if i < nsteps:
             try:
@@ -549,6 +586,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             try:
                 new, info = integ.step(s, st, h, solver, ws)
             except SimulationError as exc:
+                if cond is not None and isinstance(exc, NewtonError):
+                    uncondense()
+                    continue
                 if not isinstance(exc, NewtonError):
                     fail(exc)
                 if h / 4 < opt["h_min"]:
@@ -582,6 +622,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             try:
                 new, info = integ.step(s, st, h, solver, ws)
             except SimulationError as exc:
+                if cond is not None and isinstance(exc, NewtonError):
+                    uncondense()
+                    continue
                 fail(exc)
         new = dataclasses.replace(new, t=t1)  # exact times, no drift
         i += 1
