@@ -38,6 +38,12 @@ fixed node, a beam node or a node loaded in its body frame with another orientat
 root's (these cannot be moved to another node), and every group in which another element
 (or a further rigid joint, closing a loop) connects two of its nodes. ``simulate(...,
 condense=False)`` keeps every rigid joint.
+
+**When a step fails.** Near a singular configuration the reduced system's Newton iterations can
+stall where the model's own converge (measured once: A02, the N-four-bar, at h = 5/23872 s,
+t = 3.21 s, the residual stuck at 2.6 times the tolerance). :func:`se3dyn.simulate` then goes
+on with the rigid joints kept from the failing step (``stats["condensed_until"]``), so a
+condensed run never fails where the model itself goes on.
 """
 
 from __future__ import annotations

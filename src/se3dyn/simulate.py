@@ -406,8 +406,10 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         model's own (the frames, velocities and accelerations of every node; the multipliers
         of the condensed joints from the equations of motion of the nodes they carry,
         computed when first asked for). ``stats["condensed"]`` names the condensed joints,
-        ``stats["matrix_size"]`` is the size of the matrix solved. See
-        :mod:`se3dyn.condense` for what is kept as a joint.
+        ``stats["matrix_size"]`` is the size of the matrix solved. A step that fails on the
+        reduced model is retried with the rigid joints kept, and the run goes on so
+        (``stats["condensed_until"]``: the time of the switch). See :mod:`se3dyn.condense`
+        for what is kept as a joint.
 
     Returns
     -------
