@@ -151,9 +151,10 @@ MUTATIONS = (
     M("beam-dissipation", K + "beam.hpp", "X.energy[P_DISSIPATION] += Le * wd;", "", "energy",
       "power dissipated by the strain-rate damping of a beam"),
     # condensation of rigid joints for the time loop (se3dyn/condense.py)
-    M("condense-parallel-axis", C, "J = J + np.einsum(", "J = J + 0 * np.einsum(", "reduction",
-      "parallel-axis terms of the combined inertia of a group"),
-    M("condense-com", C, "return M, 0.5 * (J + J.T), com", "return M, 0.5 * (J + J.T), None",
+    M("condense-parallel-axis", "src/se3dyn/system.py", "Js = Js + np.einsum(",
+      "Js = Js + 0 * np.einsum(", "reduction",
+      "parallel-axis terms of the combined inertia of a group (and of lumped beam masses)"),
+    M("condense-com", C, "mass=M, inertia=J, com=com)", "mass=M, inertia=J, com=None)",
       "reduction", "centre of mass of a group (put at its root node)"),
     M("condense-joint-frame-a", C, "frames=(C[a] @ s.joint_XA[j]", "frames=(s.joint_XA[j]",
       "reduction", "attachment frame of a joint on a member (node A) moved to the root"),

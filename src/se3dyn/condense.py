@@ -53,7 +53,7 @@ import dataclasses
 import numpy as np
 
 from se3dyn import lie
-from se3dyn.model import Model, NodeSpec
+from se3dyn.model import Model
 
 __all__ = ["Condensation", "condensation"]
 
@@ -96,22 +96,6 @@ def _ends(model: Model) -> list[tuple[str, str, str]]:
     out += [(f"spring '{s.name}'", s.node_a, s.node_b) for s in model.springs]
     out += [(f"bushing '{b.name}'", b.node_a, b.node_b) for b in model.bushings]
     return out
-
-
-def _composite_inertia(nodes: list[NodeSpec]) -> tuple[float, np.ndarray, np.ndarray | None]:
-    """Mass, inertia about the centre of mass (inertial frame) and centre of mass of rigidly
-    joined nodes (parallel-axis rule); the centre None when the group has no mass."""
-    m = np.array([n.mass for n in nodes], float)
-    c = np.array([n.position if n.com is None else n.com for n in nodes], float)
-    M = float(m.sum())
-    J = np.sum([n.inertia for n in nodes], axis=0)
-    if M <= 0.0:
-        return 0.0, J, None
-    com = (m[:, None] * c).sum(axis=0) / M
-    d = c - com
-    J = J + np.einsum("n,nij->ij", m, np.einsum("nk,nk->n", d, d)[:, None, None] * np.eye(3)
-                      - np.einsum("ni,nj->nij", d, d))
-    return M, 0.5 * (J + J.T), com
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -307,7 +291,7 @@ def condensation(s, enabled: bool = True) -> Condensation | None:
 
 
 def _build(s) -> Condensation | None:
-    from se3dyn.system import compile_model, evaluate, step_inputs
+    from se3dyn.system import combine_inertia, compile_model, evaluate, step_inputs
 
     model = s.model
     nidx = {name: i for i, name in enumerate(s.node_names)}
@@ -352,7 +336,10 @@ def _build(s) -> Condensation | None:
         if len(grp) == 1:
             nodes.append(n0)
             continue
-        M, J, com = _composite_inertia(grp)
+        M, J, com = combine_inertia(
+            np.array([g.mass for g in grp]),
+            np.array([g.position if g.com is None else g.com for g in grp], float),
+            np.array([g.inertia for g in grp]))
         # (a fixed node is always its group's root: the group is fixed)
         nodes.append(dataclasses.replace(n0, mass=M, inertia=J, com=com))
     name_of = lambda k: s.node_names[int(root[k])]  # noqa: E731

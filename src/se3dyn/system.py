@@ -376,14 +376,43 @@ def _lump_beam_masses(d: dict, model: Model, nidx: dict) -> None:
             if d["node_fixed"][i]:
                 continue
             R = X[:3, :3]
-            m1, c1 = mass[i], com[i]
-            m = m1 + m2
-            c = m1 * c1 / m
-            r1, r2 = c1 - c, -c
-            J[i] = (J[i] + m1 * (r1 @ r1 * np.eye(3) - np.outer(r1, r1)) + R @ Js @ R.T
-                    + m2 * (r2 @ r2 * np.eye(3) - np.outer(r2, r2)))
-            mass[i], com[i] = m, c
+            mass[i], J[i], com[i] = combine_inertia(
+                np.array([mass[i], m2]), np.array([com[i], np.zeros(3)]),
+                np.array([J[i], R @ Js @ R.T]))
     d["node_mass"], d["node_J"], d["node_com"] = mass, J, com
+
+
+def combine_inertia(m: np.ndarray, c: np.ndarray, J: np.ndarray
+                    ) -> tuple[float, np.ndarray, np.ndarray | None]:
+    """Rigid bodies joined into one (Sec. 6): mass, inertia about the joint centre of mass
+    (parallel-axis rule) and that centre.
+
+    Parameters
+    ----------
+    m : ndarray (n,)
+        Masses.
+    c : ndarray (n, 3)
+        Centres of mass (any one frame).
+    J : ndarray (n, 3, 3)
+        Inertias about them (the same frame).
+
+    Returns
+    -------
+    M : float
+    J : ndarray (3, 3)
+    c : ndarray (3,) or None
+        None when the bodies have no mass (J is then the sum of the inertias).
+    """
+    m, c = np.asarray(m, float), np.asarray(c, float)
+    M = float(m.sum())
+    Js = np.sum(J, axis=0)
+    if M <= 0.0:
+        return 0.0, Js, None
+    com = (m[:, None] * c).sum(axis=0) / M
+    d = c - com
+    Js = Js + np.einsum("n,nij->ij", m, np.einsum("nk,nk->n", d, d)[:, None, None] * np.eye(3)
+                        - np.einsum("ni,nj->nij", d, d))
+    return M, 0.5 * (Js + Js.T), com
 
 
 class _Inputs:
