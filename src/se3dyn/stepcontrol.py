@@ -62,8 +62,8 @@ eight problems at three tolerances (``benchmarks/adaptive_steps.py``, ``docs/acc
 ``c^(-1/6)`` with tracking and phases needs 0.45-1.04 times the steps of the best fixed
 step of the same global error in all 24 runs (tracking alone: 0.44-1.05 in 22, the N-four-bar
 at the tightest tolerance 2.7, the squeezer 1.2), against 0.45-1.07 and 1.3-4.2 (the
-squeezer, the N-four-bar) without tracking and 0.39-2.8 (and 3.7-3.9) for ``c^(-1/3)``. The price: where steps vary, the sum of the local
-errors is no longer ``tol``.
+squeezer, the N-four-bar) without tracking and 0.39-2.8 (and 3.7-3.9) for ``c^(-1/3)``.
+The price: where steps vary, the sum of the local errors is no longer ``tol``.
 Everything depends on the time, the step count, the step and the states at the step's ends
 only, so a run continued from a checkpoint chooses the same steps.
 """
