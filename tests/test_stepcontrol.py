@@ -177,3 +177,59 @@ def test_the_state_coefficient_predicts_the_next_steps_local_error():
     assert np.median(ratios) == pytest.approx(1.0, abs=0.05)
     assert stepcontrol.coefficient(norm, integ.init(s, 0.0), integ.params) is None
     assert stepcontrol.coefficient(norm, st0, sd.GeneralizedAlpha(rho_inf=1.0).params) is None
+
+
+def _controlled_run(c, span, tol, h, allowance):
+    """The adaptive loop of ``simulate`` on a model whose local error is exactly ``c(t) h^3``
+    and whose states give ``c`` exactly: the times and steps of the rejections."""
+    t, n, rejected = 0.0, 0, []
+    while t < span - 1e-12:
+        h = min(h, span - t)
+        err = c(t + h / 2) * h ** 3 / stepcontrol.share(tol, span, t, 0.0, n, h)
+        lim = allowance(t, 0.0, n, h)
+        if err > lim:
+            rejected.append((t, h, (t / n if n else h)))
+            h = stepcontrol.next_step(h, err, False)
+            continue
+        t, n = t + h, n + 1
+        h = stepcontrol.next_step(h, err, True, c=(c(t - h), c(t)), limit=lim)
+    return n, rejected
+
+
+def test_a_violent_phase_is_crossed_without_rejection_and_rescaled_in_the_quiet_one():
+    # a swing from rest like A02's: the coefficient 30 times larger at the peak (t = 1, 3)
+    # than in the quiet phases (t = 0, 2, 4). Tracked steps keep h c^(1/6) = k, so their
+    # error-to-share ratio k^6 span / (tol h_bar^4) climbs as the mean step h_bar falls
+    # through the first swing; held to 1 everywhere the run rejects (a step change) in the
+    # violent phase, with the allowance only where a step is at least 1.2 h_bar: in the quiet
+    # phase, where the coefficient is small
+    def c(t):
+        return 1.0 + 29.0 * np.sin(0.5 * np.pi * t) ** 2
+
+    span, tol = 5.0, 1e-5
+    h0 = (tol / (span * c(0.0) ** (2 / 3))) ** 0.5 / 2  # ratio 0.5 ** 4 of the first share
+
+    def one(*_):
+        return 1.0
+
+    _, held = _controlled_run(c, span, tol, h0, one)
+    assert held and all(h < stepcontrol.QUIET * h_bar for _, h, h_bar in held)
+    assert any(c(t) > 10.0 for t, _, _ in held)
+    n, rejected = _controlled_run(c, span, tol, h0, stepcontrol.allowance)
+    assert all(h >= stepcontrol.QUIET * h_bar for _, h, h_bar in rejected)
+    assert all(c(t) < 10.0 for t, _, _ in rejected)
+    assert len(rejected) <= len(held)
+
+
+def test_the_allowance_and_the_band_of_a_violent_phase():
+    h_bar = 1e-3
+    assert stepcontrol.allowance(1.0, 0.0, 1000, stepcontrol.QUIET * h_bar) == 1.0
+    assert stepcontrol.allowance(1.0, 0.0, 1000, h_bar) == stepcontrol.ALLOWANCE
+    h, cs = 1e-3, (10.0, 11.0)
+    tracked = h * (10 / 11) ** (1 / 6)
+    # a violent phase: tracked above the share (up to the allowance) and far below it
+    for ratio in (3.9, 0.5, 1.3 ** -11):
+        assert stepcontrol.next_step(h, ratio, True, c=cs, limit=4.0) == pytest.approx(tracked)
+    # a quiet phase: the rule rescales outside [1.3^-6, 1]
+    for ratio in (1.3 ** -11, 1.3 ** -7):
+        assert stepcontrol.next_step(h, ratio, True, c=cs) == stepcontrol.next_step(h, ratio, True)

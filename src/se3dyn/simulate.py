@@ -335,7 +335,10 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         smaller step; while the error stays within ``[1.3^-6, 1]`` of its share the next step
         tracks the state, ``h (c_n / c_{n+1})^(1/6)`` with ``c`` the error coefficient that
         ``a - vd`` of the states at the step's ends give (rho_inf < 1), so that the steps
-        follow the motion, not its history; otherwise it is ``h (share / error)^(1/6)``
+        follow the motion, not its history (where a step is shorter than 1.2 times the mean
+        step so far, a violent phase, errors up to 4 times the share are accepted and the band
+        is ``[1.3^-12, 4]``: the share rescales the steps in the quiet phases, where a step
+        change costs least); otherwise it is ``h (share / error)^(1/6)``
         (safety 0.9, at most doubled, kept when it would grow by less than 30 %). A step whose
         Newton iterations fail is retried with h / 4. The sum of the accepted estimates is
         ``stats["error_estimate"]``. The global error is a fraction of ``tol`` where errors
@@ -602,7 +605,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             tol_h = stepcontrol.share(opt["tol"], span, st.t, t_start, i, h)
             est = norm(info.error)
             err = est / tol_h
-            if not err <= 1.0:
+            lim = stepcontrol.allowance(st.t, t_start, i, h)
+            if not err <= lim:
                 if h <= opt["h_min"] * (1 + 1e-9):
                     worst = norm.worst(info.error)
                     fail(SimulationError(
@@ -661,7 +665,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         if adaptive:
             cs = (stepcontrol.coefficient(norm, prev, integ.params),
                   stepcontrol.coefficient(norm, st, integ.params))
-            h = min(opt["h_max"], stepcontrol.next_step(h, err, accepted=True, c=cs))
+            h = min(opt["h_max"],
+                    stepcontrol.next_step(h, err, accepted=True, c=cs, limit=lim))
         cp = None
         if stored and regular and i % cpe == 0:
             cp = Checkpoint(st, i, h, stats["newton_iterations"], stats["rejected"], rec.total)

@@ -41,6 +41,17 @@ coefficient of the local error ``c h^3`` that the states at the step's ends give
 it (an error outside the band, a coefficient changing by more than ``KEEP_BELOW`` in one
 step, the first step, and rho_inf = 1, where ``a = vd`` gives nothing).
 
+**Phases.** Under tracking the error-to-share ratio is ``k^6 span / (tol h_bar^4)`` with
+``k = h c^(1/6)`` constant: it climbs as ``h_bar`` falls through a violent phase (on A02 at
+tol = 1e-5 from 0.2 to 1 through the first swing from rest) and a rejection there, a 10 % step
+change at the acceleration peak, cost most of the run's accuracy (10 tol). So a step shorter
+than ``QUIET`` times ``h_bar`` (a violent phase) is accepted up to ``ALLOWANCE`` times its
+share and keeps tracking down to ``KEEP_BELOW^-12`` of it (a spurious jump of ``a - vd`` near
+a singular position then does not freeze the step for hundreds of steps); the first step of
+the following quiet phase (``h >= QUIET h_bar``, where a step change costs little) is held to
+its share and rescales ``k`` there (:func:`allowance`). On A02 at 1e-5: one rescale at
+t = 1.59 s instead of two rejections at the peak, global error 1.2 tol instead of 10.
+
 Why ``c^(-1/6)``. On a motion of even difficulty the steps are even and the shares add up to
 ``tol``: the local errors sum to ``tol``. Where the difficulty varies, the classical rule (equal
 error per step, ``h ~ c^(-1/3)``, the fewest steps for a given *sum of local errors*) spends its
@@ -48,11 +59,11 @@ steps in short violent phases (a slider-crank's rod whipping round, a squeezer's
 swinging through) whose large local errors largely cancel in the global error, and takes long
 steps in the quiet phases before them, whose errors the motion then amplifies. Measured on
 eight problems at three tolerances (``benchmarks/adaptive_steps.py``, ``docs/accuracy.md``):
-``c^(-1/6)`` with tracking needs 0.44-1.05 times the steps of the best fixed step of the same
-global error in 22 of the 24 runs (the N-four-bar at the tightest tolerance 2.7, the squeezer
-1.2), against 0.45-1.07 and 1.3-4.2 (the squeezer, the N-four-bar) without tracking and
-0.39-2.8 (and 3.7-3.9) for ``c^(-1/3)``. The price: where steps vary, the sum of the local
-errors is no longer ``tol``.
+``c^(-1/6)`` with tracking and phases needs 0.45-1.04 times the steps of the best fixed
+step of the same global error in all 24 runs (tracking alone: 0.44-1.05 in 22, the N-four-bar
+at the tightest tolerance 2.7, the squeezer 1.2), against 0.45-1.07 and 1.3-4.2 (the
+squeezer, the N-four-bar) without tracking and 0.39-2.8 (and 3.7-3.9) for ``c^(-1/3)``.
+The price: where steps vary, the sum of the local errors is no longer ``tol``.
 Everything depends on the time, the step count, the step and the states at the step's ends
 only, so a run continued from a checkpoint chooses the same steps.
 """
@@ -63,6 +74,10 @@ import numpy as np
 
 #: Safety factor on the proposed step, its bounds per step and the dead band of growth.
 SAFETY, GROW_MAX, SHRINK_MIN, KEEP_BELOW = 0.9, 2.0, 0.2, 1.3
+#: A step is in a quiet phase when it is at least QUIET times the mean step so far; elsewhere
+#: (a violent phase) an error up to ALLOWANCE times its share is accepted, and a tracked step
+#: keeps tracking down to KEEP_BELOW^-12 of it (KEEP_BELOW^-6 in a quiet phase).
+QUIET, ALLOWANCE = 1.2, 4.0
 
 
 class ErrorNorm:
@@ -152,6 +167,16 @@ def share(tol: float, span: float, t: float, t_start: float, steps: int, h: floa
     return max(tol * (h_bar / span) * (h_bar / h) ** 3, 1e-300)
 
 
+def allowance(t: float, t_start: float, steps: int, h: float) -> float:
+    """The error-to-share ratio up to which a step of size ``h`` from ``t`` is accepted, after
+    ``steps`` steps from ``t_start``: 1 in a quiet phase (``h`` at least ``QUIET`` times the
+    mean step so far), ``ALLOWANCE`` in a violent one (see the module: there the ratio of
+    tracked steps climbs as the mean step falls, and a rejection, a step change, costs most;
+    the first quiet step rescales)."""
+    h_bar = (t - t_start) / steps if steps > 0 and t > t_start else h
+    return 1.0 if h >= QUIET * h_bar else ALLOWANCE
+
+
 def coefficient(norm: ErrorNorm, st, params: tuple[float, float, float, float]) -> float | None:
     """The local error coefficient ``c`` (a step's error ``c h^3``, m/s^3) at the state ``st``,
     from ``a - vd = (alpha_m - alpha_f) h_last q^(3)`` (Eq. (43): ``a`` approximates ``vd`` at
@@ -174,7 +199,7 @@ def coefficient(norm: ErrorNorm, st, params: tuple[float, float, float, float]) 
 
 
 def next_step(h: float, ratio: float, accepted: bool,
-              c: tuple[float | None, float | None] | None = None) -> float:
+              c: tuple[float | None, float | None] | None = None, limit: float = 1.0) -> float:
     """The step after one of size ``h`` whose error was ``ratio`` times its share (a ratio that
     goes as ``h^6``, see the module; unbounded by ``h_min``/``h_max``: the caller clips). A
     rejected step always shrinks.
@@ -183,13 +208,15 @@ def next_step(h: float, ratio: float, accepted: bool,
     of the accepted step. With both known, a ratio within ``[KEEP_BELOW^-6, 1]`` and a change
     of at most a factor ``KEEP_BELOW``, the step *tracks* the state: ``h (c_0 / c_1)^(1/6)``,
     so that ``h c^(1/6)`` stays what it was (steps as ``c^(-1/6)`` of the current state, not of
-    the run's history); otherwise the rule below."""
+    the run's history); otherwise the rule below. ``limit``: the step's :func:`allowance`;
+    above 1 (a violent phase) the band is ``[KEEP_BELOW^-12, limit]``."""
     f = SAFETY * max(ratio, 1e-10) ** (-1.0 / 6.0)
     if not accepted:
         return h * min(SAFETY, max(SHRINK_MIN, f))
     if c is not None and c[0] is not None and c[1] is not None and c[1] > 0:
         g = (c[0] / c[1]) ** (1.0 / 6.0)
-        if KEEP_BELOW ** -6 <= ratio <= 1.0 and 1.0 / KEEP_BELOW <= g <= KEEP_BELOW:
+        low = KEEP_BELOW ** (-12 if limit > 1.0 else -6)
+        if low <= ratio <= limit and 1.0 / KEEP_BELOW <= g <= KEEP_BELOW:
             return h * g
     f = min(GROW_MAX, max(SHRINK_MIN, f))
     if 1.0 <= f < KEEP_BELOW:
