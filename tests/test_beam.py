@@ -776,8 +776,9 @@ beams:
 def test_beams_run_with_adaptive_steps_and_in_redundant_loops():
     """A cantilever released under gravity with adaptive steps meets a fixed-step reference
     within tol (0.1 tol with about 3,000 steps for 0.3 s at tol = 1e-5, as many as the fixed
-    step of that accuracy; the step control of before issue 16 needed 13,000); a beam whose tip is held by two identical rigid joints to a fixed node has the
-    six equations of the second found redundant and left out, and its clamped tip stays put."""
+    step of that accuracy; the step control of before issue 16 needed 13,000); a beam whose
+    tip is held by two identical rigid joints to a fixed node has the six equations of the
+    second found redundant and left out, and its clamped tip stays put."""
     def cantilever(mb):
         mb.node("root", fixed=True)
         mb.node("tip", position=(1.0, 0, 0))

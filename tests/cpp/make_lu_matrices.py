@@ -36,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "src"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
 import chain_scaling  # noqa: E402  (the chain models, defined once there)
+
 import se3dyn as sd  # noqa: E402
 from se3dyn import lie  # noqa: E402
 from se3dyn.examples import slider_crank  # noqa: E402
