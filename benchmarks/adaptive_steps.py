@@ -104,8 +104,8 @@ def _problem(name: str) -> dict:
         while grid[-1] < 6 * cost:
             grid.append(int(grid[-1] * 1.03) + 1)
         best, hi = None, len(grid) - 1
-        while hi > 0 and fixed(grid[hi]) == math.inf:  # steps so small that Newton stalls
-            hi -= 1  # at the round-off floor of the residual (A02 at 51,090 steps)
+        while hi > 0 and fixed(grid[hi]) == math.inf:  # a fixed step that fails (A02 at
+            hi -= 1  # 51,090 steps did before a failing condensed step fell back to the model)
         if fixed(grid[hi]) <= e:  # bisection: the fixed-step error falls with N (C h^2)
             lo = 0
             while lo < hi:
