@@ -360,6 +360,11 @@ def cmd_run(args) -> int:
     st = res.stats
     print(f"  {stats['steps']} steps, {stats['newton_iterations']} Newton iterations "
           f"(max {st['max_iterations']} per step), wall time {wall:.2f} s")
+    if st.get("condensed"):
+        names = ", ".join(repr(n) for n in st["condensed"][:8]) + (
+            f" and {len(st['condensed']) - 8} more" if len(st["condensed"]) > 8 else "")
+        print(f"  rigid joints {names} condensed for the time loop (matrix "
+              f"{st['matrix_size']}; every node and joint reported)")
     for line in run_report(st):
         print("  " + line)
     print(f"  max constraint violation {st['max_constraint']:.2e}")
