@@ -199,9 +199,10 @@ class Condensation:
         L[:, self.mult_full] = lam
         return (Hf, *outs[:3], L) + ((outs[3],) if a is not None else ())
 
-    def expand(self, st, inputs=None):
+    def expand(self, st, ws=None, inputs=None):
         """The full system's state of a reduced state, the rigid joints' multipliers included
-        (``inputs``: :func:`se3dyn.system.step_inputs` of the full system at ``st.t``)."""
+        (evaluated by the workspace ``ws`` of the full system, a new one if None; ``inputs``:
+        :func:`se3dyn.system.step_inputs` of the full system at ``st.t``)."""
         from se3dyn.integrator import State
         from se3dyn.system import step_inputs
 
@@ -215,7 +216,7 @@ class Condensation:
             HJ = self.joint_frames(H[None])[0]
         u = (inputs or step_inputs(f, st.t))["u"]
         self.rigid_multipliers(H[None], HJ[None], alpha[None], v[None], vd[None], lam[None],
-                               u[None])
+                               u[None], ws)
         return State(t=st.t, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
                      work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated,
                      power=st.power, dropped=self.mult_full[np.asarray(st.dropped, np.int64)],
@@ -237,26 +238,29 @@ class Condensation:
         :attr:`se3dyn.results.Results.lam`), in blocks of rows."""
         self.fill_rows(res.t, res.H, res.alpha, res.v, res.vd, res.__dict__["_lam"])
 
-    def fill_rows(self, t, H, alpha, v, vd, lam) -> None:
+    def fill_rows(self, t, H, alpha, v, vd, lam, ws=None) -> None:
         """The same for rows of the full system given as arrays (``lam`` (n, nm) in place)."""
-        from se3dyn.system import input_table
+        from se3dyn.system import Workspace, input_table
 
+        ws = ws or Workspace(self.full)
         for lo in range(0, len(t), 4096):
             sl = slice(lo, lo + 4096)
             U, _ = input_table(self.full, np.asarray(t[sl], float))
             self.rigid_multipliers(H[sl], self.joint_frames(H[sl]), alpha[sl], v[sl], vd[sl],
-                                   lam[sl], U)
+                                   lam[sl], U, ws)
 
     def rigid_multipliers(self, H, HJ, alpha, v, vd, lam, U, ws=None) -> None:
         """Fill in the multipliers of the condensed rigid joints of rows (n, ...) of the full
         system (``lam`` (n, nm), in place) from the rows of the equations of motion of the
-        nodes they carry (Eq. (36)); ``U`` (n, nu) the inputs of the rows."""
+        nodes they carry (Eq. (36)); ``U`` (n, nu) the inputs of the rows; evaluated by the
+        workspace ``ws`` of the full system (a new one if None: never the system's shared
+        default one, so that runs and results in several threads do not share work arrays)."""
         if not len(self.rigid) or not len(H):
             return
-        from se3dyn.system import _engine
+        from se3dyn.system import Workspace, _engine
 
         f = self.full
-        eng, _ = _engine(f, ws)
+        eng, _ = _engine(f, ws or Workspace(f))
         n = len(H)
         F = np.ascontiguousarray(np.concatenate([H, HJ], axis=1), float)
         mult = f.joint_multadr[self.rigid][:, None] + np.arange(6)
@@ -291,7 +295,7 @@ def condensation(s, enabled: bool = True) -> Condensation | None:
 
 
 def _build(s) -> Condensation | None:
-    from se3dyn.system import combine_inertia, compile_model, evaluate, step_inputs
+    from se3dyn.system import Workspace, combine_inertia, compile_model, evaluate, step_inputs
 
     model = s.model
     nidx = {name: i for i, name in enumerate(s.node_names)}
@@ -406,8 +410,9 @@ def _build(s) -> Condensation | None:
     Dc, Dp = np.zeros((nr, 6, 6)), np.zeros((nr, 6, 6))
     z, zl = np.zeros(s.nq), np.zeros(s.nm)
     inputs = step_inputs(s, 0.0)
+    ws = Workspace(s)  # (its own: the build may run in several threads at once)
     ev = lambda lam: evaluate(s, s.node_H0, s.joint_H0, s.alpha0, z, z, z, lam,  # noqa: E731
-                              inputs).r
+                              inputs, ws=ws).r
     r0 = ev(zl)
     todo = list(range(nr))
     while todo:

@@ -87,9 +87,10 @@ class _Recorder:
     _FIELDS = ("t", "H", "v", "vd", "lam", "alpha", "scal")
 
     def __init__(self, s: System, capacity: int, sink=None, limit: int | None = None, *,
-                 store: bool = True, on_rows=None, cond=None):
+                 store: bool = True, on_rows=None, cond=None, full_ws=None):
         self.s = s
         self.cond = cond  # rows of cond.reduced, passed on as rows of cond.full (condense)
+        self.full_ws = full_ws  # the run's workspace of cond.full (its rigid reactions)
         self.out_system = s if cond is None else cond.full
         self.sink = sink
         self.on_rows = on_rows
@@ -161,7 +162,7 @@ class _Recorder:
 
     def sink_row(self, st: State, scal: np.ndarray) -> None:
         """Pass a stored row on to ``on_output`` (as a state of the model's own system)."""
-        self.sink(st if self.cond is None else self.cond.expand(st),
+        self.sink(st if self.cond is None else self.cond.expand(st, self.full_ws),
                   dict(zip(SCALARS, scal.tolist(), strict=True)))
 
     def added(self, count: int) -> None:
@@ -216,7 +217,9 @@ class _Recorder:
         self._summarize()
         checkpoint, self.pending = self.pending, None
         if checkpoint is not None and self.cond is not None and self.on_rows is not None:
-            checkpoint = dataclasses.replace(checkpoint, state=self.cond.expand(checkpoint.state))
+            checkpoint = dataclasses.replace(checkpoint,
+                                             state=self.cond.expand(checkpoint.state,
+                                                                    self.full_ws))
         if self.on_rows is not None and (self.n > self.sent or checkpoint is not None):
             self.on_rows(self._block(self.sent, self.n), checkpoint)
         self.sent = self.n
@@ -231,14 +234,15 @@ class _Recorder:
         (their rigid joints' multipliers computed now), and so will the next ones."""
         c, n, cap = self.cond, self.n, len(self.t)
         rows = c.expand_rows(self.H[:n], self.v[:n], self.vd[:n], self.alpha[:n], self.lam[:n])
-        c.fill_rows(self.t[:n], rows[0], rows[3], rows[1], rows[2], rows[4])
+        c.fill_rows(self.t[:n], rows[0], rows[3], rows[1], rows[2], rows[4], self.full_ws)
         for name, arr in zip(("H", "v", "vd", "alpha", "lam"), rows, strict=True):
             new = np.zeros((cap,) + arr.shape[1:])
             new[:n] = arr
             setattr(self, name, new)
         if self.pending is not None:
             self.pending = dataclasses.replace(self.pending,
-                                               state=c.expand(self.pending.state))
+                                               state=c.expand(self.pending.state,
+                                                              self.full_ws))
         self.s = self.out_system = c.full
         self.cond = None
         s = self.s
@@ -490,6 +494,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     # (a continued run starts from a state, not from the model's velocities)
     v_report = _velocity_report(s, st, e["kinetic"], ws) if initial_state is None else {}
     model_system, redundant_names = s, [equation_name(s, r) for r in st.dropped]
+    ws_full = ws  # the model's own system: its state at t0, the condensed rows expanded
     # rigid joints condensed for the time loop (se3dyn.condense): the steps run on the
     # reduced system, the stored rows are the model's own
     cond = condensation(s) if condense else None
@@ -504,7 +509,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     # storage grows as the run goes (doubling, up to the rows expected)
     rec = _Recorder(s, min(capacity, _INITIAL_ROWS), on_output,
                     None if adaptive and grid is None else capacity, store=store,
-                    on_rows=on_rows, cond=cond)
+                    on_rows=on_rows, cond=cond, full_ws=ws_full)
     solver = integ.solver(s, st)
     rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
     stats = dict(steps=0, rejected=0, newton_iterations=0, rho_inf=rho_inf, step=step,
@@ -536,17 +541,16 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         # (a condensed run never fails where the model itself goes on; stats say from when)
         nonlocal s, st, ws, solver, cond, norm
         stats["condensed_until"] = st.t
-        full = dataclasses.replace(cond.expand(st), solver=None)
+        full = dataclasses.replace(cond.expand(st, ws_full), solver=None)
         rec.uncondense()
-        s, st, cond = model_system, full, None
-        ws = Workspace(s)
+        s, st, cond, ws = model_system, full, None, ws_full
         solver = integ.solver(s, st)
         if adaptive:
             norm = stepcontrol.ErrorNorm(s)
 
     def fail(exc: SimulationError):
         stats.update(steps=i - k0, failed=True, wall_time=time.perf_counter() - wall0,
-                     final_state=st if cond is None else cond.expand(st))
+                     final_state=st if cond is None else cond.expand(st, ws_full))
         if grid is None and rec.n and rec.last_time() != st.t:
             e = energies(s, st, step_inputs(s, st.t), ws)
             rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
@@ -673,7 +677,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         rec.emit(cp, force=st.t >= t_end or (not adaptive and i >= nsteps))
     rec.emit()
     stats.update(steps=i - k0, failed=False, wall_time=time.perf_counter() - wall0,
-                 final_state=st if cond is None else cond.expand(st))
+                 final_state=st if cond is None else cond.expand(st, ws_full))
     res = rec.results(stats)
     _energy_check(res)
     return res
