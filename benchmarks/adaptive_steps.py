@@ -19,7 +19,13 @@ whose published reference is given to 1e-14):
   0.1 to 6 times the adaptive run's steps, found by bisection since the fixed-step error falls
   with N as C h^2; same 200 output times) whose error is at most the adaptive run's, and the
   ratio of the adaptive run's steps (rejected ones included) to N: below 1, adaptive stepping
-  is cheaper.
+  is cheaper;
+* the global error estimate (``global_error=True``: a companion run on the run's steps two at
+  a time, Richardson) against the true global error above, and the wall time of the run with
+  the estimate over the run without (the same steps and rows);
+* ``global_error="bound"``: its true error, whether it is within ``tol``, and its cost (the
+  steps of every run, rejected and companion steps included) against the best fixed step of
+  its own accuracy (the same bisection).
 
 Writes ``benchmarks/results/adaptive_steps.json`` (named problems: their entries only).
 Usage: ``python benchmarks/adaptive_steps.py [problem ...]`` (default: all).
@@ -93,38 +99,65 @@ def _problem(name: str) -> dict:
                 cache[n] = math.inf
         return cache[n]
 
-    rows = []
-    for tol in OWN_TOLS.get(name, TOLS):
-        t0 = time.perf_counter()
-        r = sd.simulate(s, T, min(1e-3, T / 1000), tol=tol, output_step=T / N_OUT, **kw)
-        wall = time.perf_counter() - t0
-        e = err(r)
-        cost = r.stats["steps"] + r.stats["rejected"]
+    def best_fixed(e: float, cost: int) -> int | None:
         grid = [max(10, int(0.1 * cost))]  # 3 % apart, 0.1 to 6 times the cost
         while grid[-1] < 6 * cost:
             grid.append(int(grid[-1] * 1.03) + 1)
-        best, hi = None, len(grid) - 1
+        hi = len(grid) - 1
         while hi > 0 and fixed(grid[hi]) == math.inf:  # a fixed step that fails (A02 at
             hi -= 1  # 51,090 steps did before a failing condensed step fell back to the model)
-        if fixed(grid[hi]) <= e:  # bisection: the fixed-step error falls with N (C h^2)
-            lo = 0
-            while lo < hi:
-                mid = (lo + hi) // 2
-                lo, hi = (lo, mid) if fixed(grid[mid]) <= e else (mid + 1, hi)
-            best = grid[lo]
+        if not fixed(grid[hi]) <= e:
+            return None
+        lo = 0  # bisection: the fixed-step error falls with N (C h^2)
+        while lo < hi:
+            mid = (lo + hi) // 2
+            lo, hi = (lo, mid) if fixed(grid[mid]) <= e else (mid + 1, hi)
+        return grid[lo]
+
+    rows = []
+    for tol in OWN_TOLS.get(name, TOLS):
+        h0 = min(1e-3, T / 1000)
+        t0 = time.perf_counter()
+        r = sd.simulate(s, T, h0, tol=tol, output_step=T / N_OUT, **kw)
+        wall = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        rg = sd.simulate(s, T, h0, tol=tol, output_step=T / N_OUT, global_error=True, **kw)
+        wall_g = time.perf_counter() - t0
+        assert np.array_equal(rg.H, r.H)  # (the estimate does not change the run)
+        e = err(r)
+        cost = r.stats["steps"] + r.stats["rejected"]
+        best = best_fixed(e, cost)
+        rb = sd.simulate(s, T, h0, tol=tol, output_step=T / N_OUT, global_error="bound", **kw)
+        eb = err(rb)
+        runs = rb.stats["global_error_runs"]
+        cost_b = (cost + rg.stats["global_error_steps"]
+                  + sum(x["steps"] + x["rejected"] for x in runs[1:]))
+        best_b = best_fixed(eb, cost_b) if len(runs) > 1 else best
+        bound = dict(error=eb, error_over_tol=eb / tol, estimate=rb.stats["global_error"],
+                     runs=runs, cost_steps=cost_b, best_fixed_steps=best_b,
+                     cost_over_best_fixed=cost_b / best_b if best_b else None)
         row = dict(tol=tol, steps=r.stats["steps"], rejected=r.stats["rejected"],
                    newton_iterations=r.stats["newton_iterations"], error=e,
                    error_over_tol=e / tol,
                    estimate_sum_over_tol=r.stats["error_estimate"] / tol,
                    h_min=r.stats["h_min_used"], h_max=r.stats["h_max_used"], wall_s=wall,
                    best_fixed_steps=best, best_fixed_error=cache.get(best),
-                   steps_over_best_fixed=cost / best if best else None)
+                   steps_over_best_fixed=cost / best if best else None,
+                   global_error_estimate=rg.stats["global_error"],
+                   estimate_over_error=rg.stats["global_error"] / e,
+                   companion_steps=rg.stats["global_error_steps"],
+                   wall_with_estimate_over_without=wall_g / wall, bound=bound)
         rows.append(row)
         ratio = f"{cost / best:.2f}" if best else "n/a"
+        ratio_b = f"{cost_b / best_b:.2f}" if best_b else "n/a"
         print(f"{name} tol {tol:g}: {r.stats['steps']} steps + {r.stats['rejected']} "
               f"rejected, error {e:.2e} m = {e / tol:.2f} tol (sum of estimates "
               f"{r.stats['error_estimate'] / tol:.2f} tol); best fixed step of that "
-              f"accuracy: {best} steps -> adaptive/fixed {ratio}", flush=True)
+              f"accuracy: {best} steps -> adaptive/fixed {ratio}; global error estimate "
+              f"{rg.stats['global_error'] / e:.2f} x the error (wall x{wall_g / wall:.2f}); "
+              f"bound: {len(runs)} run(s), refined x{rb.stats['global_error_refine']}, error "
+              f"{eb / tol:.2f} tol, cost {cost_b} steps -> /best fixed of that accuracy "
+              f"{ratio_b}", flush=True)
     return dict(t_end=T, settings=kw, rows=rows)
 
 

@@ -710,7 +710,7 @@ def _positive(kind):
 
 
 _OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step",
-              "initial_velocities")
+              "initial_velocities", "global_error")
 
 
 def run_report(stats: dict) -> list[str]:
@@ -731,6 +731,15 @@ def run_report(stats: dict) -> list[str]:
         out.append(f"adaptive steps: local error estimates add up to "
                    f"{stats['error_estimate']:.3e} m (tol {stats['tol']:g} m); the global "
                    "error can exceed it where the motion amplifies errors (docs/accuracy.md)")
+    if stats.get("global_error") is not None:
+        ge, tol = stats["global_error"], stats.get("tol") or math.inf
+        out.append(f"global error estimate {ge:.3e} m ({ge / tol:.3g} tol) at t = "
+                   f"{stats['global_error_at']:.6g} s"
+                   + ("  WARNING: above tol; the motion amplifies the local errors, a smaller "
+                      "tol brings it down" if ge > tol else ""))
+    if stats.get("global_error_until") is not None:
+        out.append(f"global error estimated until t = {stats['global_error_until']:.9g} s "
+                   f"only (its companion run stopped: {stats.get('global_error_failure', '')})")
     if "energy_balance_error" in stats:
         err, scale = stats["energy_balance_error"], stats["energy_scale"]
         rel = f"{100 * err / scale:.3g} % of" if scale > 0 else "with no"
@@ -755,6 +764,9 @@ def _add_overrides(p: argparse.ArgumentParser) -> None:
                    help="adaptive steps: the local position errors (m, RMS over each "
                         "body's mass) add up to TOL over a run of even difficulty "
                         "(docs/accuracy.md)")
+    p.add_argument("--global-error", action="store_const", const=True, default=None,
+                   help="with --tol: estimate the global position error by a companion run "
+                        "on the run's steps taken two at a time (about half the steps again)")
     p.add_argument("--output-step", type=_positive("pos"),
                    help="store results every OUTPUT_STEP seconds (dense output)")
     p.add_argument("--initial-velocities", choices=("project", "strict"),

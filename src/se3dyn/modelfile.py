@@ -780,6 +780,9 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("initial_velocities", Str(("project", "strict")), "project", "Initial "
               "velocities the joints do not allow: projected onto the velocity constraints "
               "(reported per node in the run summary and the results' stats), or refused."),
+        Field("global_error", Bool(), False, "With `tol`: estimate the run's global position "
+              "error by a companion run on its steps taken two at a time (Richardson; about "
+              "half the steps again); reported in the run summary and the results' stats."),
         Field("condense", Bool(), True, "Nodes joined by rigid joints move as one body in the "
               "time loop (fewer unknowns; every node's motion and every joint's reactions are "
               "still reported); false keeps the rigid joints as constraints."),

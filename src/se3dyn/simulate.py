@@ -297,7 +297,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
              on_rows: Callable[[Results, Checkpoint | None], None] | None = None,
              store: bool = True,
              initial_state: State | Checkpoint | None = None,
-             condense: bool = True) -> Results:
+             condense: bool = True, global_error: bool | str = False,
+             _schedule: np.ndarray | None = None) -> Results:
     """Simulate a model from ``t_start`` to ``t_end`` (Eqs. (38)-(46)), with a fixed step or,
     when ``tol`` is given, with adaptive steps.
 
@@ -417,6 +418,26 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         reduced model is retried with the rigid joints kept, and the run goes on so
         (``stats["condensed_until"]``: the time of the switch). See :mod:`se3dyn.condense`
         for what is kept as a joint.
+    global_error : bool or "bound"
+        With ``tol``: ``True`` estimates the global position error of the run (m, in the norm
+        of ``tol``) by a companion run that takes the run's accepted steps two at a time
+        (Richardson: the error is the difference of the two runs over three where both
+        meet; :class:`~se3dyn.stepcontrol.GlobalEstimate`), at the cost of about half the
+        run's steps again. ``stats["global_error"]`` is the largest estimate,
+        ``stats["global_error_at"]`` its time, ``stats["global_error_history"]`` the (k, 2)
+        times and estimates; where the companion's Newton iterations fail, the estimate stops
+        (``stats["global_error_until"]``). The run's own steps do not depend on it, and a
+        :class:`~se3dyn.errors.Se3dynWarning` says so when the estimate exceeds ``tol``. A run
+        continued from ``initial_state`` estimates the error made from there on.
+        ``"bound"`` makes ``tol`` a bound on the estimated global error: when the first
+        run's estimate ``E`` exceeds ``tol``, the run is repeated on its own steps each split
+        into ``m = ceil(sqrt(E / (0.8 tol)))`` (the error of a second-order scheme falls as
+        ``1/m^2`` on steps refined alike), and the repeated run's error estimated from the
+        two, ``|y_1 - y_m| / (m^2 - 1)`` over their common rows; at most
+        ``BOUND_RUNS`` = 3 runs. The results are those of the last run;
+        ``stats["global_error_runs"]`` lists every run (refinement, steps, estimate).
+        For results kept in memory only (``store=True``, no ``on_output``/``on_rows``) and
+        from the model's initial state.
 
     Returns
     -------
@@ -437,6 +458,16 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         ``result`` attribute holds the results up to the last converged step, and the message
         names the time, the step, the norms and the worst item.
     """
+    if isinstance(global_error, str) and global_error == "bound":
+        return _bound(dict(model=model, t_end=t_end, step=step, rho_inf=rho_inf,
+                           t_start=t_start, tol_residual=tol_residual,
+                           tol_constraint=tol_constraint, max_iter=max_iter,
+                           output_every=output_every, formulation=formulation,
+                           redundant=redundant, tol=tol, h_min=h_min, h_max=h_max,
+                           output_step=output_step, engine=engine, newton=newton,
+                           initial_velocities=initial_velocities, progress=progress,
+                           on_output=on_output, on_rows=on_rows, store=store,
+                           initial_state=initial_state, condense=condense))
     s = system_of(model)
     t_end, step, t_start, output_every, span, opt = _settings(
         t_end, step, t_start, output_every, tol, h_min, h_max, output_step)
@@ -448,6 +479,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             raise ModelError("simulate", fld, "True or False", val)
     store, condense = bool(store), bool(condense)
     adaptive = opt["tol"] is not None
+    global_error = _global_error_setting(global_error, adaptive)
     k0 = 0  # steps before the first one of this call (fixed steps from an initial_state)
     first_step = None
     if isinstance(initial_state, Checkpoint):
@@ -524,9 +556,13 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                  **v_report)
     if initial_state is not None:
         stats["resumed_at"] = st.t
+    gest = None  # the companion run of the global error estimate
+    step_times = [st.t]  # of an adaptive run: the times its accepted steps reached
     if adaptive:
         norm = stepcontrol.ErrorNorm(s)
         stats["error_estimate"] = 0.0
+        if global_error:
+            gest = stepcontrol.GlobalEstimate(norm, st, _companion(integ, s))
     nsteps = 0 if adaptive else max(1, math.ceil(span / step - 1e-9))
     h = min(step, opt["h_max"]) if adaptive else step
     if adaptive and first_step is not None:
@@ -543,12 +579,20 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         stats["condensed_until"] = st.t
         full = dataclasses.replace(cond.expand(st, ws_full), solver=None)
         rec.uncondense()
+        if gest is not None:
+            gest.replace(stepcontrol.ErrorNorm(model_system),
+                         dataclasses.replace(cond.expand(gest.coarse, ws_full), solver=None),
+                         _companion(integ, model_system))
         s, st, cond, ws = model_system, full, None, ws_full
         solver = integ.solver(s, st)
         if adaptive:
             norm = stepcontrol.ErrorNorm(s)
 
     def fail(exc: SimulationError):
+        if gest is not None:
+            stats.update(gest.stats())
+        if adaptive:
+            stats["step_times"] = np.asarray(step_times)
         stats.update(steps=i - k0, failed=True, wall_time=time.perf_counter() - wall0,
                      final_state=st if cond is None else cond.expand(st, ws_full))
         if grid is None and rec.n and rec.last_time() != st.t:
@@ -588,7 +632,15 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         if nsteps > k0:
             stats["h_min_used"], stats["h_max_used"] = hs
     while st.t < t_end and (adaptive or i < nsteps):
-        if adaptive:
+        if _schedule is not None:  # (a refined repetition, global_error="bound")
+            t1 = float(_schedule[i + 1])
+            h = t1 - st.t
+            try:
+                new, info = integ.step(s, st, h, solver, ws)
+            except SimulationError as exc:
+                fail(exc)
+            regular = True
+        elif adaptive:
             h = min(h, t_end - st.t)
             if t_end - st.t - h < 1e-9 * h:
                 h = t_end - st.t
@@ -638,6 +690,10 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                 fail(exc)
         new = dataclasses.replace(new, t=t1)  # exact times, no drift
         i += 1
+        if adaptive:
+            step_times.append(t1)
+        if gest is not None:
+            gest.accepted(new, final=t1 >= t_end)
         stats["newton_iterations"] += info.iterations
         stats["h_min_used"] = min(stats["h_min_used"], h)
         stats["h_max_used"] = max(stats["h_max_used"], h)
@@ -666,7 +722,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         prev, st = st, new
         if progress is not None:
             progress(st.t, i)
-        if adaptive:
+        if adaptive and _schedule is None:
             cs = (stepcontrol.coefficient(norm, prev, integ.params),
                   stepcontrol.coefficient(norm, st, integ.params))
             h = min(opt["h_max"],
@@ -676,11 +732,102 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             cp = Checkpoint(st, i, h, stats["newton_iterations"], stats["rejected"], rec.total)
         rec.emit(cp, force=st.t >= t_end or (not adaptive and i >= nsteps))
     rec.emit()
+    if gest is not None:
+        stats.update(gest.stats())
+    if adaptive:
+        stats["step_times"] = np.asarray(step_times)
     stats.update(steps=i - k0, failed=False, wall_time=time.perf_counter() - wall0,
                  final_state=st if cond is None else cond.expand(st, ws_full))
     res = rec.results(stats)
     _energy_check(res)
+    _global_error_check(res)
     return res
+
+
+#: Runs of ``simulate(..., global_error="bound")`` at most (the first and its refinements),
+#: and the fraction of ``tol`` a refinement aims at.
+BOUND_RUNS, BOUND_AIM = 3, 0.8
+
+
+def _bound(call: dict) -> Results:
+    """``simulate(..., global_error="bound")``: the run, repeated on its own steps refined
+    until the estimated global error is within ``tol`` (see :func:`simulate`)."""
+    import warnings
+
+    from se3dyn.errors import Se3dynWarning
+
+    why = None
+    if call["tol"] is None:
+        why = "an adaptive run (tol given)"
+    elif call["on_output"] is not None or call["on_rows"] is not None or call["store"] is not True:
+        why = ("results kept in memory (store=True, no on_output or on_rows): a run may be "
+               "repeated")
+    elif call["initial_state"] is not None:
+        why = "a run from the model's initial state (no initial_state)"
+    if why:
+        raise ModelError("simulate", "global_error", f"'bound' with {why}", "bound")
+    tol = float(call["tol"])
+    with warnings.catch_warnings():  # (the first run's estimate above tol is what follows)
+        warnings.filterwarnings("ignore", "global error estimate", Se3dynWarning)
+        res = simulate(**call, global_error=True)
+    est = res.stats["global_error"]
+    times = res.stats["step_times"]
+    runs = [dict(refine=1, steps=res.stats["steps"], rejected=res.stats["rejected"],
+                 global_error=est)]
+    norm = stepcontrol.ErrorNorm(system_of(call["model"]))
+    refine = 1
+    while (est is not None and est > tol and len(runs) < BOUND_RUNS
+           and res.stats.get("global_error_until") is None):
+        m = max(2, math.ceil(math.sqrt(est / (BOUND_AIM * tol))))
+        refine *= m
+        frac = np.arange(refine) / refine  # every step of the first run split in `refine`
+        sched = np.append((times[:-1, None] + frac * np.diff(times)[:, None]).ravel(),
+                          times[-1])
+        sched[::refine] = times  # (the first run's times exactly)
+        new = simulate(**call, global_error=False, _schedule=sched)
+        common, ia, ib = np.intersect1d(res.t, new.t, return_indices=True)
+        est = float(norm.frames(new.H[ib], res.H[ia]).max(initial=0.0)) / (m * m - 1)
+        runs.append(dict(refine=refine, steps=new.stats["steps"], rejected=0,
+                         global_error=est))
+        res = new
+    res.stats.update(global_error=est, global_error_runs=runs, global_error_refine=refine)
+    if len(runs) > 1:
+        for k in ("global_error_at", "global_error_final", "global_error_history",
+                  "global_error_steps"):
+            res.stats.pop(k, None)
+    if est is not None and est > tol:
+        warnings.warn(Se3dynWarning(
+            f"global_error='bound': the estimated global error {est:.3g} m is still above "
+            f"tol = {tol:g} m after {len(runs)} runs (steps refined {refine} times)"
+            + (f"; the estimate stopped at t = {res.stats['global_error_until']:.6g} s"
+               if res.stats.get("global_error_until") is not None else "")),
+            stacklevel=3)
+    return res
+
+
+def _global_error_setting(val, adaptive: bool) -> bool:
+    """``global_error`` checked: True or False, True with ``tol`` only ("bound" is handled
+    by :func:`_bound`)."""
+    if isinstance(val, str) and val == "bound":
+        val = True
+    if not isinstance(val, bool | np.bool_):
+        raise ModelError("simulate", "global_error", "True, False or 'bound'", val)
+    if val and not adaptive:
+        raise ModelError("simulate", "global_error", "an adaptive run (tol given): the "
+                         "estimate follows the run's own steps", val)
+    return bool(val)
+
+
+def _companion(integ: GeneralizedAlpha, s: System):
+    """The step of the companion run of a global error estimate: from a state to a time, in a
+    workspace of its own (:class:`~se3dyn.stepcontrol.GlobalEstimate`)."""
+    ws = Workspace(s)
+
+    def step(st: State, t: float) -> State:
+        new, _ = integ.step(s, st, t - st.t, None, ws)
+        return dataclasses.replace(new, t=t)
+
+    return step
 
 
 def _check_initial_state(s: System, st, t_start: float, t_end: float, step: float,
@@ -794,6 +941,7 @@ def check_settings(model: Model | System, **settings) -> None:
         a["t_end"], a["step"], a["t_start"], a["output_every"], a["tol"], a["h_min"],
         a["h_max"], a["output_step"])
     _check_size(s, span, step, output_every, opt["output_step"], opt["tol"] is not None)
+    _global_error_setting(a["global_error"], opt["tol"] is not None)
     GeneralizedAlpha(rho_inf=a["rho_inf"], tol_residual=a["tol_residual"],
                      tol_constraint=a["tol_constraint"], max_iter=a["max_iter"],
                      formulation=a["formulation"], redundant=a["redundant"],
@@ -877,6 +1025,19 @@ def _energy_check(res: Results) -> None:
             f"the energy in play in the run ({scale:.3g} J): the step is probably too large "
             "for the motion (the results may be far from the true motion; try a smaller step, "
             "or rho_inf < 1 with the index-3 form)"), stacklevel=3)
+
+
+def _global_error_check(res: Results) -> None:
+    import warnings
+
+    from se3dyn.errors import Se3dynWarning
+
+    ge, tol = res.stats.get("global_error"), res.stats.get("tol")
+    if ge is not None and tol is not None and ge > tol:
+        warnings.warn(Se3dynWarning(
+            f"global error estimate {ge:.3g} m is {ge / tol:.3g} times tol = {tol:g} m (largest "
+            f"at t = {res.stats['global_error_at']:.6g} s): the motion amplifies the local "
+            "errors; a smaller tol brings it down (docs/accuracy.md)"), stacklevel=3)
 
 
 def _available_memory() -> float | None:

@@ -1,0 +1,173 @@
+"""Global error estimate of adaptive runs (``simulate(..., tol=..., global_error=True)``).
+
+A companion run takes the run's accepted steps two at a time; the scheme being second order,
+the run's global position error is the difference of the two runs over 2^2 - 1 = 3 where they
+meet (Richardson's global extrapolation, :class:`se3dyn.stepcontrol.GlobalEstimate`). Checked
+against closed-form solutions (a damped oscillator, the IFToMM A01 pendulum) and, on a
+mechanism that amplifies errors (the paper's slider-crank, global error above ``tol``),
+against a converged reference run whose own error is 1/800 of the run's.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import se3dyn as sd
+from se3dyn.errors import ModelError, Se3dynWarning
+from se3dyn.examples import slider_crank
+from se3dyn.modelfile import load_model
+from se3dyn.simulate import Checkpoint
+from se3dyn.stepcontrol import ErrorNorm
+from test_adaptive import _exact, _oscillator_model, _pendulum_exact_p1
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-4])
+def test_estimate_follows_the_closed_form_error_of_the_damped_oscillator(tol):
+    r = sd.simulate(_oscillator_model(), 5.0, 1e-3, tol=tol, global_error=True)
+    hist = r.stats["global_error_history"]
+    assert hist.shape[1] == 2 and len(hist) == math.ceil(r.stats["steps"] / 2)
+    assert r.stats["global_error_steps"] == len(hist)
+    # every row is a step of the run (no output_step): the true error at the meeting times
+    i = np.searchsorted(r.t, hist[:, 0])
+    np.testing.assert_array_equal(r.t[i], hist[:, 0])
+    true = np.abs(r.joint_coordinates("s")[i, 0] - _exact(hist[:, 0]))
+    # the body is a point mass on a slider: the norm of tol is its position error
+    assert 0.8 <= r.stats["global_error"] / true.max() <= 1.25, (r.stats["global_error"],
+                                                                 true.max())
+    # and along the run, not only at its largest: within a fifth of the largest error
+    assert np.abs(hist[:, 1] - true).max() <= 0.2 * true.max()
+    k = int(np.argmax(hist[:, 1]))
+    assert r.stats["global_error_at"] == hist[k, 0]
+    assert r.stats["global_error_final"] == hist[-1, 1]
+
+
+def test_estimate_matches_the_closed_form_error_of_the_a01_pendulum():
+    model, settings = load_model(ROOT / "examples" / "a01_simple_pendulum.yaml")
+    r = sd.simulate(model, 10.0, 1e-3, tol=1e-3, output_step=0.01, rho_inf=settings["rho_inf"],
+                    global_error=True)
+    e = float(np.linalg.norm(r.node_position("P1")[:, :2] - _pendulum_exact_p1(r.t),
+                             axis=1).max())
+    assert 0.8 <= r.stats["global_error"] / e <= 1.25, (r.stats["global_error"], e)
+    assert r.stats["global_error"] <= 1e-3  # errors neither grow nor decay: within tol
+
+
+T_SC, N_OUT = 1.0, 200
+
+
+@pytest.fixture(scope="module")
+def crank():
+    """The paper's slider-crank over 1 s and a converged reference on 200 output times (16,000
+    fixed steps: its error is 1/800 of the runs' below, the fixed-step error being C h^2)."""
+    s = sd.compile_model(slider_crank())
+    return s, sd.simulate(s, T_SC, T_SC / 16000, output_every=16000 // N_OUT)
+
+
+def test_estimate_finds_an_error_above_tol_where_the_motion_amplifies_it_and_warns(crank):
+    # the slider-crank's rod whipping round amplifies the errors of the quiet phase before it:
+    # the global error is about 2.4 tol (docs/accuracy.md); the estimate must see it
+    s, ref = crank
+    tol = 1e-5
+    with pytest.warns(Se3dynWarning, match="global error estimate .* times tol"):
+        r = sd.simulate(s, T_SC, 1e-3, tol=tol, output_step=T_SC / N_OUT, global_error=True)
+    assert np.allclose(r.t, ref.t, rtol=0, atol=1e-12)
+    e = float(ErrorNorm(s).frames(r.H, ref.H).max())
+    assert e > 1.5 * tol  # (the property that makes the estimate worth having)
+    assert 0.8 <= r.stats["global_error"] / e <= 1.25, (r.stats["global_error"], e)
+
+
+def test_bound_repeats_the_run_on_refined_steps_until_the_error_is_within_tol(crank):
+    s, ref = crank
+    tol = 1e-5
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Se3dynWarning)  # (nothing left to warn about)
+        r = sd.simulate(s, T_SC, 1e-3, tol=tol, output_step=T_SC / N_OUT,
+                        global_error="bound")
+    e = float(ErrorNorm(s).frames(r.H, ref.H).max())
+    assert e <= tol, e  # the true error, against the converged reference
+    runs = r.stats["global_error_runs"]
+    assert len(runs) >= 2 and runs[0]["global_error"] > tol
+    m = runs[-1]["refine"]
+    assert runs[-1]["steps"] == m * runs[0]["steps"]  # every step of the first run split in m
+    assert r.stats["global_error"] <= tol
+    assert 0.8 <= r.stats["global_error"] / e <= 1.25, (r.stats["global_error"], e)
+    # the refined run passes through every time of the first one
+    first = sd.simulate(s, T_SC, 1e-3, tol=tol, output_step=T_SC / N_OUT)
+    assert np.isin(first.stats["step_times"], r.stats["step_times"]).all()
+
+
+def test_bound_keeps_a_first_run_already_within_tol():
+    kw = dict(tol=1e-3, output_step=0.01)
+    a = sd.simulate(slider_crank(), 0.5, 1e-3, global_error=True, **kw)
+    b = sd.simulate(slider_crank(), 0.5, 1e-3, global_error="bound", **kw)
+    assert a.stats["global_error"] <= 1e-3
+    np.testing.assert_array_equal(a.H, b.H)
+    assert b.stats["global_error_runs"] == [dict(refine=1, steps=a.stats["steps"],
+                                                 rejected=a.stats["rejected"],
+                                                 global_error=a.stats["global_error"])]
+
+
+def test_the_estimate_does_not_change_the_run():
+    kw = dict(tol=1e-4, output_step=0.01)
+    a = sd.simulate(slider_crank(), 0.5, 1e-3, **kw)
+    b = sd.simulate(slider_crank(), 0.5, 1e-3, global_error=True, **kw)
+    for name in ("t", "H", "v", "vd", "lam"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert a.stats["steps"] == b.stats["steps"] and "global_error" not in a.stats
+
+
+def test_a_companion_that_fails_stops_the_estimate_and_says_where():
+    # one Newton iteration per step: the run retries its failing steps at h / 4, while the
+    # companion's double steps fail; the run completes, the estimate says it stopped
+    r = sd.simulate(slider_crank(), 0.2, 0.02, tol=1e-3, max_iter=1, global_error=True)
+    assert not r.stats["failed"] and r.t[-1] == 0.2
+    assert r.stats["global_error_until"] == 0.0
+    assert "max_iter=1" in r.stats["global_error_failure"]
+    assert r.stats["global_error"] is None
+
+
+def test_a_continued_run_estimates_the_error_from_where_it_starts():
+    # the companion starts from the state the run continues from: the estimate is that of the
+    # error made from there on (the state carries no companion)
+    model = slider_crank()
+    first = sd.simulate(model, 0.3, 1e-3, tol=1e-4)
+    cp = Checkpoint(first.stats["final_state"], first.stats["steps"], 1e-3)
+    r = sd.simulate(model, 0.5, 1e-3, tol=1e-4, initial_state=cp, global_error=True)
+    assert r.stats["global_error_from"] == 0.3
+    assert r.stats["global_error_history"][0, 0] > 0.3
+    assert r.stats["global_error_history"][-1, 0] == 0.5
+
+
+@pytest.mark.parametrize("kw, want", [
+    (dict(global_error=True), "an adaptive run"),
+    (dict(global_error="yes", tol=1e-3), "True, False or 'bound'"),
+    (dict(global_error="bound"), "'bound' with an adaptive run"),
+    (dict(global_error="bound", tol=1e-3, store=False), "'bound' with results kept in memory"),
+])
+def test_bad_global_error_settings_are_named(kw, want):
+    with pytest.raises(ModelError, match=f"global_error.*{want}"):
+        sd.simulate(slider_crank(), 0.1, 1e-3, **kw)
+
+
+def test_command_line_and_model_file_report_the_estimate(tmp_path, capsys):
+    from se3dyn.cli import main
+
+    text = (ROOT / "examples" / "slider_crank.yaml").read_text()
+    assert "global_error" not in text
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Se3dynWarning)  # (the command reports, never warns)
+        assert main(["run", str(ROOT / "examples" / "slider_crank.yaml"), "--out",
+                     str(tmp_path), "--quiet", "--t-end", "0.3", "--tol", "1e-4",
+                     "--global-error"]) == 0
+    out = capsys.readouterr().out
+    assert "global error estimate" in out and " tol) at t = " in out
+    from se3dyn.h5 import read_results
+
+    info = read_results(tmp_path / "slider_crank.h5").stats
+    assert info["global_error"] > 0 and info["global_error_steps"] > 0
