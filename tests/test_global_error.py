@@ -171,3 +171,30 @@ def test_command_line_and_model_file_report_the_estimate(tmp_path, capsys):
 
     info = read_results(tmp_path / "slider_crank.h5").stats
     assert info["global_error"] > 0 and info["global_error_steps"] > 0
+
+
+def test_bound_keeps_the_last_run_when_a_refinement_fails(monkeypatch):
+    # a refined run whose Newton iterations fail (as a step near a singular position may):
+    # the results and the estimate are the first run's, and a warning names the failure
+    import sys
+
+    sim = sys.modules["se3dyn.simulate"]  # (the package's `simulate` is the function)
+    real = sim.simulate
+
+    def failing(*args, _schedule=None, **kw):
+        if _schedule is not None:
+            raise sd.NewtonError("Newton failed at t=0.5 (step h=0.001); made up", t=0.5,
+                                 h=1e-3, iterations=25, residual_norm=1.0,
+                                 constraint_norm=0.0, item="node 'x'")
+        return real(*args, **kw)
+
+    monkeypatch.setattr(sim, "simulate", failing)
+    kw = dict(tol=1e-5, output_step=0.01)
+    with pytest.warns(Se3dynWarning, match="the refinement of the last failed: Newton failed"):
+        r = sim.simulate(slider_crank(), 1.0, 1e-3, global_error="bound", **kw)
+    with pytest.warns(Se3dynWarning, match="global error estimate"):
+        first = real(slider_crank(), 1.0, 1e-3, global_error=True, **kw)
+    np.testing.assert_array_equal(r.H, first.H)
+    assert r.stats["global_error"] == first.stats["global_error"] > 1e-5
+    assert r.stats["global_error_refine"] == 1
+    assert r.stats["global_error_runs"][-1]["failure"] == "Newton failed at t=0.5 (step h=0.001)"

@@ -349,7 +349,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         ``stats["error_estimate"]``. The global error is a fraction of ``tol`` where errors
         neither grow nor decay along the motion (the undamped pendulum) or decay, and larger
         where the motion amplifies them (an accelerating mechanism, a fast top, a mechanism
-        passing singular positions): see ``docs/accuracy.md``.
+        passing singular positions): see ``docs/accuracy.md``; ``global_error`` measures it,
+        and ``global_error="bound"`` holds it to ``tol``. ``stats["step_times"]`` holds the
+        times the accepted steps reached.
     h_min, h_max : float, optional
         Step bounds for adaptive stepping (default ``1e-12 (t_end - t_start)`` and
         ``(t_end - t_start) / 10``). Falling below ``h_min`` stops the run with a
@@ -638,6 +640,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             try:
                 new, info = integ.step(s, st, h, solver, ws)
             except SimulationError as exc:
+                if cond is not None and isinstance(exc, NewtonError):
+                    uncondense()
+                    continue
                 fail(exc)
             regular = True
         elif adaptive:
@@ -784,12 +789,19 @@ def _bound(call: dict) -> Results:
         sched = np.append((times[:-1, None] + frac * np.diff(times)[:, None]).ravel(),
                           times[-1])
         sched[::refine] = times  # (the first run's times exactly)
-        new = simulate(**call, global_error=False, _schedule=sched)
+        try:
+            new = simulate(**call, global_error=False, _schedule=sched)
+        except SimulationError as exc:  # the refined run failed: the last run is kept
+            runs.append(dict(refine=refine, steps=0, rejected=0, global_error=None,
+                             failure=str(exc).split(";")[0]))
+            break
         common, ia, ib = np.intersect1d(res.t, new.t, return_indices=True)
         est = float(norm.frames(new.H[ib], res.H[ia]).max(initial=0.0)) / (m * m - 1)
         runs.append(dict(refine=refine, steps=new.stats["steps"], rejected=0,
                          global_error=est))
         res = new
+    if runs[-1].get("failure"):  # the results and estimate are the run before's
+        refine = runs[-2]["refine"]
     res.stats.update(global_error=est, global_error_runs=runs, global_error_refine=refine)
     if len(runs) > 1:
         for k in ("global_error_at", "global_error_final", "global_error_history",
@@ -799,6 +811,8 @@ def _bound(call: dict) -> Results:
         warnings.warn(Se3dynWarning(
             f"global_error='bound': the estimated global error {est:.3g} m is still above "
             f"tol = {tol:g} m after {len(runs)} runs (steps refined {refine} times)"
+            + (f"; the refinement of the last failed: {runs[-1]['failure']}"
+               if runs[-1].get("failure") else "")
             + (f"; the estimate stopped at t = {res.stats['global_error_until']:.6g} s"
                if res.stats.get("global_error_until") is not None else "")),
             stacklevel=3)
