@@ -198,3 +198,27 @@ def test_bound_keeps_the_last_run_when_a_refinement_fails(monkeypatch):
     assert r.stats["global_error"] == first.stats["global_error"] > 1e-5
     assert r.stats["global_error_refine"] == 1
     assert r.stats["global_error_runs"][-1]["failure"] == "Newton failed at t=0.5 (step h=0.001)"
+
+
+def test_bound_on_the_published_squeezer_divides_its_error_by_the_refinement_squared():
+    """IFToMM A03, Andrews' squeezer (tests/test_a03_squeezer.py), against its published
+    reference solution at t = 0.03 s (Test Set for IVP Solvers, PSIDE at 1e-14): at
+    tol = 1e-6 m the motion amplifies the local errors to about 1.4 tol; the bound refines the
+    steps m times, and the error of the seven published angles falls by m^2 (second order on
+    steps refined alike, the law the bound relies on)."""
+    from test_a03_squeezer import ANGLES, FILE, Q_REF, T_END
+
+    model, _ = load_model(FILE)
+    kw = dict(tol=1e-6, output_step=T_END / 100)
+    with pytest.warns(Se3dynWarning, match="global error estimate"):
+        first = sd.simulate(model, T_END, 3e-5, global_error=True, **kw)
+    r = sd.simulate(model, T_END, 3e-5, global_error="bound", **kw)
+    assert first.stats["global_error"] > 1e-6 >= r.stats["global_error"]
+    m = r.stats["global_error_refine"]
+    assert m >= 2
+
+    def angle_error(res):
+        q = np.array([res.joint_coordinates(a)[-1, 0] for a in ANGLES])
+        return float(np.abs(q - Q_REF).max())
+
+    assert 0.8 <= angle_error(first) / angle_error(r) / m**2 <= 1.25
