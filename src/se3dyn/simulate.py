@@ -460,16 +460,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         ``result`` attribute holds the results up to the last converged step, and the message
         names the time, the step, the norms and the worst item.
     """
-    if isinstance(global_error, str) and global_error == "bound":
-        return _bound(dict(model=model, t_end=t_end, step=step, rho_inf=rho_inf,
-                           t_start=t_start, tol_residual=tol_residual,
-                           tol_constraint=tol_constraint, max_iter=max_iter,
-                           output_every=output_every, formulation=formulation,
-                           redundant=redundant, tol=tol, h_min=h_min, h_max=h_max,
-                           output_step=output_step, engine=engine, newton=newton,
-                           initial_velocities=initial_velocities, progress=progress,
-                           on_output=on_output, on_rows=on_rows, store=store,
-                           initial_state=initial_state, condense=condense))
+    if isinstance(global_error, str) and global_error == "bound":  # (locals: the arguments)
+        return _bound({k: v for k, v in locals().items()
+                       if k not in ("global_error", "_schedule")})
     s = system_of(model)
     t_end, step, t_start, output_every, span, opt = _settings(
         t_end, step, t_start, output_every, tol, h_min, h_max, output_step)
@@ -644,6 +637,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                     uncondense()
                     continue
                 fail(exc)
+            stats["error_estimate"] += norm(info.error)
             regular = True
         elif adaptive:
             h = min(h, t_end - st.t)
