@@ -20,7 +20,7 @@ import pytest
 import se3dyn as sd
 from se3dyn.errors import ModelError, Se3dynWarning
 from se3dyn.examples import slider_crank
-from se3dyn.modelfile import load_model
+from se3dyn.modelfile import load_model, loads_model
 from se3dyn.simulate import Checkpoint
 from se3dyn.stepcontrol import ErrorNorm
 from test_adaptive import _exact, _oscillator_model, _pendulum_exact_p1
@@ -223,3 +223,39 @@ def test_bound_on_the_published_squeezer_divides_its_error_by_the_refinement_squ
         return float(np.abs(q - Q_REF).max())
 
     assert 0.8 <= angle_error(first) / angle_error(r) / m**2 <= 1.25
+
+
+def test_command_line_bound_writes_the_refined_run_and_refuses_to_resume_it(tmp_path, capsys):
+    from se3dyn.cli import main
+    from se3dyn.h5 import read_results
+
+    model = ROOT / "examples" / "slider_crank.yaml"
+    assert main(["run", str(model), "--out", str(tmp_path), "--quiet", "--t-end", "1",
+                 "--tol", "1e-5", "--global-error", "bound"]) == 0
+    out = capsys.readouterr().out
+    assert "global error bound: the first run's estimate" in out
+    res = read_results(tmp_path / "slider_crank.h5")
+    st = res.stats
+    assert st["global_error"] <= 1e-5 and st["global_error_refine"] >= 2
+    assert st["steps"] == len(res.t) - 1  # every step of the refined run stored
+    # the same run in the API: the file holds its rows
+    api = sd.simulate(slider_crank(), 1.0, 0.01, tol=1e-5, global_error="bound")
+    np.testing.assert_array_equal(res.t, api.t)
+    assert main(["run", str(model), "--resume", str(tmp_path / "slider_crank.h5")]) == 2
+    assert "cannot be continued" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # (argparse: one line, exit status 2)
+        main(["run", str(model), "--out", str(tmp_path), "--overwrite", "--global-error",
+              "maybe"])
+    assert exc.value.code == 2
+    assert "expected 'bound' or nothing, got 'maybe'" in capsys.readouterr().err
+
+
+def test_model_file_global_error_takes_true_false_or_bound():
+    text = (ROOT / "examples" / "slider_crank.yaml").read_text()
+    sim = "simulation: {t_end: 5.0, step: 0.01, rho_inf: 0.9}"
+    assert sim in text
+    _, settings = loads_model(text.replace(sim, sim[:-1] + ", tol: 1.0e-4, global_error: "
+                                              "bound}"))
+    assert settings["global_error"] == "bound"
+    with pytest.raises(ModelError, match="global_error.*true, false or bound.*'maybe'"):
+        loads_model(text.replace(sim, sim[:-1] + ", global_error: maybe}"))

@@ -7,7 +7,8 @@ traceback.
 
     se3dyn check MODEL...
     se3dyn run MODEL [--t-end T] [--step H] [--rho-inf R] [--formulation F]
-                  [--tol TOL] [--output-step DT] [--out DIR] [--overwrite] [--quiet]
+                  [--tol TOL [--global-error [bound]]] [--output-step DT] [--out DIR]
+                  [--overwrite] [--quiet]
     se3dyn run MODEL --resume RESULTS [--t-end T] [--quiet]
     se3dyn sweep MODEL --vary PATH=SPEC... [--method M --samples N --seed S]
                   [--metric NAME=FUNC(EXPR)...] [--scheduler ADDR | --workers N] [--resume]
@@ -311,6 +312,7 @@ def cmd_run(args) -> int:
     base_steps = cp.steps if cp is not None else 0
     base_its = writer.base_iterations
     resume_hint = f"continue with: se3dyn run {args.model} --resume {path}"
+    bound = cfg.get("global_error") == "bound"
     with writer:
         try:
             def progress(t: float, i: int) -> None:
@@ -321,8 +323,12 @@ def cmd_run(args) -> int:
             try:
                 with warnings.catch_warnings():  # (the summary below reports them)
                     warnings.simplefilter("ignore", Se3dynWarning)
-                    res = sd.simulate(s, progress=progress, on_rows=writer.add_rows,
-                                      store=False, initial_state=cp, **cfg)
+                    if bound:  # a run may be repeated: its rows are written when it is done
+                        res = sd.simulate(s, progress=progress, initial_state=cp, **cfg)
+                        writer.add_rows(res, None)
+                    else:
+                        res = sd.simulate(s, progress=progress, on_rows=writer.add_rows,
+                                          store=False, initial_state=cp, **cfg)
             finally:
                 _DEFER[0] = False
             _check_stop()
@@ -341,7 +347,12 @@ def cmd_run(args) -> int:
             prog.done()
             what = "interrupted" if isinstance(exc, KeyboardInterrupt) else "terminated"
             writer.close(stats={"failed": True, "message": what})
-            _err(f"{what}; results so far kept in {path} ({resume_hint})")
+            if bound:  # (nothing was written: the rows come when the run is done)
+                path.unlink(missing_ok=True)
+                _err(f"{what}; global_error: bound writes its results when the run is done: "
+                     f"nothing kept, {path} removed")
+            else:
+                _err(f"{what}; results so far kept in {path} ({resume_hint})")
             return 130 if isinstance(exc, KeyboardInterrupt) else 143
         _shield()
         prog.done()
@@ -407,6 +418,9 @@ def _resume(args, s, text: str):
                      "differ); give the model file the run was started with")
     if "t_end" not in cfg or "step" not in cfg:
         raise _Usage(f"--resume {path}: no simulation settings stored in it")
+    if cfg.get("global_error") == "bound":
+        raise _Usage(f"--resume {path}: a run with global_error: bound is written when it is "
+                     "done and cannot be continued; run it again")
     t_end = float(cfg["t_end"])
     if args.t_end is not None and args.t_end != t_end:
         if cfg.get("tol") is not None:
@@ -731,12 +745,24 @@ def run_report(stats: dict) -> list[str]:
         out.append(f"adaptive steps: local error estimates add up to "
                    f"{stats['error_estimate']:.3e} m (tol {stats['tol']:g} m); the global "
                    "error can exceed it where the motion amplifies errors (docs/accuracy.md)")
-    if stats.get("global_error") is not None:
-        ge, tol = stats["global_error"], stats.get("tol") or math.inf
-        out.append(f"global error estimate {ge:.3e} m ({ge / tol:.3g} tol) at t = "
-                   f"{stats['global_error_at']:.6g} s"
-                   + ("  WARNING: above tol; the motion amplifies the local errors, a smaller "
-                      "tol brings it down" if ge > tol else ""))
+    ge = stats.get("global_error")
+    if ge is not None:  # (from a results file: the scalars only)
+        tol = stats.get("tol") or math.inf
+        m = stats.get("global_error_refine") or 1
+        if m > 1:
+            runs = stats.get("global_error_runs") or []
+            first = (f"the first run's estimate {runs[0]['global_error']:.3e} m exceeded tol; "
+                     if runs else "")
+            out.append(f"global error bound: {first}the run repeated on its steps refined {m} "
+                       f"times: estimate {ge:.3e} m ({ge / tol:.3g} tol)"
+                       + ("  WARNING: still above tol" if ge > tol else ""))
+        else:
+            at = stats.get("global_error_at")
+            out.append(f"global error estimate {ge:.3e} m ({ge / tol:.3g} tol)"
+                       + (f" at t = {at:.6g} s" if at is not None else "")
+                       + ("  WARNING: above tol; the motion amplifies the local errors, a "
+                          "smaller tol (or --global-error bound) brings it down"
+                          if ge > tol else ""))
     if stats.get("global_error_until") is not None:
         out.append(f"global error estimated until t = {stats['global_error_until']:.9g} s "
                    f"only (its companion run stopped: {stats.get('global_error_failure', '')})")
@@ -753,6 +779,13 @@ def run_report(stats: dict) -> list[str]:
     return out
 
 
+def _bound_word(text: str) -> str:
+    """The optional value of --global-error: only 'bound'."""
+    if text != "bound":
+        raise argparse.ArgumentTypeError(f"expected 'bound' or nothing, got {text!r}")
+    return text
+
+
 def _add_overrides(p: argparse.ArgumentParser) -> None:
     """The run-time overrides of the file's simulation settings (run and sweep)."""
     p.add_argument("--t-end", type=_positive("pos"), help="final time (s)")
@@ -764,9 +797,12 @@ def _add_overrides(p: argparse.ArgumentParser) -> None:
                    help="adaptive steps: the local position errors (m, RMS over each "
                         "body's mass) add up to TOL over a run of even difficulty "
                         "(docs/accuracy.md)")
-    p.add_argument("--global-error", action="store_const", const=True, default=None,
+    p.add_argument("--global-error", nargs="?", const=True, default=None, type=_bound_word,
+                   metavar="bound",
                    help="with --tol: estimate the global position error by a companion run "
-                        "on the run's steps taken two at a time (about half the steps again)")
+                        "on the run's steps taken two at a time (about half the steps again); "
+                        "'--global-error bound' also repeats the run on its steps refined until "
+                        "the estimate is within TOL (results written when the run is done)")
     p.add_argument("--output-step", type=_positive("pos"),
                    help="store results every OUTPUT_STEP seconds (dense output)")
     p.add_argument("--initial-velocities", choices=("project", "strict"),

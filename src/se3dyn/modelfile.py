@@ -375,6 +375,26 @@ class Bool(_Type):
 
 
 @_schema_type
+class BoolOr(_Type):
+    """true / false, or one of the strings ``choices``."""
+
+    choices: tuple[str, ...] = ()
+
+    @property
+    def text(self) -> str:
+        return "true / false / " + " / ".join(f"`{c}`" for c in self.choices)
+
+    def schema(self) -> dict:
+        return {"oneOf": [{"type": "boolean"}, {"enum": list(self.choices)}]}
+
+    def convert(self, ctx, node, item, fld):
+        v = ctx.scalar(node)
+        if not (isinstance(v, bool) or (isinstance(v, str) and v in self.choices)):
+            ctx.fail(node, item, fld, "true, false or " + ", ".join(self.choices))
+        return v
+
+
+@_schema_type
 class Str(_Type):
     """A string, optionally one of ``choices``; ``ref`` for a node name (strings or integers)."""
 
@@ -780,9 +800,11 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("initial_velocities", Str(("project", "strict")), "project", "Initial "
               "velocities the joints do not allow: projected onto the velocity constraints "
               "(reported per node in the run summary and the results' stats), or refused."),
-        Field("global_error", Bool(), False, "With `tol`: estimate the run's global position "
-              "error by a companion run on its steps taken two at a time (Richardson; about "
-              "half the steps again); reported in the run summary and the results' stats."),
+        Field("global_error", BoolOr(("bound",)), False, "With `tol`: `true` estimates the "
+              "run's global position error by a companion run on its steps taken two at a "
+              "time (Richardson; about half the steps again), reported in the run summary and "
+              "the results' stats; `bound` also repeats the run on its steps refined until the "
+              "estimate is within `tol` (the results are then written when the run is done)."),
         Field("condense", Bool(), True, "Nodes joined by rigid joints move as one body in the "
               "time loop (fewer unknowns; every node's motion and every joint's reactions are "
               "still reported); false keeps the rigid joints as constraints."),

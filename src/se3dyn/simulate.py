@@ -816,14 +816,13 @@ def _bound(call: dict) -> Results:
 def _global_error_setting(val, adaptive: bool) -> bool:
     """``global_error`` checked: True or False, True with ``tol`` only ("bound" is handled
     by :func:`_bound`)."""
-    if isinstance(val, str) and val == "bound":
-        val = True
-    if not isinstance(val, bool | np.bool_):
+    on = True if isinstance(val, str) and val == "bound" else val
+    if not isinstance(on, bool | np.bool_):
         raise ModelError("simulate", "global_error", "True, False or 'bound'", val)
-    if val and not adaptive:
+    if on and not adaptive:
         raise ModelError("simulate", "global_error", "an adaptive run (tol given): the "
                          "estimate follows the run's own steps", val)
-    return bool(val)
+    return bool(on)
 
 
 def _companion(integ: GeneralizedAlpha, s: System):
