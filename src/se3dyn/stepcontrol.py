@@ -241,7 +241,10 @@ class GlobalEstimate:
     the :class:`ErrorNorm` of the frames of the two runs, over three. It costs about half the
     run's steps again (the companion's steps, each a Newton solve), and no step of the run
     depends on it. Where the companion's Newton iterations fail (a step twice as long may not
-    converge near a singular position) the estimate stops there and says so.
+    converge near a singular position) the estimate stops there and says so. It holds where
+    the errors are in their asymptotic range, ``C h^2``: where the steps do not resolve the
+    fast modes of a model (a flexible beam released at t = 0) it can be off by a factor of
+    a few (docs/accuracy.md).
 
     Parameters
     ----------
