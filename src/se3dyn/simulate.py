@@ -627,19 +627,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         if nsteps > k0:
             stats["h_min_used"], stats["h_max_used"] = hs
     while st.t < t_end and (adaptive or i < nsteps):
-        if _schedule is not None:  # (a refined repetition, global_error="bound")
-            t1 = float(_schedule[i + 1])
-            h = t1 - st.t
-            try:
-                new, info = integ.step(s, st, h, solver, ws)
-            except SimulationError as exc:
-                if cond is not None and isinstance(exc, NewtonError):
-                    uncondense()
-                    continue
-                fail(exc)
-            stats["error_estimate"] += norm(info.error)
-            regular = True
-        elif adaptive:
+        if adaptive and _schedule is None:
             h = min(h, t_end - st.t)
             if t_end - st.t - h < 1e-9 * h:
                 h = t_end - st.t
@@ -676,9 +664,12 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             stats["error_estimate"] += est
             t1 = st.t + h if t_end - st.t - h > 1e-12 * span else t_end
             regular = True  # (an adaptive run continues to its own t_end only)
-        else:
-            t1 = t_start + (i + 1) * step if i + 1 < nsteps else t_end
-            regular = t1 == t_start + (i + 1) * step
+        else:  # prescribed times: fixed steps, or the refined repetition of global_error="bound"
+            if _schedule is not None:
+                t1, regular = float(_schedule[i + 1]), True
+            else:
+                t1 = t_start + (i + 1) * step if i + 1 < nsteps else t_end
+                regular = t1 == t_start + (i + 1) * step
             h = t1 - st.t
             try:
                 new, info = integ.step(s, st, h, solver, ws)
@@ -687,6 +678,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
                     uncondense()
                     continue
                 fail(exc)
+            if _schedule is not None:
+                stats["error_estimate"] += norm(info.error)
         new = dataclasses.replace(new, t=t1)  # exact times, no drift
         i += 1
         if adaptive:
