@@ -259,3 +259,20 @@ def test_model_file_global_error_takes_true_false_or_bound():
     assert settings["global_error"] == "bound"
     with pytest.raises(ModelError, match="global_error.*true, false or bound.*'maybe'"):
         loads_model(text.replace(sim, sim[:-1] + ", global_error: maybe}"))
+
+
+def test_command_line_bound_run_that_fails_keeps_its_rows(tmp_path, capsys):
+    # kept in memory while it runs: a failing run still writes the rows it computed
+    from se3dyn.cli import main
+    from se3dyn.h5 import read_results
+
+    text = (ROOT / "examples" / "slider_crank.yaml").read_text()
+    sim = "simulation: {t_end: 5.0, step: 0.01, rho_inf: 0.9}"
+    f = tmp_path / "crank.yaml"
+    f.write_text(text.replace(sim, "simulation: {t_end: 1.0, step: 0.01, tol: 1.0e-4, "
+                                   "global_error: bound, max_iter: 1, h_min: 0.005}"))
+    assert main(["run", str(f), "--out", str(tmp_path), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    res = read_results(tmp_path / "crank.h5")
+    assert len(res.t) > 1 and f"{len(res.t)} rows kept" in err
+    assert res.stats["failed"]

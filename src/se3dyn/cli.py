@@ -335,6 +335,8 @@ def cmd_run(args) -> int:
         except SimulationError as exc:
             failed = exc
             res = exc.result
+            if bound and res is not None:  # (kept in memory so far: written now)
+                writer.add_rows(res, None)
         except ModelError as exc:  # refused before any step: no results file is left
             prog.done()
             _shield()
