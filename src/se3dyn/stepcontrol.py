@@ -1,5 +1,6 @@
 """Step-size control of adaptive runs (``simulate(..., tol=...)``): the norm of a step's local
-error estimate and the choice of the next step.
+error estimate and the choice of the next step; and the estimate of a run's global error
+(:class:`GlobalEstimate`, ``global_error=True``), which never steers the steps.
 
 The estimate itself comes from the integrator (:meth:`GeneralizedAlpha.step`): the part of the
 increment's Taylor expansion the generalized-alpha update does not reproduce,
