@@ -602,6 +602,7 @@ def environment(repo) -> dict:
         "git": {"head": git("rev-parse", "HEAD"),
                 "dirty": git("status", "--porcelain", "--untracked-files=no").splitlines()},
         "se3dyn_engine": {"file": so, "mtime": os.path.getmtime(so),
+                          "built_native": bool(getattr(eng, "built_native", False)),
                           "sha256": hashlib.sha256(open(so, "rb").read()).hexdigest()[:16],
                           "code_sha256": code.hexdigest()[:16]},
     }
@@ -1096,7 +1097,8 @@ def main(argv) -> int:
               + f"; git {env['git']['head'][:10]}"
               + (f" + {len(env['git']['dirty'])} modified files" if env["git"]["dirty"] else "")
               + f"; _engine sha256 {env['se3dyn_engine']['sha256']}, engine + sources "
-              f"{env['se3dyn_engine']['code_sha256']}")
+              f"{env['se3dyn_engine']['code_sha256']}, built for this machine "
+              f"(-march=native): {'yes' if env['se3dyn_engine']['built_native'] else 'NO'}")
         print("EXUDYN defaults as read from exu.SimulationSettings():")
         for k, v in defaults.items():
             print(f"  {k} = {v}")

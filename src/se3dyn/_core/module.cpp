@@ -112,6 +112,13 @@ NB_MODULE(_engine, m) {
   // engines live in the caches of System objects, which the interpreter may still hold at
   // shutdown (results keep their system): nothing leaks while it runs
   nb::set_leak_warnings(false);
+  // compiled for the instruction set of the building machine (CMake option SE3DYN_NATIVE,
+  // on by default; an editable build keeps the value of its CMake cache)
+#ifdef SE3DYN_BUILT_NATIVE
+  m.attr("built_native") = true;
+#else
+  m.attr("built_native") = false;
+#endif
   m.def("set_series", [](DArr c, DArr d, DArr e, DArr f, double cut) {
     Series& S = series();
     S.cut = cut;
