@@ -553,6 +553,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         stats["resumed_at"] = st.t
     gest = None  # the companion run of the global error estimate
     step_times = [st.t]  # of an adaptive run: the times its accepted steps reached
+    c_st = None  # the error coefficient of the state st, once computed (stepcontrol)
     if adaptive:
         norm = stepcontrol.ErrorNorm(s)
         stats["error_estimate"] = 0.0
@@ -570,7 +571,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     def uncondense() -> None:
         # a step of the reduced system failed: the run goes on with the rigid joints kept
         # (a condensed run never fails where the model itself goes on; stats say from when)
-        nonlocal s, st, ws, solver, cond, norm
+        nonlocal s, st, ws, solver, cond, norm, c_st
+        c_st = None  # (another norm from here)
         stats["condensed_until"] = st.t
         full = dataclasses.replace(cond.expand(st, ws_full), solver=None)
         rec.uncondense()
@@ -583,13 +585,16 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         if adaptive:
             norm = stepcontrol.ErrorNorm(s)
 
-    def fail(exc: SimulationError):
+    def final_stats(failed: bool) -> None:  # (the run's end, or where it failed)
         if gest is not None:
             stats.update(gest.stats())
         if adaptive:
             stats["step_times"] = np.asarray(step_times)
-        stats.update(steps=i - k0, failed=True, wall_time=time.perf_counter() - wall0,
+        stats.update(steps=i - k0, failed=failed, wall_time=time.perf_counter() - wall0,
                      final_state=st if cond is None else cond.expand(st, ws_full))
+
+    def fail(exc: SimulationError):
+        final_stats(True)
         if grid is None and rec.n and rec.last_time() != st.t:
             e = energies(s, st, step_inputs(s, st.t), ws)
             rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
@@ -715,8 +720,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         if progress is not None:
             progress(st.t, i)
         if adaptive and _schedule is None:
-            cs = (stepcontrol.coefficient(norm, prev, integ.params),
-                  stepcontrol.coefficient(norm, st, integ.params))
+            c0 = c_st if c_st is not None else stepcontrol.coefficient(norm, prev, integ.params)
+            c_st = stepcontrol.coefficient(norm, st, integ.params)
+            cs = (c0, c_st)
             h = min(opt["h_max"],
                     stepcontrol.next_step(h, err, accepted=True, c=cs, limit=lim))
         cp = None
@@ -724,12 +730,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             cp = Checkpoint(st, i, h, stats["newton_iterations"], stats["rejected"], rec.total)
         rec.emit(cp, force=st.t >= t_end or (not adaptive and i >= nsteps))
     rec.emit()
-    if gest is not None:
-        stats.update(gest.stats())
-    if adaptive:
-        stats["step_times"] = np.asarray(step_times)
-    stats.update(steps=i - k0, failed=False, wall_time=time.perf_counter() - wall0,
-                 final_state=st if cond is None else cond.expand(st, ws_full))
+    final_stats(False)
     res = rec.results(stats)
     _energy_check(res)
     _global_error_check(res)
