@@ -41,8 +41,8 @@ def count(name: str) -> str:
     made = []
     stepper = system.Workspace.stepper
 
-    def keep(self, index2, dropped, keep=True):  # the run's steppers, to read their counters
-        stp = stepper(self, index2, dropped, keep)
+    def keep(self, index2, dropped, keep=True, split=True):  # the run's steppers, to read
+        stp = stepper(self, index2, dropped, keep, split)     # their counters
         if stp not in made:
             made.append(stp)
         return stp

@@ -270,7 +270,7 @@ def test_command_line_bound_run_that_fails_keeps_its_rows(tmp_path, capsys):
     sim = "simulation: {t_end: 5.0, step: 0.01, rho_inf: 0.9}"
     f = tmp_path / "crank.yaml"
     f.write_text(text.replace(sim, "simulation: {t_end: 1.0, step: 0.01, tol: 1.0e-4, "
-                                   "global_error: bound, max_iter: 1, h_min: 0.005}"))
+                                   "global_error: bound, max_iter: 2, h_min: 0.005}"))
     assert main(["run", str(f), "--out", str(tmp_path), "--quiet"]) == 1
     err = capsys.readouterr().err
     res = read_results(tmp_path / "crank.h5")

@@ -157,7 +157,7 @@ class Condensation:
 
         if st.solver is not None:  # a state of a run that kept its rigid joints: continued so
             lay = layout_of(self.reduced)
-            if len(st.solver.ref) not in (lay.nvals, lay.nvals2):
+            if len(st.solver.ref) not in (lay.nvals, lay.nvals2 + 1):  # (+1: the mode)
                 return None
         inv = np.full(self.full.nm, -1, np.int64)
         inv[self.mult_full] = np.arange(len(self.mult_full))

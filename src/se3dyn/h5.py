@@ -526,7 +526,8 @@ _STATE_DOC = ("t, h_last, work_act, work_ext, dissipated, power (3), number of d
               "in /restart/solver, -1: none)")
 _MEMORY_DOC = ("State.solver.ref of the checkpoint in the slot of the same index of "
                "/restart/state (its first nv values): the iteration matrix of the last full "
-               "sparse LU factorisation, whose pivot sequence the next steps reuse")
+               "sparse LU factorisation, whose pivot sequence the next steps reuse; index 2: "
+               "one more value, the mode of the iteration (0 split, 1 full matrix)")
 
 
 def _state_length(s) -> int:

@@ -45,8 +45,10 @@ class SolverMemory:
     ref : ndarray (nv,)
         Values of the iteration matrix (in the engine's value order; dropped equations as
         identity rows and columns) of the last full sparse LU factorisation, whose pivot
-        sequence the refactorisations of the following steps reuse. Read-only: the stepper
-        and the States holding it share one array.
+        sequence the refactorisations of the following steps reuse; for the index-2 form one
+        more entry, the mode of the iteration (0: the split matrix, 1: the full one; see
+        ``se3dyn/_core/newton.hpp``). Read-only: the stepper and the States holding it share
+        one array.
     """
 
     ref: np.ndarray
@@ -99,9 +101,11 @@ def _ws(s: System, ws=None):
     return ws or workspace(s)
 
 
-def _stepper(s: System, index2: bool, dropped: np.ndarray, ws=None, keep: bool = True):
-    """The compiled Newton stepper of a workspace (the system's default one)."""
-    return _ws(s, ws).stepper(index2, dropped, keep)
+def _stepper(s: System, index2: bool, dropped: np.ndarray, ws=None, keep: bool = True,
+             split: bool = True):
+    """The compiled Newton stepper of a workspace (the system's default one); ``split``
+    (modified Newton): see :meth:`se3dyn.system.Workspace.stepper`."""
+    return _ws(s, ws).stepper(index2, dropped, keep, split)
 
 
 @dataclass(frozen=True)
@@ -424,7 +428,7 @@ class GeneralizedAlpha:
         a_n = st.a
         if st.h_last > 0 and h != st.h_last:
             a_n = st.vd + (h / st.h_last) * (st.a - st.vd)
-        stp = _stepper(s, self.index2, st.dropped, ws)
+        stp = _stepper(s, self.index2, st.dropped, ws, split=self.newton == "modified")
         w = _ws(s, ws)
         w.adopt(stp, st.solver)
         F = s.M + s.m

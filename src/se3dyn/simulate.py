@@ -533,6 +533,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         else:
             s, st = cond.reduced, reduced
             ws = Workspace(s)
+    run_ws = [ws_full] + ([ws] if ws is not ws_full else [])  # (their steppers' counters)
     # storage grows as the run goes (doubling, up to the rows expected)
     rec = _Recorder(s, min(capacity, _INITIAL_ROWS), on_output,
                     None if adaptive and grid is None else capacity, store=store,
@@ -590,6 +591,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
             stats.update(gest.stats())
         if adaptive:
             stats["step_times"] = np.asarray(step_times)
+        if integ.index2:  # (split index-2 steps that fell back to the full matrix)
+            stats["full_matrix_steps"] = sum(w.full_matrix_steps() for w in run_ws)
         stats.update(steps=i - k0, failed=failed, wall_time=time.perf_counter() - wall0,
                      final_state=st if cond is None else cond.expand(st, ws_full))
 
@@ -1068,7 +1071,7 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int,
     from se3dyn.system import input_table
 
     block = output_every * max(1, _BLOCK // output_every)
-    stp = _stepper(s, integ.index2, st.dropped, ws)
+    stp = _stepper(s, integ.index2, st.dropped, ws, split=integ.newton == "modified")
     ws.adopt(stp, st.solver)
     F = s.M + s.m
     H = np.ascontiguousarray(np.concatenate([st.H, st.HJ]).reshape(F, 4, 4), dtype=float)

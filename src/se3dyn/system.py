@@ -564,6 +564,14 @@ def layout_of(s: System):
     return lay
 
 
+#: Stabilized index-2 steps under modified Newton iterate with a block-triangular part of their
+#: Newton matrix (one index-3-sized factorisation and a small one instead of a matrix with
+#: twice the separators; a step that contracts too slowly goes on with the full matrix:
+#: ``_core/newton.hpp``). The converged steps are the same to the Newton tolerances; False
+#: iterates with the full matrix (tests compare the two).
+SPLIT_INDEX2 = True
+
+
 class Workspace:
     """The scratch of a run: the compiled engine of a system (its element batches with their
     work arrays) and the Newton steppers (sparse LU factors) by formulation and set of dropped
@@ -581,6 +589,12 @@ class Workspace:
         self.engine = _core().Engine(self.layout.tables)
         self._steppers: dict = {}
         self._memo: dict = {}  # id(stepper) -> (stepper, its serials, SolverMemory it holds)
+
+    def full_matrix_steps(self) -> int:
+        """Steps of this workspace's split index-2 steppers done with the full matrix, once the
+        split iteration contracted too slowly (``_core/newton.hpp``), over the workspace's
+        life."""
+        return sum(int(stp.full_steps()) for stp in self._steppers.values())
 
     def memory(self, stp):
         """The solver memory a stepper holds now (:class:`se3dyn.integrator.SolverMemory`, or
@@ -605,19 +619,31 @@ class Workspace:
         if c is not None and c[0] is stp and c[1] == ser and c[2] is mem:
             return
         ref = None if mem is None else mem.ref
+        if ref is not None and len(ref) == stp.memory_size() - 1:
+            # an index-2 memory without its mode (results files of se3dyn before the split
+            # iteration, 2026-11-23): the full matrix's values, so the full matrix's mode
+            ref = np.append(ref, 1.0)
         if not stp.holds(ref):
             code = stp.restore(ref)
-            if code != 0:
+            # (ref None: the factorisation of the model's generic matrix may fail, e.g. by
+            # overflow along a chain of thousands of links with random frames; the stepper then
+            # holds no reference and factorises the first matrix of the run anew, as a new
+            # stepper whose generic matrix failed does: the same numbers)
+            if code != 0 and ref is not None:
                 raise SimulationError("restoring the linear solver's factors of the state failed "
                                       f"(LU status {code}): the state does not belong to this "
                                       "model or was altered")
         self._memo[id(stp)] = (stp, stp.serials(), mem)
 
-    def stepper(self, index2: bool, dropped: np.ndarray, keep: bool = True):
+    def stepper(self, index2: bool, dropped: np.ndarray, keep: bool = True,
+                split: bool = True):
         """The compiled Newton stepper for one formulation and one set of dropped (redundant)
         equations, its sparse LU analysed on first use; ``keep=False``: not kept for later
-        calls (a one-off solve, e.g. the initial accelerations of an index-2 run)."""
-        key = (bool(index2), np.asarray(dropped, np.int64).tobytes())
+        calls (a one-off solve, e.g. the initial accelerations of an index-2 run);
+        ``split``: index 2 iterates with the split matrix (modified Newton; see
+        :data:`SPLIT_INDEX2`)."""
+        split = bool(split and index2 and SPLIT_INDEX2)
+        key = (bool(index2), np.asarray(dropped, np.int64).tobytes(), split)
         stp = self._steppers.get(key)
         if stp is None:
             s = self.s
@@ -628,7 +654,8 @@ class Workspace:
             N = s.nq + (2 * s.nm if index2 else s.nm)
             # the compiled stepper builds its pattern from the layout's blocks
             stp = _core().Stepper(self.engine, bool(index2), int(N), lay.block_table(index2),
-                                  np.ascontiguousarray(groups, np.int64), drop)
+                                  np.ascontiguousarray(groups, np.int64), drop,
+                                  split=split)
             if keep:
                 self._steppers[key] = stp
         return stp

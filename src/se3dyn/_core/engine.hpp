@@ -163,6 +163,10 @@ struct Engine {
     double* vals;    // (nvals or nvals2,) or nullptr
     double* energy;  // (N_ENERGY,) or nullptr
     double* arhs = nullptr;  // (nm,) acceleration-level constraint right-hand side or nullptr
+    // index 2: also the blocks -(cM M + cC C_T) B_n^T of the dynamic rows in the xi columns
+    // (the split iteration matrix of the Stepper does without them: newton.hpp)
+    bool velprod = true;
+    bool phi_rows = true;  // with vals: the constraint rows too (Context::phi_rows)
   };
 
   // Residual (Eq. (39)), constraints (Eq. (40)), velocity constraints and, when vals, the
@@ -179,7 +183,8 @@ struct Engine {
     long nv = index2 ? nvals2 : nvals;
     if (o.vals) std::fill(o.vals, o.vals + nv, 0.0);
     bool prod = o.vals && index2;
-    if (prod) std::fill(velv.begin(), velv.end(), 0.0);
+    bool vprod = prod && o.velprod;
+    if (vprod) std::fill(velv.begin(), velv.end(), 0.0);
     if (o.energy) std::fill(o.energy, o.energy + N_ENERGY, 0.0);
     Context X;
     X.T = &T;
@@ -193,13 +198,14 @@ struct Engine {
     X.phi = o.phi;
     X.psi = o.psi;
     X.vals = o.vals;
-    X.velv = prod ? velv.data() : nullptr;
+    X.velv = vprod ? velv.data() : nullptr;
     X.vel_off = vel_off.data();
     X.vel_at = vel_at.data();
     X.nvel = long(vel_off.size());
     X.cM = cM;
     X.cC = cC;
     X.cK = cK;
+    X.phi_rows = o.phi_rows;
     X.energy = o.energy;
     X.arhs = o.arhs;
     if (o.arhs) std::fill(o.arhs, o.arhs + nm, 0.0);
@@ -211,6 +217,7 @@ struct Engine {
       joints->store_B(T, Hn, joints->Bnu);
       double* vals = o.vals;
       for (const VelProd& p : velprod) {
+        if (!vprod) break;
         const double* V = velv.data() + p.src;  // ki x kj row-major (src: in velv)
         const double* Bn = &joints->Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
         sub_times_T(p.ki, p.kj, V, p.kj, Bn, vals + p.target);  // target: ki x 6
@@ -220,6 +227,25 @@ struct Engine {
                     &joints->Bnu[108 * p.c2 + 36 * p.s2], vals + p.target);
     }
     return X.fscale;
+  }
+
+  // out (nm) += B A x, x (nq) on the unknowns, with the B A of the last matrix evaluation
+  // (the split index-2 iteration, newton.hpp)
+  void add_BA(const double* x, double* out) const {
+    for (int e = 0; e < joints->n; ++e) {
+      int fr[3] = {joints->fa[e], joints->fb[e], joints->fj[e]};
+      double* o = out + joints->mult[e];
+      for (int s = 0; s < 3; ++s) {
+        int f = fr[s], d = T.dof[f], k = T.k[f];
+        if (d < 0) continue;
+        const double* BA = &joints->Bu[108 * e + 36 * s];  // 6 x k, ld 6
+        for (int i = 0; i < 6; ++i) {
+          double acc = 0.0;
+          for (int c = 0; c < k; ++c) acc += BA[6 * i + c] * x[d + c];
+          o[i] += acc;
+        }
+      }
+    }
   }
 
   // B_n^T xi on the unknowns: out[dof_f] -= A_f^T B_{n,f}^T xi (the index-2 correction)

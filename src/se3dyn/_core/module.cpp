@@ -272,7 +272,8 @@ NB_MODULE(_engine, m) {
 
   nb::class_<Stepper>(m, "Stepper")
       .def("__init__",
-           [](Stepper* S, Engine& E, bool index2, int N, IArr blocks, IArr group, IArr drop) {
+           [](Stepper* S, Engine& E, bool index2, int N, IArr blocks, IArr group, IArr drop,
+              bool split) {
              // the pattern from the blocks of se3dyn.assembly (block_pattern.hpp): no pattern
              // arrays per value cross the binding
              new (S) Stepper();
@@ -287,9 +288,10 @@ NB_MODULE(_engine, m) {
              block_csc(N, blocks.data(), long(blocks.size() / 5), nv, cp.data(), ri.data(),
                        src.data());
              S->init(&E, index2, N, std::move(cp), std::move(ri), std::move(src),
-                     gr.empty() ? nullptr : gr.data(), dr.data());
+                     gr.empty() ? nullptr : gr.data(), dr.data(), split);
            },
-           nb::keep_alive<1, 2>())
+           nb::arg("engine"), nb::arg("index2"), nb::arg("N"), nb::arg("blocks"),
+           nb::arg("group"), nb::arg("drop"), nb::arg("split") = true, nb::keep_alive<1, 2>())
       .def(
           "step",
           [](Stepper& S, CArr Hn, CArr alpha_n, CArr v_n, CArr vd_n, CArr a_n, CArr lam_n,
@@ -316,9 +318,19 @@ NB_MODULE(_engine, m) {
       .def("lu_stats",
            [](const Stepper& S) {
              // (n, nnz(L), nnz(U), multiply-adds of a refactorisation, supernodes) of the factors
-             return nb::make_tuple(S.N, S.lu.nnz_L(), S.lu.nnz_U(), S.lu.refactor_flops(),
-                                   S.lu.num_supernodes());
+             // (split index 2: of both, summed)
+             long long l = S.lu.nnz_L(), u = S.lu.nnz_U(), f = S.lu.refactor_flops();
+             int sn = S.lu.num_supernodes();
+             if (S.split) {
+               l += S.lux.nnz_L();
+               u += S.lux.nnz_U();
+               f += S.lux.refactor_flops();
+               sn += S.lux.num_supernodes();
+             }
+             return nb::make_tuple(S.N, l, u, f, sn);
            })
+      .def("full_steps", [](const Stepper& S) { return S.full_steps; })
+      .def("memory_size", [](const Stepper& S) { return S.memory_size(); })
       .def("serials",
            [](const Stepper& S) {
              // (serial number of the solver memory, whether it holds one to keep)
@@ -326,9 +338,9 @@ NB_MODULE(_engine, m) {
            })
       .def("memory",
            [](const Stepper& S) -> nb::object {
-             // the solver memory (the values of the last full factorisation, read-only: shared
-             // with the stepper, no copy) or None (none, or the generic matrix's: a function of
-             // the model)
+             // the solver memory (the values of the last full factorisation and, split index 2,
+             // the mode (newton.hpp); read-only: shared with the stepper, no copy) or None (none,
+             // or the generic matrix's: a function of the model)
              if (!S.have_ref || S.ref_probe) return nb::none();
              using Ref = std::shared_ptr<const std::vector<double>>;
              Ref* ref = new Ref(S.ref_vals);
@@ -338,11 +350,11 @@ NB_MODULE(_engine, m) {
            })
       .def("holds",
            [](const Stepper& S, std::optional<CArr> ref) {
-             return S.holds(ref ? cptr(*ref, S.vals.size(), "ref") : nullptr);
+             return S.holds(ref ? cptr(*ref, S.memory_size(), "ref") : nullptr);
            }, nb::arg("ref").none())
       .def("restore",
            [](Stepper& S, std::optional<CArr> ref) {
-             return S.restore(ref ? cptr(*ref, S.vals.size(), "ref") : nullptr);
+             return S.restore(ref ? cptr(*ref, S.memory_size(), "ref") : nullptr);
            }, nb::arg("ref").none())
       .def(
           "solve_values",
@@ -353,7 +365,7 @@ NB_MODULE(_engine, m) {
             if (rhs.size() != size_t(S.N)) throw std::invalid_argument("solve_values: rhs");
             std::copy(vals.data(), vals.data() + vals.size(), S.vals.begin());
             int code = S.factor();
-            if (code == 0) S.lu.solve(rhs.data());
+            if (code == 0) S.solve(rhs.data());
             return code;
           })
       .def(

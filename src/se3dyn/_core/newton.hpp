@@ -7,6 +7,36 @@
 // velocity constraints / gamma'; every block is O(1) whatever h. Velocities and accelerations
 // follow m = n - B_n^T xi: dv = gamma' dm, dvd = beta' dm (Eqs. (41)-(43)).
 //
+// Split index-2 iteration matrix. With m = n - B_n^T xi (the increment the velocities and
+// accelerations follow) as unknown instead of n, the Newton matrix of the stabilised index-2
+// form reads, rows dynamics, constraints, velocity constraints:
+//     [ S          Phi_q^T   cK K_T T B_n^T     ] [dm ]
+//     [ Phi_q T    0         Phi_q T B_n^T      ] [dl ]
+//     [ B + cv Z   0         cv Z B_n^T         ] [dxi]
+// (S = cM M + cC C_T + cK K_T T, B = Phi_q, Z = d(B v)/dq T). The stepper iterates with its
+// block-triangular part, Phi_q T taken as B (equal up to O(|n|) and O(|phi|)): (dm, dl) solve
+// [S Phi_q^T; B + cv Z 0], the index-3 matrix with the velocity constraints' rows (its
+// pattern), then dxi solves B B_n^T dxi = -phi - B dm (nm x nm, coupling the joints that share
+// a frame; B of the matrix's iterate), and dn = dm + B_n^T dxi. Only the iteration matrix
+// changes (as modified Newton changes it anyway): the residuals are exact, so the converged
+// step is the same. The omitted blocks are O(h^2 K) and O(h |v|) against the kept ones
+// (spectral radius of the iteration's error map, measured at h = 1 ms: 2e-4 to 2e-2 on the 30-
+// to 1000-link chains, 4e-3 to 2e-5 on the slider-crank and the gallery; docs/performance.md).
+// In m the round-off of the positions (Phi of frames 100 m from the origin) stays out of the
+// velocities: with n as unknown and the dynamic rows' xi block left out instead, Newton stalled
+// at a residual of 2e-10 on the 300-link chain (the noise of xi times beta' in the dynamic
+// rows). Why split: the full matrix couples, through its xi columns, every pair of joints that
+// share a body, doubling the separator of a link in the elimination (4.7-6.1 times the
+// multiply-adds of index 3). The price: no quadratic first iteration (1.6-3.9 iterations per
+// step on the gallery and the chains where the full matrix takes 1.0-2.9, still 0.6-0.8 times
+// the CPU time), and a contraction that grows with h^2 K / M (stiff elements: beams, bushings)
+// and h |v|. So when a split iteration contracts too slowly to converge within KSPLIT more
+// iterations, or its residual grows, the stepper goes over to the full matrix (luf) for the
+// rest of the step and of the run: the mode is part of the solver memory (the last entry of an
+// index-2 memory, 1 for the full matrix), so a State restarts in the mode its run was in and
+// restarts stay exact; a run from a new State starts split. Full Newton (a factorisation at
+// every iteration) never splits.
+//
 // Modified Newton: the matrix is factorised at the predictor of every step (vd_{n+1} = vd_n)
 // and kept over the step's iterations while Newton contracts fast enough; it is refactorised at
 // the current iterate when the scaled residual or constraint error grows, when the contraction
@@ -57,6 +87,17 @@ struct Stepper {
   Engine* E;
   bool index2;
   int N = 0;                         // size of the linear system
+  // split index-2 iteration matrix (see the header): lu holds the (dm, dl) block (rows:
+  // dynamics, then per multiplier its velocity constraint, or for a dropped equation its
+  // constraint row, the identity), lux the xi block B B_n^T (the velocity constraints' rows)
+  bool split = false;
+  int N1 = 0;
+  SparseLU lux;
+  SparseLU luf;            // split: the full matrix, once the split contracted too slowly
+  bool full_mode = false;  // split: iterating with the full matrix (part of the memory)
+  long full_steps = 0;     // steps done with the full matrix (counted over the stepper's life)
+  static constexpr double KSPLIT = 6.0;  // (header)
+  std::vector<double> dm;  // (nq,)
   std::vector<int> zero_at, one_at;  // values of dropped equations: zero, or 1 (diagonal)
   std::vector<char> dropm;           // (nm,) dropped multiplier equations
   SparseLU lu;                       // reads vals in place (its value map)
@@ -74,10 +115,12 @@ struct Stepper {
   // vals), all taken over by the sparse LU
   void init(Engine* e, bool idx2, int n_sys, std::vector<int>&& colptr,
             std::vector<int>&& rowind, std::vector<int>&& src, const int* group,
-            const char* drop) {
+            const char* drop, bool split_matrix = true) {
     E = e;
     index2 = idx2;
     N = n_sys;
+    split = split_matrix && index2 && E->nm > 0;
+    N1 = split ? E->nq + E->nm : N;
     const long nnz = colptr[N];
     dropm.assign(drop, drop + E->nm);
     std::vector<char> dropped(N, 0);
@@ -104,25 +147,103 @@ struct Stepper {
     lu.set_options(opt);
     vals.assign(nnz, 0.0);
     rhs.assign(N, 0.0);
+    dm.assign(index2 ? E->nq : 0, 0.0);
     r.assign(E->nq, 0.0);
     phi.assign(E->nm, 0.0);
     psi.assign(E->nm, 0.0);
     // the ordering and the entries kept in the factors' patterns from a generic matrix
     probe();
     set_dropped();
-    std::vector<char> keep(nnz);
-    for (long p = 0; p < nnz; ++p) keep[p] = vals[src[p]] != 0.0;  // NaN counts as nonzero
-    lu.analyze(N, std::move(colptr), std::move(rowind), std::move(src), group, vals.data());
-    lu.set_keep(keep.data());
+    if (!split) {
+      std::vector<char> keep(nnz);
+      for (long p = 0; p < nnz; ++p) keep[p] = vals[src[p]] != 0.0;  // NaN counts as nonzero
+      lu.analyze(N, std::move(colptr), std::move(rowind), std::move(src), group, vals.data());
+      lu.set_keep(keep.data());
+    } else {
+      lux.set_options(opt);
+      const int nq = E->nq, nm = E->nm;
+      // row r of the index-2 matrix in the (dm, dl) block: -1 where it is not there
+      std::vector<int> rowmap(N, -1);
+      for (int r = 0; r < nq; ++r) rowmap[r] = r;
+      for (int i = 0; i < nm; ++i) rowmap[dropm[i] ? nq + i : N1 + i] = nq + i;
+      std::vector<int> cp1{0}, ri1, s1, cpx{0}, rix, sx;
+      for (int c = 0; c < N; ++c) {
+        for (int p = colptr[c]; p < colptr[c + 1]; ++p) {
+          int rw = rowind[p];
+          if (c < N1 && rowmap[rw] >= 0) {
+            ri1.push_back(rowmap[rw]);
+            s1.push_back(src[p]);
+          } else if (c >= N1 && rw >= N1) {
+            rix.push_back(rw - N1);
+            sx.push_back(src[p]);
+          }
+        }
+        if (c < N1) cp1.push_back(int(ri1.size()));
+        else cpx.push_back(int(rix.size()));
+      }
+      auto keep_of = [&](const std::vector<int>& sv) {
+        std::vector<char> k(sv.size());
+        for (size_t p = 0; p < sv.size(); ++p) k[p] = vals[sv[p]] != 0.0;
+        return k;
+      };
+      std::vector<char> k1 = keep_of(s1), kx = keep_of(sx), kf = keep_of(src);
+      luf.set_options(opt);
+      luf.analyze(N, std::move(colptr), std::move(rowind), std::move(src), group, vals.data());
+      luf.set_keep(kf.data());
+      lu.analyze(N1, std::move(cp1), std::move(ri1), std::move(s1), group, vals.data());
+      lu.set_keep(k1.data());
+      lux.analyze(N - N1, std::move(cpx), std::move(rix), std::move(sx),
+                  group ? group + N1 : nullptr, vals.data());
+      lux.set_keep(kx.data());
+    }
     probe_reference();
+  }
+
+  // Both factors (split) or the one: a full factorisation, or a refactorisation
+  int lu_factor() {
+    int code = lu.factor(vals.data());
+    if (code == 0 && split) code = lux.factor(vals.data());
+    return code;
+  }
+  int lu_refactor() {
+    int code = lu.refactor(vals.data());
+    if (code == 0 && split) code = lux.refactor(vals.data());
+    return code;
+  }
+
+  // Solve the iteration matrix in place (x: N entries; rows dynamics, constraints, velocity
+  // constraints in, (dn, dl, dxi) out); index 2: also dm = dn - B_n^T dxi out
+  void solve(double* x) {
+    const int nq = E->nq, nm = E->nm;
+    if (!split || full_mode) {
+      (full_mode ? luf : lu).solve(x);
+      if (index2 && nm > 0) {
+        std::copy(x, x + nq, dm.begin());
+        E->subtract_BnT(x + nq + nm, dm.data());
+      }
+      return;
+    }
+    double* xl = x + nq;  // constraints' right-hand side in, dl out
+    double* xx = x + N1;  // velocity constraints' right-hand side in, dxi out
+    for (int i = 0; i < nm; ++i) std::swap(xl[i], xx[i]);
+    lu.solve(x);  // (dm, dl); xx: -B B_n^T dxi = -phi - B dm
+    for (int i = 0; i < nm; ++i) xx[i] = -xx[i];
+    E->add_BA(x, xx);
+    for (int i = 0; i < nm; ++i) xx[i] = dropm[i] ? 0.0 : xx[i];
+    lux.solve(xx);
+    std::copy(x, x + nq, dm.begin());
+    for (int i = 0; i < nm; ++i) xx[i] = -xx[i];
+    E->subtract_BnT(xx, x);  // dn = dm + B_n^T dxi
+    for (int i = 0; i < nm; ++i) xx[i] = -xx[i];
   }
 
   // The first reference of the refactorisations: a full factorisation of the generic matrix
   // (the solver memory is then the model's own: nothing to keep in a State)
   int probe_reference() {
+    full_mode = false;
     probe();
     set_dropped();
-    int code = lu.factor(vals.data());
+    int code = lu_factor();
     have_ref = code == 0;
     ref_probe = have_ref;
     ref_vals.reset();
@@ -175,23 +296,37 @@ struct Stepper {
   // factorisation when it succeeds, else a full one, whose values become the reference
   int factor() {
     set_dropped();
-    int code = have_ref ? lu.refactor(vals.data()) : 1;
+    int code = have_ref ? (full_mode ? luf.refactor(vals.data()) : lu_refactor()) : 1;
     if (code != 0) {
-      code = lu.factor(vals.data());
+      code = full_mode ? luf.factor(vals.data()) : lu_factor();
       have_ref = code == 0;
       ref_probe = false;
       ref_vals.reset();  // (freed unless a State holds it)
-      if (have_ref) ref_vals = std::make_shared<const std::vector<double>>(vals);
+      if (have_ref) {
+        std::vector<double> m(vals);
+        if (index2) m.push_back(split && !full_mode ? 0.0 : 1.0);  // the mode (see the header)
+        ref_vals = std::make_shared<const std::vector<double>>(std::move(m));
+      }
       ++ref_serial;
     }
     return code;
   }
 
-  // Restore the solver memory: a full factorisation of `ref`, or (nullptr) of the generic
-  // matrix, as a new stepper starts. Returns 0, or the LU's nonzero status.
+  // Entries of the solver memory: the matrix values, and for index 2 the mode (1: the full
+  // matrix, 0: split)
+  size_t memory_size() const { return vals.size() + (index2 ? 1 : 0); }
+
+  // Restore the solver memory: a full factorisation of `ref` (memory_size() entries) in its
+  // mode, or (nullptr) of the generic matrix, as a new stepper starts. Returns 0, or the LU's
+  // nonzero status. (A memory of split factors given to a stepper that never splits, a run
+  // continued in full Newton: its values lack the full matrix's blocks; the generic matrix's
+  // factors serve instead, the same for every such continuation.)
   int restore(const double* ref) {
     if (!ref) return probe_reference();
+    bool full = !index2 || ref[vals.size()] != 0.0;
+    if (!split && !full) return probe_reference();
     have_ref = false;
+    full_mode = split && full;
     std::copy(ref, ref + vals.size(), vals.begin());
     return factor();
   }
@@ -201,7 +336,7 @@ struct Stepper {
     if (!have_ref) return false;
     if (!ref) return ref_probe;
     return !ref_probe && (ref == ref_vals->data() ||
-                          std::memcmp(ref, ref_vals->data(), vals.size() * sizeof(double)) == 0);
+                          std::memcmp(ref, ref_vals->data(), memory_size() * sizeof(double)) == 0);
   }
 
   struct Params {
@@ -247,6 +382,15 @@ struct Stepper {
     // the converged one are the new state's (no evaluation of its own)
     Engine::Out o{r.data(), phi.data(), stab ? psi.data() : nullptr, alpha, nullptr,
                   energy.data()};
+    o.velprod = o.phi_rows = !split || full_mode;
+    // a split iteration that must be refactorised goes over to the full matrix (for the run)
+    auto fall_back = [&]() {
+      if (refac && split && !full_mode && it > 0) {
+        full_mode = true;
+        have_ref = false;  // (a full factorisation of the full matrix: the new memory)
+        o.velprod = o.phi_rows = true;
+      }
+    };
     while (true) {
       bool with_matrix = refac || !P.reuse;  // the matrix is evaluated with the residual
       o.vals = with_matrix ? vals.data() : nullptr;
@@ -264,6 +408,7 @@ struct Stepper {
       double ec = nm > 0 ? std::fmax(er / P.tol_r, ep / P.ltol) : er / P.tol_r;
       if (ec > ec_prev) refac = true;
       ec_prev = ec;
+      fall_back();
       if (refac || !P.reuse) {
         if (!with_matrix) {
           o.vals = vals.data();
@@ -279,7 +424,7 @@ struct Stepper {
         rhs[nq + i] = dropm[i] ? 0.0 : -phi[i];
         if (stab) rhs[nq + nm + i] = dropm[i] ? 0.0 : -psi[i] / gp;
       }
-      lu.solve(rhs.data());
+      solve(rhs.data());
       double dnmax = 0.0, nmax = 0.0;
       for (int i = 0; i < nq; ++i) {
         n[i] += rhs[i];
@@ -287,7 +432,7 @@ struct Stepper {
         dnmax = d > dnmax ? d : dnmax;
         nmax = m > nmax ? m : nmax;
       }
-      if (stab) G.subtract_BnT(rhs.data() + nq + nm, rhs.data());  // dm = dn - B_n^T xi
+      if (stab) std::copy(dm.begin(), dm.end(), rhs.begin());  // dm = dn - B_n^T xi
       for (int i = 0; i < nq; ++i) {
         v[i] += gp * rhs[i];
         vd[i] += bp * rhs[i];
@@ -301,10 +446,11 @@ struct Stepper {
           double lt = std::log(theta);
           double k_rem = std::log(P.tol_r / std::fmax(er * theta, P.tol_r)) / lt;
           if (nm > 0) k_rem = std::fmax(k_rem, std::log(P.ltol / std::fmax(ep * theta, P.ltol)) / lt);
-          if (k_rem > P.kmax) refac = true;
+          if (k_rem > P.kmax || (split && !full_mode && k_rem > KSPLIT)) refac = true;
         }
       }
       dn_prev = dnmax;
+      fall_back();
       // (round-off of the positions: of the increment, or of the model's length scale when the
       // motion has come to rest and the forces with it)
       if (ep <= P.ltol && dnmax <= 4e-16 * std::fmax(nmax, P.lscale)) {
@@ -313,6 +459,7 @@ struct Stepper {
         break;
       }
     }
+    if (full_mode) ++full_steps;
     info.iterations = it;
     info.residual = er;
     info.constraint = ep;

@@ -41,6 +41,10 @@ struct Context {
   const long* vel_at = nullptr;   // (nvel,) their offsets in velv
   long nvel = 0;
   double cM = 0, cC = 0, cK = 0;  // coefficients of M, C_T and K_T T (Eq. (46))
+  // with vals: also the constraint rows (Eq. (59)); the split index-2 iteration of
+  // _core/newton.hpp does without them (the constraints' rows there are B, of the multiplier
+  // columns' blocks)
+  bool phi_rows = true;
   double fscale = 0;     // magnitude of the forces entering r (for relative tolerances)
   double* energy;        // (N_ENERGY,) or nullptr
 

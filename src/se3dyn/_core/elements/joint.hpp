@@ -136,14 +136,14 @@ struct Joints : ElementBatch {
       }
       if (!X.vals) continue;
       double D[36], C[36], Y[36];
-      dvect(G, D);
+      if (X.phi_rows) dvect(G, D);
       // constraint rows: D Ad PA T_A A_A, -D Ad_{G^-1} PB T_B A_B, D T_J A_J
-      if (T.k[a]) {
+      if (X.phi_rows && T.k[a]) {
         mm<6, 6, 6>(D, AdP, C);
         cols_times(6, T.k[a], C, &S.TA[36 * a], Y);
         add_block(X.vals, off_ca[e], 6, T.k[a], Y, 1.0);
       }
-      if (T.k[b]) {
+      if (X.phi_rows && T.k[b]) {
         double AdG[36], t[36];
         adjoint_inv(G, AdG);
         mm<6, 6, 6>(D, AdG, t);
@@ -152,7 +152,7 @@ struct Joints : ElementBatch {
         cols_times(6, T.k[b], C, &S.TA[36 * b], Y);
         add_block(X.vals, off_cb[e], 6, T.k[b], Y, -1.0);
       }
-      if (T.k[j]) {
+      if (X.phi_rows && T.k[j]) {
         cols_times(6, T.k[j], D, &S.TA[36 * j], Y);
         add_block(X.vals, off_cj[e], 6, T.k[j], Y, 1.0);
       }
