@@ -12,8 +12,10 @@
 #include <limits>
 #include <vector>
 
+#include <map>
 #include <memory>
 #include <stdexcept>
+#include <utility>
 
 #include "elements/registry.hpp"
 #include "sparse_lu.hpp"
@@ -65,6 +67,10 @@ struct Engine {
   std::vector<char> log_needed;        // a spring needs them inside the iterations
   std::vector<VelProd> velprod;
   std::vector<XiProd> xiprod;
+  // the split iteration's xi block B_n B_n^T is symmetric: the products of joint pairs c1 <= c2
+  // (xi_half), the blocks of c1 > c2 their transposes (xi_mirror: source, target offsets)
+  std::vector<int> xi_half;
+  std::vector<std::pair<long, long>> xi_mirror;
   std::vector<char> is_joint_frame;    // (F,)
   // the velocity-level blocks the products use (Context::vel): offsets in the values,
   // increasing, and in velv
@@ -98,6 +104,14 @@ struct Engine {
     velv.assign(nv, 0.0);
     for (VelProd& p : velprod)
       p.src = vel_at[std::lower_bound(vel_off.begin(), vel_off.end(), p.src) - vel_off.begin()];
+    std::map<std::pair<int, int>, long> target_of;  // (c1, c2) -> its block's offset
+    for (size_t i = 0; i < xiprod.size(); ++i) {
+      const XiProd& p = xiprod[i];
+      target_of[{p.c1, p.c2}] = p.target;
+      if (p.c1 <= p.c2) xi_half.push_back(int(i));
+    }
+    for (const auto& [cc, t] : target_of)
+      if (cc.first < cc.second) xi_mirror.emplace_back(t, target_of.at({cc.second, cc.first}));
     if (!joints) {  // no constraint elements: an empty batch keeps the index-2 code uniform
       batches.push_back(std::make_unique<Joints>());
       joints = static_cast<Joints*>(batches.back().get());
@@ -167,6 +181,9 @@ struct Engine {
     // (the split iteration matrix of the Stepper does without them: newton.hpp)
     bool velprod = true;
     bool phi_rows = true;  // with vals: the constraint rows too (Context::phi_rows)
+    // index 2: the xi block as B_n B_n^T (symmetric: half the products) instead of B B_n^T
+    // (the split iteration, newton.hpp)
+    bool xi_sym = false;
   };
 
   // Residual (Eq. (39)), constraints (Eq. (40)), velocity constraints and, when vals, the
@@ -222,9 +239,20 @@ struct Engine {
         const double* Bn = &joints->Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
         sub_times_T(p.ki, p.kj, V, p.kj, Bn, vals + p.target);  // target: ki x 6
       }
-      for (const XiProd& p : xiprod)
-        sub_times_T(6, p.k, &joints->Bu[108 * p.c1 + 36 * p.s1], 6,
-                    &joints->Bnu[108 * p.c2 + 36 * p.s2], vals + p.target);
+      if (!o.xi_sym) {
+        for (const XiProd& p : xiprod)
+          sub_times_T(6, p.k, &joints->Bu[108 * p.c1 + 36 * p.s1], 6,
+                      &joints->Bnu[108 * p.c2 + 36 * p.s2], vals + p.target);
+      } else {
+        for (int i : xi_half) {
+          const XiProd& p = xiprod[i];
+          sub_times_T(6, p.k, &joints->Bnu[108 * p.c1 + 36 * p.s1], 6,
+                      &joints->Bnu[108 * p.c2 + 36 * p.s2], vals + p.target);
+        }
+        for (const auto& [from, to] : xi_mirror)
+          for (int r = 0; r < 6; ++r)
+            for (int c = 0; c < 6; ++c) vals[to + 6 * r + c] = vals[from + 6 * c + r];
+      }
     }
     return X.fscale;
   }

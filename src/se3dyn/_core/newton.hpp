@@ -14,10 +14,11 @@
 //     [ Phi_q T    0         Phi_q T B_n^T      ] [dl ]
 //     [ B + cv Z   0         cv Z B_n^T         ] [dxi]
 // (S = cM M + cC C_T + cK K_T T, B = Phi_q, Z = d(B v)/dq T). The stepper iterates with its
-// block-triangular part, Phi_q T taken as B (equal up to O(|n|) and O(|phi|)): (dm, dl) solve
-// [S Phi_q^T; B + cv Z 0], the index-3 matrix with the velocity constraints' rows (its
-// pattern), then dxi solves B B_n^T dxi = -phi - B dm (nm x nm, coupling the joints that share
-// a frame; B of the matrix's iterate), and dn = dm + B_n^T dxi. Only the iteration matrix
+// block-triangular part, Phi_q T taken as B in the dm columns and as B_n in the dxi ones (equal
+// up to O(|n|) and O(|phi|)): (dm, dl) solve [S Phi_q^T; B + cv Z 0], the index-3 matrix with
+// the velocity constraints' rows (its pattern), then dxi solves B_n B_n^T dxi = -phi - B dm
+// (nm x nm, symmetric positive definite, coupling the joints that share a frame; B of the
+// matrix's iterate, B_n of the step's start), and dn = dm + B_n^T dxi. Only the iteration matrix
 // changes (as modified Newton changes it anyway): the residuals are exact, so the converged
 // step is the same. The omitted blocks are O(h^2 K) and O(h |v|) against the kept ones
 // (spectral radius of the iteration's error map, measured at h = 1 ms: 2e-4 to 2e-2 on the 30-
@@ -89,7 +90,8 @@ struct Stepper {
   int N = 0;                         // size of the linear system
   // split index-2 iteration matrix (see the header): lu holds the (dm, dl) block (rows:
   // dynamics, then per multiplier its velocity constraint, or for a dropped equation its
-  // constraint row, the identity), lux the xi block B B_n^T (the velocity constraints' rows)
+  // constraint row, the identity), lux the xi block B_n B_n^T (in the velocity constraints'
+  // rows of the values)
   bool split = false;
   int N1 = 0;
   SparseLU lux;
@@ -226,7 +228,7 @@ struct Stepper {
     double* xl = x + nq;  // constraints' right-hand side in, dl out
     double* xx = x + N1;  // velocity constraints' right-hand side in, dxi out
     for (int i = 0; i < nm; ++i) std::swap(xl[i], xx[i]);
-    lu.solve(x);  // (dm, dl); xx: -B B_n^T dxi = -phi - B dm
+    lu.solve(x);  // (dm, dl); xx: -B_n B_n^T dxi = -phi - B dm
     for (int i = 0; i < nm; ++i) xx[i] = -xx[i];
     E->add_BA(x, xx);
     for (int i = 0; i < nm; ++i) xx[i] = dropm[i] ? 0.0 : xx[i];
@@ -383,12 +385,14 @@ struct Stepper {
     Engine::Out o{r.data(), phi.data(), stab ? psi.data() : nullptr, alpha, nullptr,
                   energy.data()};
     o.velprod = o.phi_rows = !split || full_mode;
+    o.xi_sym = !o.velprod;
     // a split iteration that must be refactorised goes over to the full matrix (for the run)
     auto fall_back = [&]() {
       if (refac && split && !full_mode && it > 0) {
         full_mode = true;
         have_ref = false;  // (a full factorisation of the full matrix: the new memory)
         o.velprod = o.phi_rows = true;
+        o.xi_sym = false;
       }
     };
     while (true) {
