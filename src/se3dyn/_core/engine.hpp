@@ -262,17 +262,27 @@ struct Engine {
   void add_BA(const double* x, double* out) const {
     for (int e = 0; e < joints->n; ++e) {
       int fr[3] = {joints->fa[e], joints->fb[e], joints->fj[e]};
-      double* o = out + joints->mult[e];
+      double o[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
       for (int s = 0; s < 3; ++s) {
         int f = fr[s], d = T.dof[f], k = T.k[f];
         if (d < 0) continue;
         const double* BA = &joints->Bu[108 * e + 36 * s];  // 6 x k, ld 6
-        for (int i = 0; i < 6; ++i) {
-          double acc = 0.0;
-          for (int c = 0; c < k; ++c) acc += BA[6 * i + c] * x[d + c];
-          o[i] += acc;
-        }
+        if (k == 6) add_rows<6>(BA, x + d, o);
+        else if (k == 3) add_rows<3>(BA, x + d, o);
+        else
+          for (int i = 0; i < 6; ++i)
+            for (int c = 0; c < k; ++c) o[i] += BA[6 * i + c] * x[d + c];
       }
+      double* out_e = out + joints->mult[e];
+      for (int i = 0; i < 6; ++i) out_e[i] += o[i];
+    }
+  }
+  template <int K>
+  static void add_rows(const double* BA, const double* x, double* o) {
+    for (int i = 0; i < 6; ++i) {
+      double acc = 0.0;
+      for (int c = 0; c < K; ++c) acc += BA[6 * i + c] * x[c];
+      o[i] += acc;
     }
   }
 
@@ -285,12 +295,24 @@ struct Engine {
         int f = fr[s], d = T.dof[f];
         if (d < 0) continue;
         const double* Bn = &joints->Bnu[108 * e + 36 * s];  // 6 x k
-        for (int c = 0; c < T.k[f]; ++c) {
-          double acc = 0.0;
-          for (int i = 0; i < 6; ++i) acc += Bn[6 * i + c] * x[i];
-          out[d + c] -= acc;
-        }
+        const int k = T.k[f];
+        if (k == 6) sub_cols<6>(Bn, x, out + d);
+        else if (k == 3) sub_cols<3>(Bn, x, out + d);
+        else
+          for (int c = 0; c < k; ++c) {
+            double acc = 0.0;
+            for (int i = 0; i < 6; ++i) acc += Bn[6 * i + c] * x[i];
+            out[d + c] -= acc;
+          }
       }
+    }
+  }
+  template <int K>
+  static void sub_cols(const double* Bn, const double* x, double* out) {
+    for (int c = 0; c < K; ++c) {
+      double acc = 0.0;
+      for (int i = 0; i < 6; ++i) acc += Bn[6 * i + c] * x[i];
+      out[c] -= acc;
     }
   }
 };

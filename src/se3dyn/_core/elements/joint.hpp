@@ -33,21 +33,41 @@ struct Joints : ElementBatch {
   std::vector<long> off_ca, off_cb, off_cj, off_ac, off_bc, off_jc, off_aj;
   // index 2: velocity-constraint rows x (A, B, J)
   std::vector<long> off_xa, off_xb, off_xj;
-  // B A per frame slot (n, 3, 6, 6) at the iterate and at the start of the step
+  // B A per frame slot (n, 3, 6, 6) at the iterate and at the start of the step; the slots of
+  // node B (-PB A_B) and of the joint frame (A_J) are constant: written once (const_ready)
   mutable std::vector<double> Bu, Bnu;
+  mutable bool const_ready = false;
 
   void resize_scratch() {
     Bu.assign(108 * n, 0.0);
     Bnu.assign(108 * n, 0.0);
+    const_ready = false;
+  }
+
+  void constant_slots(const FrameTables& T) const {
+    if (const_ready) return;
+    for (int e = 0; e < n; ++e) {
+      int fr[3] = {fa[e], fb[e], fj[e]};
+      for (int s = 1; s < 3; ++s) {
+        double Bs[36];
+        B(e, s, Frame(), Bs);  // (independent of the joint frame)
+        cols_times(6, T.k[fr[s]], Bs, &T.A[36 * fr[s]], &Bu[108 * e + 36 * s]);
+        std::copy(&Bu[108 * e + 36 * s], &Bu[108 * e + 36 * s] + 36, &Bnu[108 * e + 36 * s]);
+      }
+    }
+    const_ready = true;
   }
 
   // B_s (6x6) of slot s (0: A, 1: B, 2: J) at the joint frame H_J
   void B(int e, int s, const Frame& HJ, double* out) const {
     if (s == 0) {
-      double Ad[36];
-      adjoint_inv(HJ, Ad);
-      if (offset[e]) mm<6, 6, 6>(Ad, &PA[36 * e], out);
-      else for (int i = 0; i < 36; ++i) out[i] = Ad[i];
+      if (offset[e]) {  // Ad_{H_J^-1} Ad_{X_A^-1} = Ad_{(X_A H_J)^-1}
+        Frame XH;
+        compose(XA[e], HJ, XH);
+        adjoint_inv(XH, out);
+      } else {
+        adjoint_inv(HJ, out);
+      }
     } else if (s == 1) {
       for (int i = 0; i < 36; ++i) out[i] = offset[e] ? -PB[36 * e + i] : (i % 7 == 0 ? -1.0 : 0.0);
     } else {
@@ -57,14 +77,11 @@ struct Joints : ElementBatch {
 
   // B_s A_f of every joint at the given frames into `dst` (n, 3, 36)
   void store_B(const FrameTables& T, const std::vector<Frame>& H, std::vector<double>& dst) const {
-    for (int e = 0; e < n; ++e) {
-      int fr[3] = {fa[e], fb[e], fj[e]};
-      for (int s = 0; s < 3; ++s) {
-        double Bs[36];
-        B(e, s, H[fj[e]], Bs);
-        double* o = &dst[108 * e + 36 * s];
-        cols_times(6, T.k[fr[s]], Bs, &T.A[36 * fr[s]], o);
-      }
+    constant_slots(T);
+    for (int e = 0; e < n; ++e) {  // (slots 1 and 2 constant)
+      double Bs[36];
+      B(e, 0, H[fj[e]], Bs);
+      cols_times(6, T.k[fa[e]], Bs, &T.A[36 * fa[e]], &dst[108 * e]);
     }
   }
 
@@ -94,6 +111,7 @@ struct Joints : ElementBatch {
 
   void eval(Context& X, bool index2) const override {
     const FrameTables& T = *X.T;
+    constant_slots(T);
     const FrameState& S = *X.S;
     for (int e = 0; e < n; ++e) {
       int a = fa[e], b = fb[e], j = fj[e];
@@ -162,10 +180,12 @@ struct Joints : ElementBatch {
       for (int s = 0; s < 3; ++s) {
         int f = fr[s];
         if (!T.k[f]) continue;
-        double Bs[36];
         double* BA = &Bu[108 * e + 36 * s];  // kept for the index-2 products
-        B(e, s, HJ, Bs);
-        cols_times(6, T.k[f], Bs, &T.A[36 * f], BA);  // B A (6 x k): its transpose is A^T B^T
+        if (s == 0) {  // (slots 1 and 2 constant: constant_slots)
+          double Bs[36];
+          B(e, s, HJ, Bs);
+          cols_times(6, T.k[f], Bs, &T.A[36 * f], BA);  // B A (6 x k): its transpose is A^T B^T
+        }
         add_block_T(X.vals, offs[s], T.k[f], 6, BA, 1.0);
       }
       // geometric stiffness: d(PA^T Ad^T lambda)/dh*_J = -(Ad PA)^T Lambda(lambda)
