@@ -542,6 +542,7 @@ def cmd_info(args) -> int:
     keys = [("steps", "steps"), ("rejected", "rejected steps"),
             ("newton_iterations", "Newton iterations"), ("factorizations", "factorisations"),
             ("formulation", "formulation"), ("matrix_size", "matrix size"),
+            ("full_matrix_steps", "steps with the full index-2 matrix"),
             ("wall_time", "wall time (s)")]
     have = [f"{label} {st[k]:.4g}" if isinstance(st[k], float) else f"{label} {st[k]}"
             for k, label in keys if k in st]

@@ -322,6 +322,10 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     formulation : {"index2", "index3"}
         Stabilized index-2 (default; second order in positions, velocities and multipliers)
         or the paper's index-3 form, see :class:`~se3dyn.integrator.GeneralizedAlpha`.
+        Under modified Newton the index-2 steps iterate with a split matrix (an index-3-sized
+        factorisation and a small one; the same converged steps) until it contracts too
+        slowly, then with the full matrix for the rest of the run
+        (``stats["full_matrix_steps"]`` counts those steps; ``se3dyn/_core/newton.hpp``).
     redundant : {"drop", "error"}
         Redundant constraint equations are left out with zero multipliers (default; their
         names are in ``stats["redundant"]``) or reported as an error.
