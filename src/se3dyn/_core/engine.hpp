@@ -177,13 +177,10 @@ struct Engine {
     double* vals;    // (nvals or nvals2,) or nullptr
     double* energy;  // (N_ENERGY,) or nullptr
     double* arhs = nullptr;  // (nm,) acceleration-level constraint right-hand side or nullptr
-    // index 2: also the blocks -(cM M + cC C_T) B_n^T of the dynamic rows in the xi columns
-    // (the split iteration matrix of the Stepper does without them: newton.hpp)
-    bool velprod = true;
-    bool phi_rows = true;  // with vals: the constraint rows too (Context::phi_rows)
-    // index 2: the xi block as B_n B_n^T (symmetric: half the products) instead of B B_n^T
-    // (the split iteration, newton.hpp)
-    bool xi_sym = false;
+    // the matrix of the split index-2 iteration (newton.hpp) instead of the full one: without
+    // the dynamic rows' xi blocks -(cM M + cC C_T) B_n^T and the constraint rows
+    // (Context::phi_rows), the xi block as B_n B_n^T (symmetric: half the products)
+    bool split = false;
   };
 
   // Residual (Eq. (39)), constraints (Eq. (40)), velocity constraints and, when vals, the
@@ -200,7 +197,7 @@ struct Engine {
     long nv = index2 ? nvals2 : nvals;
     if (o.vals) std::fill(o.vals, o.vals + nv, 0.0);
     bool prod = o.vals && index2;
-    bool vprod = prod && o.velprod;
+    bool vprod = prod && !o.split;
     if (vprod) std::fill(velv.begin(), velv.end(), 0.0);
     if (o.energy) std::fill(o.energy, o.energy + N_ENERGY, 0.0);
     Context X;
@@ -222,7 +219,7 @@ struct Engine {
     X.cM = cM;
     X.cC = cC;
     X.cK = cK;
-    X.phi_rows = o.phi_rows;
+    X.phi_rows = !o.split;
     X.energy = o.energy;
     X.arhs = o.arhs;
     if (o.arhs) std::fill(o.arhs, o.arhs + nm, 0.0);
@@ -239,7 +236,7 @@ struct Engine {
         const double* Bn = &joints->Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
         sub_times_T(p.ki, p.kj, V, p.kj, Bn, vals + p.target);  // target: ki x 6
       }
-      if (!o.xi_sym) {
+      if (!o.split) {
         for (const XiProd& p : xiprod)
           sub_times_T(6, p.k, &joints->Bu[108 * p.c1 + 36 * p.s1], 6,
                       &joints->Bnu[108 * p.c2 + 36 * p.s2], vals + p.target);

@@ -384,15 +384,13 @@ struct Stepper {
     // the converged one are the new state's (no evaluation of its own)
     Engine::Out o{r.data(), phi.data(), stab ? psi.data() : nullptr, alpha, nullptr,
                   energy.data()};
-    o.velprod = o.phi_rows = !split || full_mode;
-    o.xi_sym = !o.velprod;
+    o.split = split && !full_mode;
     // a split iteration that must be refactorised goes over to the full matrix (for the run)
     auto fall_back = [&]() {
       if (refac && split && !full_mode && it > 0) {
         full_mode = true;
         have_ref = false;  // (a full factorisation of the full matrix: the new memory)
-        o.velprod = o.phi_rows = true;
-        o.xi_sym = false;
+        o.split = false;
       }
     };
     while (true) {
