@@ -71,6 +71,11 @@ struct Engine {
   // (xi_half), the blocks of c1 > c2 their transposes (xi_mirror: source, target offsets)
   std::vector<int> xi_half;
   std::vector<std::pair<long, long>> xi_mirror;
+  // products of two constant slots of B (node B, joint frame: Joints::constant_slots) are the
+  // same at every evaluation: -X Y^T of product i at xi_neg[36 * xi_at[i]] (xi_at[i] < 0: a
+  // product to form), made at the first evaluation with products
+  std::vector<int> xi_at;
+  std::vector<double> xi_neg;
   std::vector<char> is_joint_frame;    // (F,)
   // the velocity-level blocks the products use (Context::vel): offsets in the values,
   // increasing, and in velv
@@ -236,22 +241,46 @@ struct Engine {
         const double* Bn = &joints->Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
         sub_times_T(p.ki, p.kj, V, p.kj, Bn, vals + p.target);  // target: ki x 6
       }
-      if (!o.split) {
-        for (const XiProd& p : xiprod)
-          sub_times_T(6, p.k, &joints->Bu[108 * p.c1 + 36 * p.s1], 6,
-                      &joints->Bnu[108 * p.c2 + 36 * p.s2], vals + p.target);
-      } else {
-        for (int i : xi_half) {
-          const XiProd& p = xiprod[i];
-          sub_times_T(6, p.k, &joints->Bnu[108 * p.c1 + 36 * p.s1], 6,
-                      &joints->Bnu[108 * p.c2 + 36 * p.s2], vals + p.target);
+      if (xi_at.empty()) constant_products();
+      // target -= B_{c1,s1} B_{c2,s2}^T (B: of the iterate, or for the split at the step start)
+      auto product = [&](int i, const std::vector<double>& B1) {
+        const XiProd& p = xiprod[i];
+        double* t = vals + p.target;
+        if (xi_at[i] >= 0) {
+          const double* c = &xi_neg[36L * xi_at[i]];
+          for (int q = 0; q < 36; ++q) t[q] += c[q];
+        } else {
+          sub_times_T(6, p.k, &B1[108 * p.c1 + 36 * p.s1], 6,
+                      &joints->Bnu[108 * p.c2 + 36 * p.s2], t);
         }
+      };
+      if (!o.split) {
+        for (size_t i = 0; i < xiprod.size(); ++i) product(int(i), joints->Bu);
+      } else {
+        for (int i : xi_half) product(i, joints->Bnu);
         for (const auto& [from, to] : xi_mirror)
           for (int r = 0; r < 6; ++r)
             for (int c = 0; c < 6; ++c) vals[to + 6 * r + c] = vals[from + 6 * c + r];
       }
     }
     return X.fscale;
+  }
+
+  // The products of two constant slots (slot 0, node A, is the only one that moves: B A =
+  // Ad_{(X_A H_J)^-1} A_A), once; the same numbers as sub_times_T forms (0 - s = -s exactly)
+  void constant_products() {
+    xi_at.assign(xiprod.size(), -1);
+    int nc = 0;
+    for (size_t i = 0; i < xiprod.size(); ++i)
+      if (xiprod[i].s1 > 0 && xiprod[i].s2 > 0) xi_at[i] = nc++;
+    xi_neg.assign(36L * nc, 0.0);
+    for (size_t i = 0; i < xiprod.size(); ++i) {
+      const XiProd& p = xiprod[i];
+      if (xi_at[i] >= 0)
+        sub_times_T(6, p.k, &joints->Bnu[108 * p.c1 + 36 * p.s1], 6,
+                    &joints->Bnu[108 * p.c2 + 36 * p.s2], &xi_neg[36L * xi_at[i]]);
+    }
+    if (xiprod.empty()) xi_at.push_back(-1);  // (made)
   }
 
   // out (nm) += B A x, x (nq) on the unknowns, with the B A of the last matrix evaluation

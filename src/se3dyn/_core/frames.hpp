@@ -107,6 +107,15 @@ inline void cols_times(int r, int kg, const double* X, const double* Y, double* 
   prod6(r, 6, kg, X, false, Y, false, out);
 }
 
+// out (6 x k_f, ld 6) = X A_f, X (6 x 6): a copy for node frames (A the identity)
+inline void frame_cols(const FrameTables& T, int f, const double* X, double* out) {
+  if (T.node[f]) {
+    for (int i = 0; i < 36; ++i) out[i] = X[i];
+    return;
+  }
+  cols_times(6, T.k[f], X, &T.A[36 * f], out);
+}
+
 // vals[off : off + kr*kc] += s * X[:kr, :kc]  (X with ld 6)
 inline void add_block(double* vals, long off, int kr, int kc, const double* X, double s) {
   if (off < 0) return;

@@ -51,7 +51,7 @@ struct Joints : ElementBatch {
       for (int s = 1; s < 3; ++s) {
         double Bs[36];
         B(e, s, Frame(), Bs);  // (independent of the joint frame)
-        cols_times(6, T.k[fr[s]], Bs, &T.A[36 * fr[s]], &Bu[108 * e + 36 * s]);
+        frame_cols(T, fr[s], Bs, &Bu[108 * e + 36 * s]);
         std::copy(&Bu[108 * e + 36 * s], &Bu[108 * e + 36 * s] + 36, &Bnu[108 * e + 36 * s]);
       }
     }
@@ -81,7 +81,7 @@ struct Joints : ElementBatch {
     for (int e = 0; e < n; ++e) {  // (slots 1 and 2 constant)
       double Bs[36];
       B(e, 0, H[fj[e]], Bs);
-      cols_times(6, T.k[fa[e]], Bs, &T.A[36 * fa[e]], &dst[108 * e]);
+      frame_cols(T, fa[e], Bs, &dst[108 * e]);
     }
   }
 
@@ -181,11 +181,8 @@ struct Joints : ElementBatch {
         int f = fr[s];
         if (!T.k[f]) continue;
         double* BA = &Bu[108 * e + 36 * s];  // kept for the index-2 products
-        if (s == 0) {  // (slots 1 and 2 constant: constant_slots)
-          double Bs[36];
-          B(e, s, HJ, Bs);
-          cols_times(6, T.k[f], Bs, &T.A[36 * f], BA);  // B A (6 x k): its transpose is A^T B^T
-        }
+        // B A (6 x k): its transpose is A^T B^T (slots 1 and 2 constant: constant_slots)
+        if (s == 0) frame_cols(T, f, AdP, BA);
         add_block_T(X.vals, offs[s], T.k[f], 6, BA, 1.0);
       }
       // geometric stiffness: d(PA^T Ad^T lambda)/dh*_J = -(Ad PA)^T Lambda(lambda)
