@@ -76,6 +76,9 @@ struct Engine {
   // product to form), made at the first evaluation with products
   std::vector<int> xi_at;
   std::vector<double> xi_neg;
+  // the value ranges [first, last) the split iteration's matrix writes: all but the constraint
+  // rows' blocks and the dynamic rows' xi blocks, which it leaves alone (and zero: Stepper)
+  std::vector<std::pair<long, long>> split_ranges;
   std::vector<char> is_joint_frame;    // (F,)
   // the velocity-level blocks the products use (Context::vel): offsets in the values,
   // increasing, and in velv
@@ -121,6 +124,21 @@ struct Engine {
       batches.push_back(std::make_unique<Joints>());
       joints = static_cast<Joints*>(batches.back().get());
     }
+    std::vector<std::pair<long, long>> skip;
+    for (const VelProd& p : velprod) skip.emplace_back(p.target, p.target + 6L * p.ki);
+    for (int e = 0; e < joints->n; ++e) {
+      int fr[3] = {joints->fa[e], joints->fb[e], joints->fj[e]};
+      long off[3] = {joints->off_ca[e], joints->off_cb[e], joints->off_cj[e]};
+      for (int s = 0; s < 3; ++s)
+        if (T.k[fr[s]] > 0 && off[s] >= 0) skip.emplace_back(off[s], off[s] + 6L * T.k[fr[s]]);
+    }
+    std::sort(skip.begin(), skip.end());
+    long at = 0;
+    for (const auto& [a, b] : skip) {
+      if (a > at) split_ranges.emplace_back(at, a);
+      at = std::max(at, b);
+    }
+    if (nvals2 > at) split_ranges.emplace_back(at, nvals2);
   }
 
   void load_frames(const double* H4) {
@@ -200,7 +218,10 @@ struct Engine {
     std::fill(o.phi, o.phi + nm, 0.0);
     if (o.psi) std::fill(o.psi, o.psi + nm, 0.0);
     long nv = index2 ? nvals2 : nvals;
-    if (o.vals) std::fill(o.vals, o.vals + nv, 0.0);
+    if (o.vals && o.split)
+      for (const auto& [a, b] : split_ranges) std::fill(o.vals + a, o.vals + b, 0.0);
+    else if (o.vals)
+      std::fill(o.vals, o.vals + nv, 0.0);
     bool prod = o.vals && index2;
     bool vprod = prod && !o.split;
     if (vprod) std::fill(velv.begin(), velv.end(), 0.0);

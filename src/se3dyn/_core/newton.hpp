@@ -199,6 +199,8 @@ struct Stepper {
       lux.set_keep(kx.data());
     }
     probe_reference();
+    // (the blocks the split matrix leaves alone stay zero: Engine::split_ranges)
+    std::fill(vals.begin(), vals.end(), 0.0);
   }
 
   // Both factors (split) or the one: a full factorisation, or a refactorisation
