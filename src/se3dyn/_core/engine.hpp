@@ -161,8 +161,7 @@ struct Engine {
       if (tangent) {
         double T6[36];
         exp_tangent_se3(ns, E, T6);
-        if (T.node[f]) for (int i = 0; i < 36; ++i) S.TA[36 * f + i] = T6[i];
-        else cols_times(6, T.k[f], T6, &T.A[36 * f], &S.TA[36 * f]);
+        frame_cols(T, f, T6, &S.TA[36 * f]);
       } else {
         exp_se3(ns, E);
       }
@@ -313,6 +312,10 @@ struct Engine {
       for (int s = 0; s < 3; ++s) {
         int f = fr[s], d = T.dof[f], k = T.k[f];
         if (d < 0) continue;
+        if (s == 2 && T.select[f]) {  // B A of the joint frame: A (B_J = I), a selection
+          for (int c = 0; c < k; ++c) o[T.sel[6 * f + c]] += x[d + c];
+          continue;
+        }
         const double* BA = &joints->Bu[108 * e + 36 * s];  // 6 x k, ld 6
         if (k == 6) add_rows<6>(BA, x + d, o);
         else if (k == 3) add_rows<3>(BA, x + d, o);
@@ -341,8 +344,12 @@ struct Engine {
       for (int s = 0; s < 3; ++s) {
         int f = fr[s], d = T.dof[f];
         if (d < 0) continue;
-        const double* Bn = &joints->Bnu[108 * e + 36 * s];  // 6 x k
         const int k = T.k[f];
+        if (s == 2 && T.select[f]) {  // (B_n A of the joint frame: A, a selection)
+          for (int c = 0; c < k; ++c) out[d + c] -= x[T.sel[6 * f + c]];
+          continue;
+        }
+        const double* Bn = &joints->Bnu[108 * e + 36 * s];  // 6 x k
         if (k == 6) sub_cols<6>(Bn, x, out + d);
         else if (k == 3) sub_cols<3>(Bn, x, out + d);
         else

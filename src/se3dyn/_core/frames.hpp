@@ -22,6 +22,30 @@ struct FrameTables {
   std::vector<int> k;          // (F,) number of unknowns
   std::vector<char> node;      // (F,) A is the identity (a node frame)
   std::vector<double> A;       // (F, 6, 6) A_f in the first k columns (row-major, ld 6)
+  // (F,) A selects: each of its k columns one entry 1, the others 0 (the joints of Table 1
+  // along the frame's axes: spherical, hinge about z, ...); then A x, A^T g and X A are copies,
+  // sel[6 f + c] the row of column c's 1 (the same numbers as the products)
+  std::vector<char> select;
+  std::vector<signed char> sel;  // (F, 6)
+  void classify() {
+    select.assign(F, 0);
+    sel.assign(6L * F, -1);
+    for (int f = 0; f < F; ++f) {
+      if (node[f] || k[f] == 0) continue;
+      bool ok = true;
+      for (int c = 0; c < k[f] && ok; ++c) {
+        int ones = 0, at = -1;
+        for (int i = 0; i < 6; ++i) {
+          double a = A[36L * f + 6 * i + c];
+          if (a == 1.0) { ++ones; at = i; }
+          else if (a != 0.0) ok = false;
+        }
+        ok = ok && ones == 1;
+        sel[6L * f + c] = static_cast<signed char>(at);
+      }
+      select[f] = ok;
+    }
+  }
 };
 
 struct FrameState {
@@ -44,6 +68,11 @@ inline void frame_expand(const FrameTables& T, int f, const double* x, double* o
     for (int i = 0; i < 6; ++i) out[i] = x[i];
     return;
   }
+  if (T.select[f]) {
+    for (int i = 0; i < 6; ++i) out[i] = 0.0;
+    for (int c = 0; c < k; ++c) out[T.sel[6 * f + c]] = x[c];
+    return;
+  }
   const double* A = &T.A[36 * f];
   for (int i = 0; i < 6; ++i) {
     double s = 0.0;
@@ -61,6 +90,10 @@ inline void frame_force(const FrameTables& T, int f, const double* g, double s, 
     for (int i = 0; i < 6; ++i) r[d + i] += s * g[i];
     return;
   }
+  if (T.select[f]) {
+    for (int c = 0; c < k; ++c) r[d + c] += s * g[T.sel[6 * f + c]];
+    return;
+  }
   const double* A = &T.A[36 * f];
   for (int c = 0; c < k; ++c) {
     double acc = 0.0;
@@ -76,6 +109,11 @@ inline void rows_to_unknowns(const FrameTables& T, int f, const double* X, doubl
     return;
   }
   int k = T.k[f];
+  if (T.select[f]) {
+    for (int c = 0; c < k; ++c)
+      for (int j = 0; j < 6; ++j) out[6 * c + j] = X[6 * T.sel[6 * f + c] + j];
+    return;
+  }
   const double* A = &T.A[36 * f];
   for (int c = 0; c < k; ++c)
     for (int j = 0; j < 6; ++j) {
@@ -107,13 +145,19 @@ inline void cols_times(int r, int kg, const double* X, const double* Y, double* 
   prod6(r, 6, kg, X, false, Y, false, out);
 }
 
-// out (6 x k_f, ld 6) = X A_f, X (6 x 6): a copy for node frames (A the identity)
-inline void frame_cols(const FrameTables& T, int f, const double* X, double* out) {
+// out (r x k_f, ld 6) = X A_f, X (r x 6, ld 6): copies for node frames (A the identity) and
+// for selections
+inline void frame_cols(const FrameTables& T, int f, const double* X, double* out, int r = 6) {
   if (T.node[f]) {
-    for (int i = 0; i < 36; ++i) out[i] = X[i];
+    for (int i = 0; i < 6 * r; ++i) out[i] = X[i];
     return;
   }
-  cols_times(6, T.k[f], X, &T.A[36 * f], out);
+  if (T.select[f]) {
+    for (int i = 0; i < r; ++i)
+      for (int c = 0; c < T.k[f]; ++c) out[6 * i + c] = X[6 * i + T.sel[6 * f + c]];
+    return;
+  }
+  cols_times(r, T.k[f], X, &T.A[36 * f], out);
 }
 
 // vals[off : off + kr*kc] += s * X[:kr, :kc]  (X with ld 6)
@@ -151,8 +195,8 @@ inline void add_frame_block(const FrameTables& T, const FrameState& S, double* v
     return;
   }
   rows_to_unknowns(T, f, K, X);
-  const double* Yg = tangent ? &S.TA[36 * g] : &T.A[36 * g];
-  cols_times(T.k[f], T.k[g], X, Yg, Y);
+  if (tangent) cols_times(T.k[f], T.k[g], X, &S.TA[36 * g], Y);
+  else frame_cols(T, g, X, Y, T.k[f]);
   add_block(vals, off, T.k[f], T.k[g], Y, s);
 }
 

@@ -85,6 +85,7 @@ void build(Engine& E, const nb::dict& d) {
   T.node = ivec<char>(d, "frame_node");
   T.A = dvec(d, "frame_A");
   T.F = static_cast<int>(T.dof.size());
+  T.classify();
   E.is_joint_frame = ivec<char>(d, "frame_joint");
   for (nb::handle h : nb::cast<nb::list>(item(d, "elements"))) {
     nb::tuple kt = nb::cast<nb::tuple>(h);
