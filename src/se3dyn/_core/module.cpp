@@ -319,13 +319,14 @@ NB_MODULE(_engine, m) {
       .def("lu_stats",
            [](const Stepper& S) {
              // (n, nnz(L), nnz(U), multiply-adds of a refactorisation, supernodes) of the factors
-             // (split index 2: of both, summed)
+             // (split index 2: of both, summed; the xi block's LDL^T counts its L for L and for
+             // U = D L^T, as an LU without pivoting would, and the multiply-adds of its factor)
              long long l = S.lu.nnz_L(), u = S.lu.nnz_U(), f = S.lu.refactor_flops();
              int sn = S.lu.num_supernodes();
              if (S.split) {
                l += S.lux.nnz_L();
-               u += S.lux.nnz_U();
-               f += S.lux.refactor_flops();
+               u += S.lux.nnz_L();
+               f += S.lux.factor_flops();
                sn += S.lux.num_supernodes();
              }
              return nb::make_tuple(S.N, l, u, f, sn);

@@ -17,10 +17,11 @@
 // block-triangular part, Phi_q T taken as B in the dm columns and as B_n in the dxi ones (equal
 // up to O(|n|) and O(|phi|)): (dm, dl) solve [S Phi_q^T; B + cv Z 0], the index-3 matrix with
 // the velocity constraints' rows (its pattern), then dxi solves B_n B_n^T dxi = -phi - B dm
-// (nm x nm, symmetric positive definite, coupling the joints that share a frame; B of the
-// matrix's iterate, B_n of the step's start), and dn = dm + B_n^T dxi. Only the iteration matrix
-// changes (as modified Newton changes it anyway): the residuals are exact, so the converged
-// step is the same. The omitted blocks are O(h^2 K) and O(h |v|) against the kept ones
+// (nm x nm, symmetric positive definite, coupling the joints that share a frame: a sparse
+// LDL^T, sparse_ldlt.hpp; B of the matrix's iterate, B_n of the step's start), and dn = dm +
+// B_n^T dxi. Only the iteration matrix changes (as modified Newton changes it anyway): the
+// residuals are exact, so the converged step is the same. The omitted blocks are O(h^2 K) and
+// O(h |v|) against the kept ones
 // (spectral radius of the iteration's error map, measured at h = 1 ms: 2e-4 to 2e-2 on the 30-
 // to 1000-link chains, 4e-3 to 2e-5 on the slider-crank and the gallery; docs/performance.md).
 // In m the round-off of the positions (Phi of frames 100 m from the origin) stays out of the
@@ -62,6 +63,7 @@
 #include <vector>
 
 #include "engine.hpp"
+#include "sparse_ldlt.hpp"
 
 namespace se3dyn {
 
@@ -90,11 +92,12 @@ struct Stepper {
   int N = 0;                         // size of the linear system
   // split index-2 iteration matrix (see the header): lu holds the (dm, dl) block (rows:
   // dynamics, then per multiplier its velocity constraint, or for a dropped equation its
-  // constraint row, the identity), lux the xi block B_n B_n^T (in the velocity constraints'
-  // rows of the values)
+  // constraint row, the identity), lux the xi block -B_n B_n^T (in the velocity constraints'
+  // rows of the values; negative definite, a dropped equation's row and column the identity's:
+  // an LDL^T with those pivot signs, no pivot sequence, so nothing of it in the solver memory)
   bool split = false;
   int N1 = 0;
-  SparseLU lux;
+  SparseLDLT lux;
   SparseLU luf;            // split: the full matrix, once the split contracted too slowly
   bool full_mode = false;  // split: iterating with the full matrix (part of the memory)
   long full_steps = 0;     // steps done with the full matrix (counted over the stepper's life)
@@ -162,7 +165,6 @@ struct Stepper {
       lu.analyze(N, std::move(colptr), std::move(rowind), std::move(src), group, vals.data());
       lu.set_keep(keep.data());
     } else {
-      lux.set_options(opt);
       const int nq = E->nq, nm = E->nm;
       // row r of the index-2 matrix in the (dm, dl) block: -1 where it is not there
       std::vector<int> rowmap(N, -1);
@@ -194,16 +196,34 @@ struct Stepper {
       luf.set_keep(kf.data());
       lu.analyze(N1, std::move(cp1), std::move(ri1), std::move(s1), group, vals.data());
       lu.set_keep(k1.data());
-      lux.analyze(N - N1, std::move(cpx), std::move(rix), std::move(sx),
-                  group ? group + N1 : nullptr, vals.data());
-      lux.set_keep(kx.data());
+      // the xi block: the ordering of a SparseLU of its pattern, the entries zero in the
+      // generic matrix left out of L, the lower triangle read. (The generic matrix is the full
+      // one, with -B B_n^T there, B of the iterate, nonzero also where the split matrix's
+      // -B_n B_n^T is zero only mathematically: products of orthogonal rows. Round-off
+      // residues in the entries left out, measured up to 4e-17 of the largest entry of their
+      // supernode's columns over the test suite, are zeros to factor by drop_tol; a larger
+      // entry there is an error, kPatternChanged.) A pivot below pivot_tol of its diagonal
+      // entry is round-off of a zero one (a numerically singular block: -2e-16 on a corrupted
+      // model of the hostile-input tests), an error too; the runs of the test suite stay above
+      // 8e-10 (the smallest at the singular positions of a mechanism, tests/test_adaptive.py).
+      SparseLDLT::Options xopt;
+      xopt.drop_zeros = true;
+      xopt.drop_tol = 1e-12;
+      xopt.pivot_tol = 1e-13;
+      lux.set_options(xopt);
+      lux.analyze(nm, std::move(cpx), std::move(rix), std::move(sx), group ? group + N1 : nullptr,
+                  vals.data(), kx.data());
+      std::vector<signed char> sign(nm);
+      for (int i = 0; i < nm; ++i) sign[i] = dropm[i] ? 1 : -1;
+      lux.set_signs(sign.data());
     }
     probe_reference();
     // (the blocks the split matrix leaves alone stay zero: Engine::split_ranges)
     std::fill(vals.begin(), vals.end(), 0.0);
   }
 
-  // Both factors (split) or the one: a full factorisation, or a refactorisation
+  // Both factors (split) or the one: a full factorisation, or a refactorisation (of the LU:
+  // the xi block's LDL^T is a factorisation every time, a function of the values alone)
   int lu_factor() {
     int code = lu.factor(vals.data());
     if (code == 0 && split) code = lux.factor(vals.data());
@@ -211,7 +231,7 @@ struct Stepper {
   }
   int lu_refactor() {
     int code = lu.refactor(vals.data());
-    if (code == 0 && split) code = lux.refactor(vals.data());
+    if (code == 0 && split) code = lux.factor(vals.data());
     return code;
   }
 
@@ -242,12 +262,14 @@ struct Stepper {
   }
 
   // The first reference of the refactorisations: a full factorisation of the generic matrix
-  // (the solver memory is then the model's own: nothing to keep in a State)
+  // (the solver memory is then the model's own: nothing to keep in a State). Split: of the
+  // (dm, dl) block only; the xi block's LDL^T keeps nothing (a function of the values it
+  // factorises), the first factorisation of a run makes it.
   int probe_reference() {
     full_mode = false;
     probe();
     set_dropped();
-    int code = lu_factor();
+    int code = lu.factor(vals.data());
     have_ref = code == 0;
     ref_probe = have_ref;
     ref_vals.reset();
