@@ -317,20 +317,32 @@ NB_MODULE(_engine, m) {
                                   info.factorisations, en);
           })
       .def("lu_stats",
-           [](const Stepper& S) {
+           [](const Stepper& S, const std::string& part) {
              // (n, nnz(L), nnz(U), multiply-adds of a refactorisation, supernodes) of the factors
-             // (split index 2: of both, summed; the xi block's LDL^T counts its L for L and for
-             // U = D L^T, as an LU without pivoting would, and the multiply-adds of its factor)
-             long long l = S.lu.nnz_L(), u = S.lu.nnz_U(), f = S.lu.refactor_flops();
-             int sn = S.lu.num_supernodes();
-             if (S.split) {
+             // (split index 2: of both, summed, or part "lu" / "xi" of one; the xi block's
+             // LDL^T counts its L for L and for U = D L^T, as an LU without pivoting would, and
+             // the multiply-adds of its factorisation; n is the factor's order)
+             if (part != "all" && part != "lu" && part != "xi")
+               throw std::invalid_argument("lu_stats: part 'all', 'lu' or 'xi'");
+             const bool lu = part != "xi", xi = part != "lu" && S.split;
+             long long l = 0, u = 0, f = 0, n = part == "all" ? S.N : 0;
+             int sn = 0;
+             if (lu) {
+               l += S.lu.nnz_L();
+               u += S.lu.nnz_U();
+               f += S.lu.refactor_flops();
+               sn += S.lu.num_supernodes();
+               if (part == "lu") n = S.lu.n();
+             }
+             if (xi) {
                l += S.lux.nnz_L();
                u += S.lux.nnz_L();
                f += S.lux.factor_flops();
                sn += S.lux.num_supernodes();
+               if (part == "xi") n = S.lux.n();
              }
-             return nb::make_tuple(S.N, l, u, f, sn);
-           })
+             return nb::make_tuple(n, l, u, f, sn);
+           }, nb::arg("part") = "all")
       .def("full_steps", [](const Stepper& S) { return S.full_steps; })
       .def("memory_size", [](const Stepper& S) { return S.memory_size(); })
       .def("serials",
