@@ -609,7 +609,10 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         exc.result = rec.results(stats)
         raise exc
 
-    stats["linear_solver"] = "sparse LU (se3dyn/_core/sparse_lu.hpp)"
+    stats["linear_solver"] = ("sparse LU (se3dyn/_core/sparse_lu.hpp)"
+                              + (" and LDL^T (sparse_ldlt.hpp) of the split index-2 iteration's "
+                                 "xi block" if integ.index2 and integ.newton == "modified" and s.nm
+                                 else ""))
     stats["engine"] = "compiled"
     if not adaptive and grid is None:
         # the whole fixed-step loop in the compiled engine, in chunks between which progress
