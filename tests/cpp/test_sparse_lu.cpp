@@ -552,6 +552,24 @@ void test_singular(std::mt19937_64& rng) {
     lu.solve(x.data());
     check(backward_error(A, A.x, x.data(), b.data()) <= 1e-13, "accuracy after failures");
   }
+  {  // a NaN in an entry left out of the factors (drop_zeros) is found whatever follows it in
+     // its column (a later zero entry must not hide it)
+    Csc A = from_triplets(3, {0, 1, 2, 1, 2}, {0, 0, 0, 1, 2}, {4, 0, 0, 3, 2});
+    SparseLU::Options o;
+    o.drop_zeros = true;
+    SparseLU lu(o);
+    lu.analyze(A.n, A.p.data(), A.i.data());
+    check(lu.factor(A.x.data()) == 0, "left-out entries: factor");
+    for (int at : {1, 2}) {  // the NaN before or after the other left-out entry
+      std::vector<double> v(A.x);
+      v[at] = NAN;
+      const int s = lu.refactor(v.data());
+      check(s > 0 && lu.status() == SparseLU::kNotFinite,
+            "NaN in a left-out entry (" + std::to_string(at) + "): refactor status " +
+                std::to_string(static_cast<int>(lu.status())));
+      check(lu.factor(A.x.data()) == 0, "left-out entries: factor again");
+    }
+  }
   {  // refactor: pivot that becomes zero, and a pivot that becomes too small
     Csc A = from_triplets(2, {0, 1, 0, 1}, {0, 0, 1, 1}, {4, 1, 1, 3});
     SparseLU lu;

@@ -1203,11 +1203,13 @@ SE3DYN_LU_SCALAR inline int SparseLU::refactor(const double* values) {
     }
     if (Rzp_[k + 1] > Rzp_[k]) {  // entries left out by factor must still be "zero"
       double zmax = 0.0;
+      bool znan = false;  // (a NaN kept apart: max() would let a later entry replace it)
       for (int q = Rzp_[k]; q < Rzp_[k + 1]; ++q) {
         const double az = std::fabs(values[Rz_[q]]);
+        znan |= az != az;
         zmax = std::max(zmax, az);
-        if (!(az <= zmax)) zmax = az;  // NaN
       }
+      if (znan) zmax = std::numeric_limits<double>::quiet_NaN();
       asum += zmax;
       if (!(zmax <= dtol * std::max(amax, zmax))) {
         for (int q = Rp_[k]; q < Rp_[k + 1]; ++q) x[Rr_[q]] = 0.0;
