@@ -28,6 +28,7 @@
 //     stepper's options: refactorisation, solve) against SparseLDLT (factorisation, solve).
 // The last line is "N passed, N failed"; the exit code is nonzero when a check failed.
 #include "sparse_ldlt.hpp"
+#include "check.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -44,22 +45,6 @@ using se3dyn::SparseLU;
 
 namespace {
 
-int g_pass = 0, g_fail = 0;
-
-std::string sci(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.2e", v);
-  return buf;
-}
-
-void check(bool ok, const std::string& what) {
-  if (ok) {
-    ++g_pass;
-  } else {
-    ++g_fail;
-    std::printf("FAILED: %s\n", what.c_str());
-  }
-}
 
 // A symmetric matrix as a dense array (small sizes: the tests build it densely) and the blocks
 // of its unknowns.
@@ -724,6 +709,5 @@ int main(int argc, char** argv) {
   test_xi_block(rng);
   test_failures(rng);
   timing(rng, 1000);
-  std::printf("%d passed, %d failed\n", g_pass, g_fail);
-  return g_fail ? 1 : 0;
+  return report();
 }

@@ -19,6 +19,7 @@
 //     numbers make_lu_matrices.py measured.
 // The last line is "N passed, N failed"; the exit code is nonzero when a check failed.
 #include "sparse_lu.hpp"
+#include "check.hpp"
 
 #include <chrono>
 #include <ctime>
@@ -35,22 +36,6 @@ using se3dyn::SparseLU;
 
 namespace {
 
-int g_pass = 0, g_fail = 0;
-
-std::string sci(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.2e", v);
-  return buf;
-}
-
-void check(bool ok, const std::string& what) {
-  if (ok) {
-    ++g_pass;
-  } else {
-    ++g_fail;
-    std::printf("FAILED: %s\n", what.c_str());
-  }
-}
 
 struct Csc {
   int n = 0;
@@ -771,7 +756,6 @@ int main(int argc, char** argv) {
   test_random(rng);
   test_scaling(rng);
   test_engine(dir, rng);
-  std::printf("%d passed, %d failed\n", g_pass, g_fail);
-  return g_fail ? 1 : 0;
+  return report();
 }
 #endif

@@ -211,14 +211,8 @@ inline int SparseLDLT::analyze(int n, std::vector<int>&& colptr, std::vector<int
                                std::vector<int>&& vmap, const int* group, const double* values,
                                const char* keep) {
   reset();
-  if (n < 0 || colptr.size() != static_cast<std::size_t>(n) + 1 || colptr[0] != 0) return -1;
-  for (int j = 0; j < n; ++j)
-    if (colptr[j + 1] < colptr[j]) return -1;
+  if (!sparse_lu_detail::valid_pattern(n, colptr, rowind, vmap)) return -1;
   const int nz = colptr[n];
-  if (rowind.size() != static_cast<std::size_t>(nz)) return -1;
-  if (!vmap.empty() && vmap.size() != static_cast<std::size_t>(nz)) return -1;
-  for (int p = 0; p < nz; ++p)
-    if (rowind[p] < 0 || rowind[p] >= n || (!vmap.empty() && vmap[p] < 0)) return -1;
   auto vidx = [&](int p) { return vmap.empty() ? p : vmap[p]; };
 
   // --- the ordering of SparseLU for this pattern (its analyze, without the numeric storage

@@ -74,6 +74,21 @@ namespace se3dyn {
 
 namespace sparse_lu_detail {
 
+// Whether (colptr, rowind, vmap) is a valid n x n CSC pattern with its value map (empty: the
+// CSC order), as analyze takes it (SparseLU and SparseLDLT)
+inline bool valid_pattern(int n, const std::vector<int>& colptr, const std::vector<int>& rowind,
+                          const std::vector<int>& vmap) {
+  if (n < 0 || colptr.size() != static_cast<std::size_t>(n) + 1 || colptr[0] != 0) return false;
+  for (int j = 0; j < n; ++j)
+    if (colptr[j + 1] < colptr[j]) return false;
+  const int nz = colptr[n];
+  if (rowind.size() != static_cast<std::size_t>(nz)) return false;
+  if (!vmap.empty() && vmap.size() != static_cast<std::size_t>(nz)) return false;
+  for (int p = 0; p < nz; ++p)
+    if (rowind[p] < 0 || rowind[p] >= n || (!vmap.empty() && vmap[p] < 0)) return false;
+  return true;
+}
+
 // Refactor's unit lower triangular solve with the diagonal block of a whole supernode j..j+W-1
 // of L (column t's entries below the diagonal first at Lx + Lp[t]) on x[j..j+W): the values of
 // U(j..j+W-1, k) to u (their magnitudes added to usum and umax in order), x[j..j+W) cleared.
@@ -674,14 +689,7 @@ inline int SparseLU::analyze(int n, std::vector<int>&& colptr, std::vector<int>&
   analyzed_ = valid_ = have_pattern_ = false;
   status_ = kNotAnalyzed;
   n_ = 0;
-  if (n < 0 || colptr.size() != static_cast<std::size_t>(n) + 1 || colptr[0] != 0) return -1;
-  for (int j = 0; j < n; ++j)
-    if (colptr[j + 1] < colptr[j]) return -1;
-  const int nz = colptr[n];
-  if (rowind.size() != static_cast<std::size_t>(nz)) return -1;
-  if (!vmap.empty() && vmap.size() != static_cast<std::size_t>(nz)) return -1;
-  for (int p = 0; p < nz; ++p)
-    if (rowind[p] < 0 || rowind[p] >= n || (!vmap.empty() && vmap[p] < 0)) return -1;
+  if (!sparse_lu_detail::valid_pattern(n, colptr, rowind, vmap)) return -1;
   n_ = n;
   colptr_.swap(colptr);
   rowind_.swap(rowind);
