@@ -1,7 +1,12 @@
-// What the standalone C++ test drivers (tests/cpp/test_*.cpp) share: the count of checks and
-// the closing line "N passed, N failed".
+// What the standalone C++ test drivers (tests/cpp/test_*.cpp) share: the count of checks, the
+// closing line "N passed, N failed" and the timing of their benchmarks.
 #pragma once
+#include <time.h>
+
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <functional>
 #include <string>
 
 namespace check_detail {
@@ -29,4 +34,23 @@ inline void check(bool ok, const std::string& what) {
 inline int report() {
   std::printf("%d passed, %d failed\n", check_detail::g_pass, check_detail::g_fail);
   return check_detail::g_fail ? 1 : 0;
+}
+
+// CPU time of the calling thread (the machine may be shared: wall-clock time would count the
+// time the thread waits for a core), in seconds.
+inline double thread_seconds() {
+  timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+// Minimum over `rounds` of the mean thread CPU time of `inner` calls, in seconds.
+inline double timeit(const std::function<void()>& f, int inner, int rounds) {
+  double best = INFINITY;
+  for (int r = 0; r < rounds; ++r) {
+    const double t0 = thread_seconds();
+    for (int k = 0; k < inner; ++k) f();
+    best = std::min(best, (thread_seconds() - t0) / inner);
+  }
+  return best;
 }

@@ -609,24 +609,6 @@ void test_failures(std::mt19937_64& rng) {
   }
 }
 
-// CPU time of the calling thread, in seconds (the machine may be shared)
-double thread_seconds() {
-  timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-}
-
-// Minimum over `rounds` of the mean thread CPU time of `inner` calls, in seconds.
-double timeit(const std::function<void()>& f, int inner, int rounds) {
-  double best = INFINITY;
-  for (int r = 0; r < rounds; ++r) {
-    const double t0 = thread_seconds();
-    for (int k = 0; k < inner; ++k) f();
-    best = std::min(best, (thread_seconds() - t0) / inner);
-  }
-  return best;
-}
-
 // The xi block of a chain of nb links (built sparse): block tridiagonal, dense 6 x 6 blocks,
 // B B^T of random couplings of neighbouring blocks (each link's joint shares a body with the
 // next), both triangles in CSC, grouped by link.

@@ -109,24 +109,6 @@ double backward_error_t(const Csc& A, const std::vector<double>& vals, const dou
   return rn / (an * xn + bn);
 }
 
-// CPU time of the calling thread (the machine may be shared: wall-clock time would count the
-// time the thread waits for a core), in seconds.
-double thread_seconds() {
-  timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-}
-
-// Minimum over `rounds` of the mean thread CPU time of `inner` calls, in seconds.
-double timeit(const std::function<void()>& f, int inner, int rounds) {
-  double best = INFINITY;
-  for (int r = 0; r < rounds; ++r) {
-    const double t0 = thread_seconds();
-    for (int k = 0; k < inner; ++k) f();
-    best = std::min(best, (thread_seconds() - t0) / inner);
-  }
-  return best;
-}
 
 // Factor, solve, refactor with other values, solve again; solve_transposed. Returns the worst
 // backward error; `tag` names the checks.
