@@ -68,15 +68,16 @@ def _velocity_changes(s: System, v: np.ndarray) -> list[dict]:
         return out
     sv = max(float(np.abs(given[:, :3]).max()), float(np.abs(used[:, :3]).max()), 1e-300)
     sw = max(float(np.abs(given[:, 3:]).max()), float(np.abs(used[:, 3:]).max()), 1e-300)
-    for i, node in enumerate(s.node_free):
-        if not (s.node_mass[node] > 0 or np.any(s.node_J[node] != 0)):
-            continue  # massless: its velocities are the joints' to determine, not the user's
-        dv, dw = float(np.linalg.norm(d[i, :3])), float(np.linalg.norm(d[i, 3:]))
-        if dv > 1e-9 * sv or dw > 1e-9 * sw:
-            R = s.node_H0[node, :3, :3]  # material -> inertial components at t0
-            out.append(dict(node=s.node_names[node], dv=dv, dw=dw,
-                            given=np.concatenate([R @ given[i, :3], R @ given[i, 3:]]),
-                            used=np.concatenate([R @ used[i, :3], R @ used[i, 3:]])))
+    free = np.asarray(s.node_free)
+    # (massless nodes: their velocities are the joints' to determine, not the user's)
+    massive = (s.node_mass[free] > 0) | np.any(s.node_J[free] != 0, axis=(1, 2))
+    dv, dw = np.linalg.norm(d[:, :3], axis=1), np.linalg.norm(d[:, 3:], axis=1)
+    for i in np.flatnonzero(massive & ((dv > 1e-9 * sv) | (dw > 1e-9 * sw))):
+        node = free[i]
+        R = s.node_H0[node, :3, :3]  # material -> inertial components at t0
+        out.append(dict(node=s.node_names[node], dv=float(dv[i]), dw=float(dw[i]),
+                        given=np.concatenate([R @ given[i, :3], R @ given[i, 3:]]),
+                        used=np.concatenate([R @ used[i, :3], R @ used[i, 3:]])))
     return out
 
 

@@ -653,9 +653,11 @@ class Workspace:
             groups = lay.groups2 if index2 else lay.groups3
             N = s.nq + (2 * s.nm if index2 else s.nm)
             # the compiled stepper builds its pattern from the layout's blocks
+            # (a one-off stepper solves one matrix: no factorisation of the generic matrix
+            # as the reference of refactorisations; its one solve factorises afresh)
             stp = _core().Stepper(self.engine, bool(index2), int(N), lay.block_table(index2),
                                   np.ascontiguousarray(groups, np.int64), drop,
-                                  split=split)
+                                  split=split, reference=keep)
             if keep:
                 self._steppers[key] = stp
         return stp

@@ -274,7 +274,7 @@ NB_MODULE(_engine, m) {
   nb::class_<Stepper>(m, "Stepper")
       .def("__init__",
            [](Stepper* S, Engine& E, bool index2, int N, IArr blocks, IArr group, IArr drop,
-              bool split) {
+              bool split, bool reference) {
              // the pattern from the blocks of se3dyn.assembly (block_pattern.hpp): no pattern
              // arrays per value cross the binding
              new (S) Stepper();
@@ -288,11 +288,23 @@ NB_MODULE(_engine, m) {
              std::vector<int> cp(size_t(N) + 1), ri(nv), src(nv);
              block_csc(N, blocks.data(), long(blocks.size() / 5), nv, cp.data(), ri.data(),
                        src.data());
+             // (split: the full matrix's pattern again from the blocks, when it is needed)
+             std::function<void(std::vector<int>&, std::vector<int>&, std::vector<int>&)> pat;
+             if (split && index2)
+               pat = [bl = std::vector<int64_t>(blocks.data(), blocks.data() + blocks.size()),
+                      N, nv](std::vector<int>& c, std::vector<int>& r, std::vector<int>& v) {
+                 c.assign(size_t(N) + 1, 0);
+                 r.assign(nv, 0);
+                 v.assign(nv, 0);
+                 block_csc(N, bl.data(), long(bl.size() / 5), nv, c.data(), r.data(), v.data());
+               };
              S->init(&E, index2, N, std::move(cp), std::move(ri), std::move(src),
-                     gr.empty() ? nullptr : gr.data(), dr.data(), split);
+                     gr.empty() ? nullptr : gr.data(), dr.data(), split, reference,
+                     std::move(pat));
            },
            nb::arg("engine"), nb::arg("index2"), nb::arg("N"), nb::arg("blocks"),
-           nb::arg("group"), nb::arg("drop"), nb::arg("split") = true, nb::keep_alive<1, 2>())
+           nb::arg("group"), nb::arg("drop"), nb::arg("split") = true,
+           nb::arg("reference") = true, nb::keep_alive<1, 2>())
       .def(
           "step",
           [](Stepper& S, CArr Hn, CArr alpha_n, CArr v_n, CArr vd_n, CArr a_n, CArr lam_n,

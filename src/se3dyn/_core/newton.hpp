@@ -59,6 +59,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -100,6 +101,11 @@ struct Stepper {
   SparseLDLT lux;
   SparseLU luf;            // split: the full matrix, once the split contracted too slowly
   bool full_mode = false;  // split: iterating with the full matrix (part of the memory)
+  // split: luf is analysed when first needed (ensure_luf), from the full matrix's pattern
+  // (full_pattern: colptr, rowind, src) and the groups of its unknowns
+  bool luf_ready = false;
+  std::function<void(std::vector<int>&, std::vector<int>&, std::vector<int>&)> full_pattern;
+  std::vector<int> full_groups;
   long full_steps = 0;     // steps done with the full matrix (counted over the stepper's life)
   static constexpr double KSPLIT = 6.0;  // (header)
   std::vector<double> dm;  // (nq,)
@@ -117,10 +123,15 @@ struct Stepper {
   long ref_serial = 0;
 
   // The pattern in CSC (colptr, rowind) and the value of each of its entries (src: index in
-  // vals), all taken over by the sparse LU
+  // vals), all taken over by the sparse LU. reference: the generic matrix's factorisation is
+  // the first reference of the refactorisations (the solver memory of a new run); false for a
+  // one-off solve (solve_values: a full factorisation of its matrix, nothing kept). split:
+  // full_pattern gives the full matrix's pattern again when it is needed (ensure_luf).
   void init(Engine* e, bool idx2, int n_sys, std::vector<int>&& colptr,
             std::vector<int>&& rowind, std::vector<int>&& src, const int* group,
-            const char* drop, bool split_matrix = true) {
+            const char* drop, bool split_matrix = true, bool reference = true,
+            std::function<void(std::vector<int>&, std::vector<int>&, std::vector<int>&)>
+                pattern = nullptr) {
     E = e;
     index2 = idx2;
     N = n_sys;
@@ -150,6 +161,7 @@ struct Stepper {
     // 5.1e-12 over the models measured; docs/performance.md)
     opt.refactor_tol = 1e-6;
     lu.set_options(opt);
+    luf.set_options(opt);
     vals.assign(nnz, 0.0);
     rhs.assign(N, 0.0);
     dm.assign(index2 ? E->nq : 0, 0.0);
@@ -190,10 +202,17 @@ struct Stepper {
         for (size_t p = 0; p < sv.size(); ++p) k[p] = vals[sv[p]] != 0.0;
         return k;
       };
-      std::vector<char> k1 = keep_of(s1), kx = keep_of(sx), kf = keep_of(src);
-      luf.set_options(opt);
-      luf.analyze(N, std::move(colptr), std::move(rowind), std::move(src), group, vals.data());
-      luf.set_keep(kf.data());
+      std::vector<char> k1 = keep_of(s1), kx = keep_of(sx);
+      // (the full matrix's LU: analysed by ensure_luf, when a run first needs it)
+      full_pattern = std::move(pattern);
+      if (!full_pattern) {  // (no way to rebuild the pattern: kept for later)
+        auto cp = std::make_shared<std::vector<int>>(std::move(colptr));
+        auto ri = std::make_shared<std::vector<int>>(std::move(rowind));
+        auto sr = std::make_shared<std::vector<int>>(src);
+        full_pattern = [cp, ri, sr](std::vector<int>& c, std::vector<int>& r,
+                                    std::vector<int>& v) { c = *cp; r = *ri; v = *sr; };
+      }
+      if (group) full_groups.assign(group, group + N);
       lu.analyze(N1, std::move(cp1), std::move(ri1), std::move(s1), group, vals.data());
       lu.set_keep(k1.data());
       // the xi block: the ordering of a SparseLU of its pattern, the entries zero in the
@@ -217,9 +236,36 @@ struct Stepper {
       for (int i = 0; i < nm; ++i) sign[i] = dropm[i] ? 1 : -1;
       lux.set_signs(sign.data());
     }
-    probe_reference();
+    if (reference) probe_reference();
     // (the blocks the split matrix leaves alone stay zero: Engine::split_ranges)
     std::fill(vals.begin(), vals.end(), 0.0);
+  }
+
+  // Split: analyse the full matrix's LU (luf) if not done yet. Like every analysis, from the
+  // generic matrix (probe()), so it is the same whenever a run first needs it: when the split
+  // iteration falls back to the full matrix, or a State of a run in that mode is restored.
+  // The engine's step-start frames and the residual arrays are kept; the matrix values are
+  // the generic matrix's afterwards (the full matrix is evaluated before its factorisation).
+  // A run that never falls back does not pay for it (10 ms at 1000 links, 0.18 s at 10^4).
+  void ensure_luf() {
+    if (!split || luf_ready) return;
+    std::vector<int> cp, ri, src;
+    full_pattern(cp, ri, src);
+    std::vector<Frame> Hn = E->Hn;
+    std::vector<double> r0 = r, phi0 = phi, psi0 = psi;
+    probe();
+    set_dropped();
+    std::vector<char> kf(src.size());
+    for (size_t p = 0; p < src.size(); ++p) kf[p] = vals[src[p]] != 0.0;
+    luf.analyze(N, std::move(cp), std::move(ri), std::move(src),
+                full_groups.empty() ? nullptr : full_groups.data(), vals.data());
+    luf.set_keep(kf.data());
+    // (copied back in place: the step holds pointers into these arrays)
+    std::copy(Hn.begin(), Hn.end(), E->Hn.begin());
+    std::copy(r0.begin(), r0.end(), r.begin());
+    std::copy(phi0.begin(), phi0.end(), phi.begin());
+    std::copy(psi0.begin(), psi0.end(), psi.begin());
+    luf_ready = true;
   }
 
   // Both factors (split) or the one: a full factorisation, or a refactorisation (of the LU:
@@ -271,7 +317,9 @@ struct Stepper {
     set_dropped();
     int code = lu.factor(vals.data());
     have_ref = code == 0;
-    ref_probe = have_ref;
+    // the memory is the model's own even when the generic matrix's factorisation failed (the
+    // first matrix of a run is then factorised anew, as by every stepper of the model)
+    ref_probe = true;
     ref_vals.reset();
     ++ref_serial;
     return code;
@@ -352,6 +400,7 @@ struct Stepper {
     bool full = !index2 || ref[vals.size()] != 0.0;
     if (!split && !full) return probe_reference();
     have_ref = false;
+    if (split && full) ensure_luf();
     full_mode = split && full;
     std::copy(ref, ref + vals.size(), vals.begin());
     return factor();
@@ -359,8 +408,8 @@ struct Stepper {
 
   // Whether this stepper's memory is `ref` (nullptr: the generic matrix's)
   bool holds(const double* ref) const {
-    if (!have_ref) return false;
     if (!ref) return ref_probe;
+    if (!have_ref) return false;
     return !ref_probe && (ref == ref_vals->data() ||
                           std::memcmp(ref, ref_vals->data(), memory_size() * sizeof(double)) == 0);
   }
@@ -412,6 +461,7 @@ struct Stepper {
     // a split iteration that must be refactorised goes over to the full matrix (for the run)
     auto fall_back = [&]() {
       if (refac && split && !full_mode && it > 0) {
+        ensure_luf();
         full_mode = true;
         have_ref = false;  // (a full factorisation of the full matrix: the new memory)
         o.split = false;
