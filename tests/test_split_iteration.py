@@ -152,3 +152,28 @@ def test_a_split_memory_given_to_full_newton_is_set_aside(monkeypatch):
     a = sd.simulate(s, 0.1, 2e-3, t_start=0.05, initial_state=st, newton="full")
     b = sd.simulate(s, 0.1, 2e-3, t_start=0.05, initial_state=st)
     _agree(a, b)
+
+
+def test_a_stepper_whose_generic_factorisation_overflows_holds_the_models_memory():
+    """Along 6000 links the generic matrix's factorisation overflows (products of its random
+    frames): the new stepper holds the model's own memory all the same (the first matrix of a
+    run is then factorised anew, as by every new stepper of the model), so a run does not try
+    that factorisation a second time; runs in a new workspace and in one that ran before give
+    the same numbers. A stepper for the initial accelerations (one solve) keeps no memory."""
+    from se3dyn.system import Workspace
+
+    s = sd.compile_model(chain_scaling.chain(6000))
+    ws = Workspace(s)
+    none = np.zeros(0, np.int64)
+    assert ws.stepper(True, none).holds(None)
+    assert ws.stepper(False, none).holds(None)
+    assert not Workspace(s).stepper(False, none, keep=False).holds(None)  # (a one-off solve)
+    integ = GeneralizedAlpha(rho_inf=0.9)
+    a = _steps(s, integ, integ.init(s, ws=ws), 1e-3, 2, ws)[-1]
+    fresh = Workspace(s)
+    b = _steps(s, integ, integ.init(s, ws=fresh), 1e-3, 2, fresh)[-1]
+    again = _steps(s, integ, integ.init(s, ws=ws), 1e-3, 2, ws)[-1]
+    for f in ("H", "v", "vd", "lam"):
+        assert np.array_equal(getattr(a, f), getattr(b, f)), f
+        assert np.array_equal(getattr(a, f), getattr(again, f)), f
+    assert np.abs(a.H[-1, 2, 3]) > 0.0  # (the chain falls)
