@@ -61,6 +61,7 @@
 #include <cstring>
 #include <functional>
 #include <memory>
+#include <stdexcept>
 #include <vector>
 
 #include "engine.hpp"
@@ -205,13 +206,7 @@ struct Stepper {
       std::vector<char> k1 = keep_of(s1), kx = keep_of(sx);
       // (the full matrix's LU: analysed by ensure_luf, when a run first needs it)
       full_pattern = std::move(pattern);
-      if (!full_pattern) {  // (no way to rebuild the pattern: kept for later)
-        auto cp = std::make_shared<std::vector<int>>(std::move(colptr));
-        auto ri = std::make_shared<std::vector<int>>(std::move(rowind));
-        auto sr = std::make_shared<std::vector<int>>(src);
-        full_pattern = [cp, ri, sr](std::vector<int>& c, std::vector<int>& r,
-                                    std::vector<int>& v) { c = *cp; r = *ri; v = *sr; };
-      }
+      if (!full_pattern) throw std::invalid_argument("split stepper: the full pattern's source");
       if (group) full_groups.assign(group, group + N);
       lu.analyze(N1, std::move(cp1), std::move(ri1), std::move(s1), group, vals.data());
       lu.set_keep(k1.data());
