@@ -214,7 +214,26 @@ def scaling_row(n: int, formulation: str = "index2", newton: str = "modified") -
     compile_s = time.perf_counter() - t0
     r = per_step(system, formulation, newton=newton)
     r.update(N=n, formulation=formulation, build_s=build, compile_s=compile_s)
+    r.update(linear_algebra_work(system, formulation, newton, r["newton_per_step"]))
     return r
+
+
+def linear_algebra_work(system, formulation: str, newton: str, its: float) -> dict:
+    """The work of a step's linear algebra, from the factors of the run's stepper (analysed as
+    a run does, after one step): multiply-adds of a refactorisation (the LU and, split index 2,
+    the xi block's LDL^T), entries of the factors (a solve does one multiply-add per entry),
+    and per step ``refactorisation + its * entries`` with the measured iterations ``its``."""
+    from se3dyn.integrator import GeneralizedAlpha
+    from se3dyn.system import Workspace
+
+    ws = Workspace(system)
+    integ = GeneralizedAlpha(rho_inf=0.9, formulation=formulation, newton=newton)
+    st = integ.init(system, ws=ws)
+    st, _ = integ.step(system, st, 1e-3, ws=ws)
+    stp = ws.stepper(integ.index2, st.dropped, split=newton == "modified")
+    _n, nnz_l, nnz_u, refac, _sn = stp.lu_stats()
+    return {"refactor_multiply_adds": int(refac), "factor_entries": int(nnz_l + nnz_u),
+            "multiply_adds_per_step": float(refac + its * (nnz_l + nnz_u))}
 
 
 def main(argv: list[str]) -> int:
@@ -259,9 +278,15 @@ def main(argv: list[str]) -> int:
         rows = [r for r in report["rows"] if r["formulation"] == form]
         if len(rows) >= 2:
             slope = fit_exponent(rows)
+            work = fit_exponent([dict(N=r["N"], ms_per_step=r["multiply_adds_per_step"])
+                                 for r in rows])
             report[f"exponent_{form}"] = slope
+            report[f"work_exponent_{form}"] = work
             print(f"{form}: fitted exponent of cost per step vs N "
-                  f"({min(r['N'] for r in rows)}..{max(r['N'] for r in rows)}): {slope:.3f}")
+                  f"({min(r['N'] for r in rows)}..{max(r['N'] for r in rows)}): {slope:.3f}; "
+                  f"of the linear algebra's multiply-adds per step: {work:.3f} (per link and "
+                  "step: " + ", ".join(f"{r['multiply_adds_per_step'] / r['N']:.0f}"
+                                       for r in rows) + ")")
     report["load_average_end"] = os.getloadavg()
     Path(a.out).write_text(json.dumps(report, indent=2) + "\n")
     print(f"wrote {a.out}")

@@ -967,9 +967,12 @@ def section_scaling(a, report) -> None:
               f"{r['build_s']:8.2f} {r['compile_s']:9.2f} {r['setup_s']:8.2f} "
               f"{r['load_average'][0]:5.2f}", flush=True)
     slope = fit_exponent(rows)
+    work = fit_exponent([dict(N=r["N"], ms_per_step=r["multiply_adds_per_step"]) for r in rows])
     print(f"  fitted exponent of ms/step vs N ({min(a.sizes)}..{max(a.sizes)}): {slope:.3f} "
-          f"(target <= {TARGETS['exponent']:g}: {verdict(slope, TARGETS['exponent'])})")
-    res = {"rows": rows, "exponent": slope}
+          f"(target <= {TARGETS['exponent']:g}: {verdict(slope, TARGETS['exponent'])}); of the "
+          f"linear algebra's multiply-adds per step (refactorisation + iterations x factor "
+          f"entries, chain_scaling.linear_algebra_work): {work:.3f}")
+    res = {"rows": rows, "exponent": slope, "work_exponent": work}
     big = [r for r in rows if r["N"] == 10000]
     if big:
         b = big[0]
