@@ -7,7 +7,8 @@ index-3 form). For each N it times the model building, ``compile_model`` and the
 of the first ``simulate`` (a one-step run) separately, then the cost per step without any
 set-up: (wall(0.1 s run) - wall(0.02 s run)) / 80 steps on the same compiled system. It prints
 ms per step, Newton iterations and factorisations per step and the exponent of a least-squares
-fit of log(ms per step) vs log N (measured in this one run), and writes
+fit of log(ms per step) vs log N (measured in this one run), at se3dyn's default thread count
+for the element kernels and at one thread (``--threads``), and writes
 benchmarks/results/chain_scaling.json. ``--memory N`` instead runs the N-link chain in this
 process (``--t-end`` model time, every 10th step stored) and prints the peak resident set size
 as one JSON line (VmHWM of /proc/self/status; ``ru_maxrss`` beside it, which a child started by
@@ -204,8 +205,16 @@ def fit_exponent(rows: list[dict]) -> float:
     return float(np.polyfit(np.log(n), np.log(ms), 1)[0])
 
 
-def scaling_row(n: int, formulation: str = "index2", newton: str = "modified") -> dict:
-    """Build, compile, set up and time per step the N-link chain (one row of the table)."""
+def scaling_row(n: int, formulation: str = "index2", newton: str = "modified",
+                threads: int | None = None) -> dict:
+    """Build, compile, set up and time per step the N-link chain (one row of the table);
+    ``threads``: the element kernels' threads (default: se3dyn's, ``se3dyn.get_threads``)."""
+    if threads is not None:
+        sd.set_threads(threads)
+        try:
+            return scaling_row(n, formulation, newton)
+        finally:
+            sd.set_threads()
     t0 = time.perf_counter()
     model = chain(n)
     build = time.perf_counter() - t0
@@ -213,7 +222,8 @@ def scaling_row(n: int, formulation: str = "index2", newton: str = "modified") -
     system = sd.compile_model(model)
     compile_s = time.perf_counter() - t0
     r = per_step(system, formulation, newton=newton)
-    r.update(N=n, formulation=formulation, build_s=build, compile_s=compile_s)
+    r.update(N=n, formulation=formulation, build_s=build, compile_s=compile_s,
+             threads=sd.get_threads())
     r.update(linear_algebra_work(system, formulation, newton, r["newton_per_step"]))
     return r
 
@@ -250,9 +260,13 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--formulation", default="index2", help="formulation of --memory")
     ap.add_argument("--phases", action="store_true",
                     help="--memory: VmRSS and VmHWM after every phase of the runs on stderr")
+    ap.add_argument("--threads", nargs="+", type=int,
+                    help="thread counts of the element kernels (default: se3dyn's default, "
+                    "and 1 beside it when that is more)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" /
                                           "chain_scaling.json"))
     a = ap.parse_args(argv)
+    threads = a.threads or sorted({sd.get_threads(), 1}, reverse=True)
     if a.memory:
         print(json.dumps(peak_memory(a.memory, a.t_end, formulation=a.formulation,
                                      phases=a.phases)))
@@ -266,23 +280,25 @@ def main(argv: list[str]) -> int:
               "h": 1e-3, "method": "(wall(0.1 s) - wall(0.02 s)) / 80 steps, set-up excluded",
               "rows": []}
     for n in a.sizes:
-        for form in a.formulations:
-            r = scaling_row(n, form)
+        for form, th in [(f, t) for f in a.formulations for t in threads]:
+            r = scaling_row(n, form, threads=th)
             report["rows"].append(r)
-            print(f"N = {n:5d} {form}: matrix {r['matrix_size']:7d}, {r['ms_per_step']:9.3f} "
+            print(f"N = {n:5d} {form} {th} thr: matrix {r['matrix_size']:7d}, "
+                  f"{r['ms_per_step']:9.3f} "
                   f"ms/step, {r['newton_per_step']:.2f} Newton iterations and "
                   f"{r['factorizations_per_step']:.2f} factorisations per step; set-up: build "
                   f"{r['build_s']:.2f} s, compile {r['compile_s']:.2f} s, first simulate "
                   f"{r['setup_s']:.2f} s", flush=True)
-    for form in a.formulations:
-        rows = [r for r in report["rows"] if r["formulation"] == form]
+    for form, th in [(f, t) for f in a.formulations for t in threads]:
+        rows = [r for r in report["rows"] if r["formulation"] == form and r["threads"] == th]
         if len(rows) >= 2:
             slope = fit_exponent(rows)
             work = fit_exponent([dict(N=r["N"], ms_per_step=r["multiply_adds_per_step"])
                                  for r in rows])
-            report[f"exponent_{form}"] = slope
-            report[f"work_exponent_{form}"] = work
-            print(f"{form}: fitted exponent of cost per step vs N "
+            tag = form if th == threads[0] else f"{form}_{th}_thread"
+            report[f"exponent_{tag}"] = slope
+            report[f"work_exponent_{tag}"] = work
+            print(f"{form}, {th} threads: fitted exponent of cost per step vs N "
                   f"({min(r['N'] for r in rows)}..{max(r['N'] for r in rows)}): {slope:.3f}; "
                   f"of the linear algebra's multiply-adds per step: {work:.3f} (per link and "
                   "step: " + ", ".join(f"{r['multiply_adds_per_step'] / r['N']:.0f}"

@@ -193,9 +193,18 @@ def se3_link_ends(res, n_links: int) -> np.ndarray:
     return H[:, :3, 3] + 0.05 * H[:, :3, 0]
 
 
-def se3_chain(n_links: int, t_end: float, h: float = CHAIN_H, **kw) -> dict:
-    """Build, compile, set up (one-step run) and solve the chain (se3dyn defaults), timed."""
+def se3_chain(n_links: int, t_end: float, h: float = CHAIN_H, threads: int | None = None,
+              **kw) -> dict:
+    """Build, compile, set up (one-step run) and solve the chain (se3dyn defaults), timed;
+    ``threads``: the element kernels' threads for this run (default: se3dyn's)."""
     import se3dyn as sd
+
+    if threads is not None:
+        sd.set_threads(threads)
+        try:
+            return {**se3_chain(n_links, t_end, h, **kw), "threads": threads}
+        finally:
+            sd.set_threads()
 
     t0 = time.perf_counter()
     model = se3_chain_model(n_links)
@@ -218,7 +227,7 @@ def se3_chain(n_links: int, t_end: float, h: float = CHAIN_H, **kw) -> dict:
             "steps": int(st["steps"]), "newton_iterations": int(st["newton_iterations"]),
             "factorizations": int(st.get("factorizations", 0)),
             "matrix_size": int(st["matrix_size"]), "formulation": st["formulation"],
-            "newton": kw.get("newton", "modified")}
+            "newton": kw.get("newton", "modified"), "threads": sd.get_threads()}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -605,7 +614,8 @@ def environment(repo) -> dict:
         "se3dyn_engine": {"file": so, "mtime": os.path.getmtime(so),
                           "built_native": bool(getattr(eng, "built_native", False)),
                           "sha256": hashlib.sha256(open(so, "rb").read()).hexdigest()[:16],
-                          "code_sha256": code.hexdigest()[:16]},
+                          "code_sha256": code.hexdigest()[:16],
+                          "threads": se3dyn.get_threads()},
     }
 
 
@@ -835,7 +845,11 @@ def section_chains(a, report) -> None:
         se, ed = median_run(ses), median_run(eds)
         ef = exu_chain(n, t_end, "fullnewton") if not a.no_fullnewton_chain else None
         ld_ef = load()
-        case = {"se3dyn": se, "exudyn_defaults": ed, "exudyn_fullnewton": ef,
+        # se3dyn on one thread (EXUDYN's default is one), once, for continuity with the runs
+        # before the threaded element kernels
+        one = se3_chain(n, t_end, threads=1) if se["threads"] > 1 else None
+        case = {"se3dyn": se, "se3dyn_1_thread": one, "exudyn_defaults": ed,
+                "exudyn_fullnewton": ef,
                 "load_average": {"se3dyn": ld_se, "exudyn_defaults": ld_ed,
                                  "exudyn_fullnewton": ld_ef}}
         if not a.no_chain_reference:
@@ -854,10 +868,11 @@ def section_chains(a, report) -> None:
     # where se3dyn's time goes on N = 1000: 0.1 s in variants
     diag = []
     n_diag = max(a.chain_sizes)
-    for kw in ({}, {"formulation": "index3"}, {"newton": "full"}):
+    for kw in ({}, {"threads": 1}, {"formulation": "index3"}, {"newton": "full"}):
         r = se3_chain(n_diag, 0.1, **kw)
         diag.append({"variant": kw or "defaults", **strip_arrays(r), "load_average": load()})
-    print(f"  se3dyn N = {n_diag}, 0.1 s, variants (set-up excluded):")
+    print(f"  se3dyn N = {n_diag}, 0.1 s, variants (set-up excluded; defaults: "
+          f"{diag[0]['threads']} threads):")
     for d in diag:
         print(f"    {str(d['variant']):28s} {1e3 * d['solve_s'] / d['steps']:8.2f} ms/step, "
               f"{d['newton_iterations'] / d['steps']:.2f} its/step, "
@@ -898,7 +913,8 @@ def print_chain_case(n: int, case: dict) -> None:
         return (dist(v["tip_final"], r["tip_final"]),
                 float(np.max(np.linalg.norm(v["link_ends_final"] - r["link_ends_final"], axis=1))))
 
-    for v in (se, ed) + ((ef,) if ef else ()):
+    one = case.get("se3dyn_1_thread")
+    for v in (se, ed) + ((ef,) if ef else ()) + ((one,) if one else ()):
         v["error_tip_m"], v["error_max_link_end_m"] = errs(v)
     exu_t = ed["solve_s"]
     ld = case["load_average"]
@@ -922,8 +938,11 @@ def print_chain_case(n: int, case: dict) -> None:
     if ef:
         line(f"EXUDYN full Newton 1e-10 (continuity) [{ld['exudyn_fullnewton'][0]}]",
              ef["solve_s"], ef, its=ef.get("newton_iterations"), fac=ef.get("jacobians"))
-    line(f"se3dyn defaults: solve [{ld['se3dyn'][0]}]", se["solve_s"], se, target=tgt,
-         its=se["newton_iterations"], fac=se["factorizations"])
+    line(f"se3dyn defaults ({se['threads']} threads): solve [{ld['se3dyn'][0]}]",
+         se["solve_s"], se, target=tgt, its=se["newton_iterations"], fac=se["factorizations"])
+    if one:
+        line("se3dyn 1 thread (EXUDYN's default; continuity)", one["solve_s"], one,
+             its=one["newton_iterations"], fac=one["factorizations"])
     su = se["setup_s"] + se["solve_s"]
     line("se3dyn: first simulate (set-up + solve)", su, se, target=tgt)
     tot = se["build_s"] + se["compile_s"] + su
@@ -972,7 +991,18 @@ def section_scaling(a, report) -> None:
           f"(target <= {TARGETS['exponent']:g}: {verdict(slope, TARGETS['exponent'])}); of the "
           f"linear algebra's multiply-adds per step (refactorisation + iterations x factor "
           f"entries, chain_scaling.linear_algebra_work): {work:.3f}")
-    res = {"rows": rows, "exponent": slope, "work_exponent": work}
+    res = {"rows": rows, "exponent": slope, "work_exponent": work, "threads": rows[0]["threads"]}
+    if rows[0]["threads"] > 1:  # one thread (EXUDYN's default), for continuity
+        ones = []
+        for n in a.sizes:
+            r = scaling_row(n, threads=1)
+            r["load_average"] = load()
+            ones.append(r)
+        res["rows_1_thread"] = ones
+        res["exponent_1_thread"] = fit_exponent(ones)
+        print("  the same with 1 thread: " + ", ".join(f"{r['ms_per_step']:.3f}" for r in ones)
+              + f" ms/step, exponent {res['exponent_1_thread']:.3f} (defaults: "
+              f"{rows[0]['threads']} threads)")
     big = [r for r in rows if r["N"] == 10000]
     if big:
         b = big[0]
@@ -1108,7 +1138,9 @@ def main(argv) -> int:
         report = {**env, "load_average_start": load(), "exudyn_defaults_read": defaults,
                   "settings": {
                       "se3dyn": "sd.simulate(model, t_end, h, rho_inf=0.9): index2, modified "
-                                "Newton, tol_residual 1e-10, tol_constraint 1e-11",
+                                "Newton, tol_residual 1e-10, tol_constraint 1e-11; element "
+                                f"kernels on {env['se3dyn_engine']['threads']} threads (the "
+                                "default: the cores; results identical for any count)",
                       "exudyn_defaults": "SimulationSettings() + endTime, numberOfSteps, "
                                          "sensors.writePeriod = h, solution.file.write = False; "
                                          "chains: linearSolver EigenSparse",
@@ -1118,6 +1150,9 @@ def main(argv) -> int:
                                       "checks at the small step)"},
                   "targets": TARGETS}
         print(f"se3dyn vs EXUDYN at EXUDYN's defaults; {env['date']}; {load_str()}")
+        print(f"threads: se3dyn's element kernels {env['se3dyn_engine']['threads']} (its "
+              f"default, the cores), EXUDYN parallel.numberOfThreads "
+              f"{defaults.get('parallel.numberOfThreads')} (its default)")
         print(f"machine: {env['machine']['platform']}, {env['machine']['cpu']}, "
               f"{env['machine']['cpu_count']} CPUs (shared)")
         print("versions: " + ", ".join(f"{k} {v}" for k, v in env["versions"].items())

@@ -81,6 +81,7 @@ from se3dyn.model import PD, JointSpec, LoadSpec, Model, ModelBuilder, NodeSpec
 from se3dyn.results import Results
 from se3dyn.simulate import simulate
 from se3dyn.system import System, compile_model
+from se3dyn.threads import get_threads, set_threads
 from se3dyn.timefunc import Callable, Component, Constant, Ramp, Sine, Step, Table
 
 __version__ = "0.1.0"
@@ -91,7 +92,7 @@ __all__ = [
     "Constant", "Step", "Ramp", "Table", "Sine", "Callable", "Component", "JOINT_TYPES",
     "Se3dynError", "ModelError", "SimulationError", "NewtonError", "__version__",
     "static_equilibrium", "StaticResult", "assemble", "Assembly", "AssemblyError",
-    "kinematics", "KinematicsResult",
+    "kinematics", "KinematicsResult", "set_threads", "get_threads",
 ]
 
 

@@ -261,6 +261,8 @@ def cmd_run(args) -> int:
     from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
     from se3dyn.h5 import ResultsFileError, ResultsWriter
 
+    if args.threads is not None:
+        sd.set_threads(args.threads)
     model, settings = _load(args.model)
     text = Path(args.model).read_text(encoding="utf-8")  # stored as metadata, as given
     try:
@@ -726,6 +728,12 @@ def _positive(kind):
     return conv
 
 
+def _whole_positive(text):
+    if not text.strip().isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return int(text)
+
+
 _OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step",
               "initial_velocities", "global_error")
 
@@ -837,6 +845,9 @@ def _run_args(r) -> None:
                    "or killed) from its last checkpoint, bit for bit as one uninterrupted run; "
                    "with --t-end, further than it was planned")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--threads", type=_whole_positive, metavar="N",
+                   help="threads of the element kernels (default: SE3DYN_THREADS or the "
+                   "cores; the results do not depend on it)")
     r.set_defaults(func=cmd_run)
 
 

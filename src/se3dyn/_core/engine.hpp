@@ -18,6 +18,7 @@
 #include <utility>
 
 #include "elements/registry.hpp"
+#include "pool.hpp"
 #include "sparse_lu.hpp"
 
 namespace se3dyn {
@@ -83,6 +84,47 @@ struct Engine {
   // the velocity-level blocks the products use (Context::vel): offsets in the values,
   // increasing, and in velv
   std::vector<long> vel_off, vel_at;
+  // Element colours (colour()). A batch's elements go in chunks of CHUNK consecutive ones
+  // (chunk k: elements CHUNK k .. CHUNK (k+1) - 1, fewer in the last). No two chunks of one
+  // colour add to the same frame with unknowns, hence to the same residual, constraint or
+  // matrix entry, so the chunks of a colour may be evaluated in any number of parts at once;
+  // the colours follow each other, and a chunk's elements go in order. Every evaluation adds
+  // the contributions in this order, so the numbers do not depend on the thread count.
+  static constexpr int CHUNK = 32;
+  struct Colours {
+    std::vector<int> chunk;  // chunk numbers, a colour after the other
+    std::vector<int> start;  // where colour c starts in chunk, with the end last
+    std::vector<int> order;  // 0 .. n-1 (the Span of a chunk)
+  };
+  std::vector<Colours> colours;
+  size_t joint_batch = 0;  // batches[joint_batch] is joints
+  // Items of a list grouped by the block they add to: groups in the order of their first item,
+  // the items of a group in list order (item[ptr[g] .. ptr[g+1])). The groups may go in parts
+  // on the pool, and every block receives its terms in list order.
+  struct Groups {
+    std::vector<int> ptr{0}, item;
+    Groups() = default;
+    explicit Groups(const std::vector<long>& target) {
+      std::map<long, int> group;
+      std::vector<int> of(target.size());
+      for (size_t i = 0; i < target.size(); ++i)
+        of[i] = group.emplace(target[i], int(group.size())).first->second;
+      ptr.assign(group.size() + 1, 0);
+      for (int g : of) ++ptr[g + 1];
+      for (size_t g = 0; g < group.size(); ++g) ptr[g + 1] += ptr[g];
+      item.resize(target.size());
+      std::vector<int> next(ptr.begin(), ptr.end() - 1);
+      for (size_t i = 0; i < target.size(); ++i) item[next[of[i]]++] = int(i);
+    }
+    long size() const { return long(ptr.size()) - 1; }
+    template <class Fn>
+    void each(long min_part, Fn&& fn) const {
+      each_index(size(), min_part, [&](long g) {
+        for (int q = ptr[g]; q < ptr[g + 1]; ++q) fn(item[q]);
+      });
+    }
+  };
+  Groups vel_groups, xi_groups;  // of velprod, and of xi_half (the split's products)
   // work
   FrameState S;
   std::vector<Frame> Hn;
@@ -93,6 +135,82 @@ struct Engine {
     b->load(t);
     if (key == "joint") joints = static_cast<Joints*>(b.get());
     batches.push_back(std::move(b));
+  }
+
+  // Greedy colouring of each batch's chunks by the frames with unknowns their elements add to
+  // (ElementBatch::frames_of): chunk k takes the lowest colour no earlier chunk of its frames
+  // has. A chain's joints and bodies take two colours (neighbouring chunks share a node).
+  void colour() {
+    colours.assign(batches.size(), Colours());
+    std::vector<std::vector<int>> at(T.F);  // colours already at each frame
+    std::vector<int> frs, mine, taken;
+    for (size_t b = 0; b < batches.size(); ++b) {
+      const ElementBatch& B = *batches[b];
+      for (auto& a : at) a.clear();
+      const int nch = (B.n + CHUNK - 1) / CHUNK;
+      std::vector<int> col(nch, 0);
+      int ncol = 0;
+      for (int k = 0; k < nch; ++k) {
+        mine.clear();
+        for (int e = CHUNK * k; e < std::min(B.n, CHUNK * (k + 1)); ++e) {
+          B.frames_of(e, frs);
+          for (int f : frs)
+            if (f >= 0 && f < T.F && T.dof[f] >= 0) mine.push_back(f);
+        }
+        std::sort(mine.begin(), mine.end());
+        mine.erase(std::unique(mine.begin(), mine.end()), mine.end());
+        taken.clear();
+        for (int f : mine) taken.insert(taken.end(), at[f].begin(), at[f].end());
+        std::sort(taken.begin(), taken.end());
+        int c = 0;
+        for (int t : taken)
+          if (t == c) ++c;
+          else if (t > c) break;
+        col[k] = c;
+        ncol = std::max(ncol, c + 1);
+        for (int f : mine) at[f].push_back(c);
+      }
+      Colours& C = colours[b];
+      C.start.assign(ncol + 1, 0);
+      for (int k = 0; k < nch; ++k) ++C.start[col[k] + 1];
+      for (int c = 0; c < ncol; ++c) C.start[c + 1] += C.start[c];
+      C.chunk.resize(nch);
+      std::vector<int> next(C.start.begin(), C.start.end() - 1);
+      for (int k = 0; k < nch; ++k) C.chunk[next[col[k]]++] = k;
+      C.order.resize(B.n);
+      for (int e = 0; e < B.n; ++e) C.order[e] = e;
+    }
+  }
+
+  // Parts of a loop over `count` items of which each part should have at least `min_part`
+  static int parts_for(long count, long min_part) {
+    long p = std::min<long>(Pool::get().threads(), count / std::max(1L, min_part));
+    return int(std::max(1L, std::min(p, 64L)));
+  }
+
+  // fn(i) for i in [0, count), in parts of at least min_part on the pool: for loops whose
+  // iterations write disjoint entries
+  template <class Fn>
+  static void each_index(long count, long min_part, Fn&& fn) {
+    int parts = parts_for(count, min_part);
+    Pool::get().run(parts, [&](int p) {
+      for (long i = count * p / parts; i < count * (p + 1) / parts; ++i) fn(i);
+    });
+  }
+
+  // fn(e) for the elements e of batch b, a colour after the other (Colours), each colour's
+  // chunks in parts of at least min_chunks on the pool
+  template <class Fn>
+  void each_element(size_t b, long min_chunks, Fn&& fn) const {
+    const Colours& C = colours[b];
+    const int n = batches[b]->n;
+    for (size_t c = 0; c + 1 < C.start.size(); ++c) {
+      const int first = C.start[c];
+      each_index(C.start[c + 1] - first, min_chunks, [&](long q) {
+        const int k = C.chunk[first + q];
+        for (int e = CHUNK * k; e < std::min(n, CHUNK * (k + 1)); ++e) fn(e);
+      });
+    }
   }
 
   void setup() {
@@ -139,6 +257,15 @@ struct Engine {
       at = std::max(at, b);
     }
     if (nvals2 > at) split_ranges.emplace_back(at, nvals2);
+    colour();
+    for (size_t b = 0; b < batches.size(); ++b)
+      if (batches[b].get() == joints) joint_batch = b;
+    std::vector<long> targets;
+    for (const VelProd& p : velprod) targets.push_back(p.target);
+    vel_groups = Groups(targets);
+    targets.clear();
+    for (int i : xi_half) targets.push_back(xiprod[i].target);
+    xi_groups = Groups(targets);
   }
 
   void load_frames(const double* H4) {
@@ -147,7 +274,14 @@ struct Engine {
 
   // Frames of the iterate: H = H_n exp(A n) (Eq. (38)), T(A n) A (Eq. (27)), v* = A v, vd* = A vd
   void update_frames(const double* n, const double* v, const double* vd, bool tangent) {
-    for (int f = 0; f < T.F; ++f) {
+    int parts = parts_for(T.F, 256);
+    Pool::get().run(parts, [&](int p) {
+      update_frames(n, v, vd, tangent, int(long(T.F) * p / parts), int(long(T.F) * (p + 1) / parts));
+    });
+  }
+  void update_frames(const double* n, const double* v, const double* vd, bool tangent, int f0,
+                     int f1) {
+    for (int f = f0; f < f1; ++f) {
       int d = T.dof[f];
       if (d < 0) {
         S.H[f] = Hn[f];
@@ -217,10 +351,18 @@ struct Engine {
     std::fill(o.phi, o.phi + nm, 0.0);
     if (o.psi) std::fill(o.psi, o.psi + nm, 0.0);
     long nv = index2 ? nvals2 : nvals;
-    if (o.vals && o.split)
-      for (const auto& [a, b] : split_ranges) std::fill(o.vals + a, o.vals + b, 0.0);
-    else if (o.vals)
-      std::fill(o.vals, o.vals + nv, 0.0);
+    if (o.vals) {
+      int parts = parts_for(nv, 1L << 16);
+      Pool::get().run(parts, [&](int p) {
+        long lo = nv * p / parts, hi = nv * (p + 1) / parts;
+        if (!o.split) {
+          std::fill(o.vals + lo, o.vals + hi, 0.0);
+          return;
+        }
+        for (const auto& [a, b] : split_ranges)
+          if (b > lo && a < hi) std::fill(o.vals + std::max(a, lo), o.vals + std::min(b, hi), 0.0);
+      });
+    }
     bool prod = o.vals && index2;
     bool vprod = prod && !o.split;
     if (vprod) std::fill(velv.begin(), velv.end(), 0.0);
@@ -251,16 +393,18 @@ struct Engine {
     joints->cv_ = cv;
     // index2: the matrix (when asked) is the stabilised index-2 one, which needs psi
     if (prod && !o.psi) throw std::invalid_argument("index-2 matrix without velocity constraints");
-    for (const auto& b : batches) b->eval(X, prod);
+    joints->constant_slots(T);
+    for (size_t b = 0; b < batches.size(); ++b) eval_batch(b, X, prod);
     if (prod) {
-      joints->store_B(T, Hn, joints->Bnu);
+      each_element(joint_batch, 2, [&](int e) { joints->store_B0(T, Hn, joints->Bnu, e); });
       double* vals = o.vals;
-      for (const VelProd& p : velprod) {
-        if (!vprod) break;
-        const double* V = velv.data() + p.src;  // ki x kj row-major (src: in velv)
-        const double* Bn = &joints->Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
-        sub_times_T(p.ki, p.kj, V, p.kj, Bn, vals + p.target);  // target: ki x 6
-      }
+      if (vprod)
+        vel_groups.each(64, [&](int i) {
+          const VelProd& p = velprod[i];
+          const double* V = velv.data() + p.src;  // ki x kj row-major (src: in velv)
+          const double* Bn = &joints->Bnu[108 * p.joint + 36 * p.slot];  // 6 x kj, ld 6
+          sub_times_T(p.ki, p.kj, V, p.kj, Bn, vals + p.target);  // target: ki x 6
+        });
       if (xi_at.empty()) constant_products();
       // target -= B_{c1,s1} B_{c2,s2}^T (B: of the iterate, or for the split at the step start)
       auto product = [&](int i, const std::vector<double>& B1) {
@@ -276,14 +420,46 @@ struct Engine {
       };
       if (!o.split) {
         for (size_t i = 0; i < xiprod.size(); ++i) product(int(i), joints->Bu);
-      } else {
-        for (int i : xi_half) product(i, joints->Bnu);
-        for (const auto& [from, to] : xi_mirror)
+      } else {  // (the targets of xi_mirror are distinct)
+        xi_groups.each(64, [&](int i) { product(xi_half[i], joints->Bnu); });
+        each_index(long(xi_mirror.size()), 256, [&](long i) {
+          const auto& [from, to] = xi_mirror[i];
           for (int r = 0; r < 6; ++r)
             for (int c = 0; c < 6; ++c) vals[to + 6 * r + c] = vals[from + 6 * c + r];
+        });
       }
     }
     return X.fscale;
+  }
+
+  // The contributions of batch b's elements, a colour after the other, each colour's chunks
+  // in parts on the pool (Colours). Each chunk sums its energies and powers apart and the
+  // chunks' sums are added in the order of the chunks, so that these sums, like every other
+  // entry, do not depend on the number of parts.
+  std::vector<double> chunk_energy;  // (chunks of a colour, N_ENERGY)
+  void eval_batch(size_t b, Context& X, bool prod) {
+    const ElementBatch& B = *batches[b];
+    const Colours& C = colours[b];
+    for (size_t c = 0; c + 1 < C.start.size(); ++c) {
+      const int first = C.start[c], chunks = C.start[c + 1] - first;
+      const int parts = parts_for(chunks, 1);
+      if (X.energy) chunk_energy.assign(size_t(N_ENERGY) * chunks, 0.0);
+      double fs[64];
+      Pool::get().run(parts, [&](int p) {
+        Context Y = X;
+        Y.fscale = 0.0;
+        for (int q = int(long(chunks) * p / parts); q < int(long(chunks) * (p + 1) / parts); ++q) {
+          const int k = C.chunk[first + q];
+          if (X.energy) Y.energy = &chunk_energy[size_t(N_ENERGY) * q];
+          B.eval(Y, prod, Span{C.order.data(), CHUNK * k, std::min(B.n, CHUNK * (k + 1))});
+        }
+        fs[p] = Y.fscale;
+      });
+      for (int p = 0; p < parts; ++p) X.fscale = std::fmax(X.fscale, fs[p]);
+      if (X.energy)
+        for (int q = 0; q < chunks; ++q)
+          for (int i = 0; i < N_ENERGY; ++i) X.energy[i] += chunk_energy[size_t(N_ENERGY) * q + i];
+    }
   }
 
   // The products of two constant slots (slot 0, node A, is the only one that moves: B A =
@@ -306,7 +482,7 @@ struct Engine {
   // out (nm) += B A x, x (nq) on the unknowns, with the B A of the last matrix evaluation
   // (the split index-2 iteration, newton.hpp)
   void add_BA(const double* x, double* out) const {
-    for (int e = 0; e < joints->n; ++e) {
+    each_element(joint_batch, 4, [&](int e) {
       int fr[3] = {joints->fa[e], joints->fb[e], joints->fj[e]};
       double o[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
       for (int s = 0; s < 3; ++s) {
@@ -325,7 +501,7 @@ struct Engine {
       }
       double* out_e = out + joints->mult[e];
       for (int i = 0; i < 6; ++i) out_e[i] += o[i];
-    }
+    });
   }
   template <int K>
   static void add_rows(const double* BA, const double* x, double* o) {
@@ -338,7 +514,7 @@ struct Engine {
 
   // B_n^T xi on the unknowns: out[dof_f] -= A_f^T B_{n,f}^T xi (the index-2 correction)
   void subtract_BnT(const double* xi, double* out) const {
-    for (int e = 0; e < joints->n; ++e) {
+    each_element(joint_batch, 4, [&](int e) {
       int fr[3] = {joints->fa[e], joints->fb[e], joints->fj[e]};
       const double* x = xi + joints->mult[e];
       for (int s = 0; s < 3; ++s) {
@@ -359,7 +535,7 @@ struct Engine {
             out[d + c] -= acc;
           }
       }
-    }
+    });
   }
   template <int K>
   static void sub_cols(const double* Bn, const double* x, double* out) {

@@ -120,6 +120,9 @@ NB_MODULE(_engine, m) {
 #else
   m.attr("built_native") = false;
 #endif
+  // threads of the element kernels and frame updates (pool.hpp; se3dyn.set_threads)
+  m.def("set_threads", [](int n) { Pool::get().set_threads(n); });
+  m.def("threads", [] { return Pool::get().threads(); });
   m.def("set_series", [](DArr c, DArr d, DArr e, DArr f, double cut) {
     Series& S = series();
     S.cut = cut;
@@ -249,6 +252,16 @@ NB_MODULE(_engine, m) {
                      1.0, 0.0, 0.0, false, 0.0, false, o);
         }
       })
+      .def("colours",
+           [](const Engine& E) {
+             // per element batch, in the order of the tables' elements: (elements, chunks,
+             // colours) of Engine::colour
+             nb::list out;
+             for (size_t b = 0; b < E.batches.size(); ++b)
+               out.append(nb::make_tuple(E.batches[b]->n, int(E.colours[b].chunk.size()),
+                                         int(E.colours[b].start.size()) - 1));
+             return out;
+           })
       .def("BnT", [](Engine& E, CArr Hn, CArr xi, DArr out) {
         // out (nq,) = B_n^T xi with B_n the constraint gradient at the frames Hn (Eq. (58))
         E.load_frames(cptr(Hn, 16 * E.T.F, "Hn"));

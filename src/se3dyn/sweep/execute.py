@@ -220,11 +220,13 @@ def execute_run(ctx: RunContext, run: int, values: dict, cache: OrderedDict | No
 
 
 def warm_up() -> float:
-    """Import se3dyn and load its compiled kernels in this process (compiled once per machine
-    into numba's cache, then loaded once per process); returns the seconds taken."""
+    """Import se3dyn and load its compiled kernels in this process, with one thread for the
+    element kernels (the sweep runs one process per core); returns the seconds taken."""
     t0 = time.perf_counter()
     import se3dyn as sd
     import se3dyn.h5  # noqa: F401  (h5py)
+
+    sd.set_threads(1)  # (the sweep keeps every core busy with runs)
 
     mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81), name="warm-up")
     mb.node("ground", fixed=True)

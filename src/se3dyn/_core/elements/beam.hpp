@@ -67,10 +67,13 @@ struct Beams : ElementBatch {
     tangent_se3_inv(d, Ti);
   }
 
-  void eval(Context& X, bool) const override {
+  void frames_of(int e, std::vector<int>& out) const override { out = {fa[e], fb[e]}; }
+
+  void eval(Context& X, bool, Span span) const override {
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
-    for (int e = 0; e < n; ++e) {
+    for (int i_span = span.first; i_span < span.last; ++i_span) {
+      const int e = span.order[i_span];
       const double* Ke = &K[36 * e];
       const double* De = &D[36 * e];
       const double* AA = &AdA[36 * e];

@@ -145,11 +145,14 @@ struct Bushings : ElementBatch {
     off_bb = t.integer("off_bb");
   }
 
-  void eval(Context& X, bool) const override {
+  void frames_of(int e, std::vector<int>& out) const override { out = {fa[e], fb[e]}; }
+
+  void eval(Context& X, bool, Span span) const override {
     using bushing_detail::Dual;
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
-    for (int e = 0; e < n; ++e) {
+    for (int i_span = span.first; i_span < span.last; ++i_span) {
+      const int e = span.order[i_span];
       const double* Pa = &PA[36 * e];
       const double* Pb = &PB[36 * e];
       const double* Ke = &K[36 * e];

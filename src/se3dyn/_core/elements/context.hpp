@@ -79,13 +79,25 @@ struct Tables {
   }
 };
 
+// The elements one call of a kernel evaluates: order[first .. last) (engine.hpp: the elements
+// of one colour, or a part of them)
+struct Span {
+  const int* order;
+  int first, last;
+};
+
 // A batch of elements of one type (struct of arrays): its kernel adds the residual, constraint
-// and tangent contributions of all its elements at one iterate (se3dyn/_core/elements/*.hpp).
+// and tangent contributions of the elements of a span at one iterate
+// (se3dyn/_core/elements/*.hpp). Kernels write only through the Context (Context::fscale,
+// energy) and into the entries of their elements' frames, so that the assembler may evaluate
+// elements that share no frame concurrently (Engine::colour).
 struct ElementBatch {
   int n = 0;
   virtual ~ElementBatch() = default;
   virtual void load(const Tables& t) = 0;
-  virtual void eval(Context& X, bool index2) const = 0;
+  // the frames element e adds to (its unknowns' rows and columns)
+  virtual void frames_of(int e, std::vector<int>& out) const = 0;
+  virtual void eval(Context& X, bool index2, Span span) const = 0;
 };
 
 }  // namespace se3dyn

@@ -78,11 +78,14 @@ struct Joints : ElementBatch {
   // B_s A_f of every joint at the given frames into `dst` (n, 3, 36)
   void store_B(const FrameTables& T, const std::vector<Frame>& H, std::vector<double>& dst) const {
     constant_slots(T);
-    for (int e = 0; e < n; ++e) {  // (slots 1 and 2 constant)
-      double Bs[36];
-      B(e, 0, H[fj[e]], Bs);
-      frame_cols(T, fa[e], Bs, &dst[108 * e]);
-    }
+    for (int e = 0; e < n; ++e) store_B0(T, H, dst, e);
+  }
+  // slot 0 (node A) of joint e (slots 1 and 2 are constant: constant_slots)
+  void store_B0(const FrameTables& T, const std::vector<Frame>& H, std::vector<double>& dst,
+                int e) const {
+    double Bs[36];
+    B(e, 0, H[fj[e]], Bs);
+    frame_cols(T, fa[e], Bs, &dst[108 * e]);
   }
 
   void load(const Tables& t) override {
@@ -109,11 +112,14 @@ struct Joints : ElementBatch {
     resize_scratch();
   }
 
-  void eval(Context& X, bool index2) const override {
+  void frames_of(int e, std::vector<int>& out) const override { out = {fa[e], fb[e], fj[e]}; }
+
+  void eval(Context& X, bool index2, Span span) const override {
     const FrameTables& T = *X.T;
     constant_slots(T);
     const FrameState& S = *X.S;
-    for (int e = 0; e < n; ++e) {
+    for (int i_span = span.first; i_span < span.last; ++i_span) {
+      const int e = span.order[i_span];
       int a = fa[e], b = fb[e], j = fj[e];
       const Frame& HJ = S.H[j];
       Frame HA = S.H[a], HB = S.H[b], G, t1;

@@ -63,9 +63,12 @@ struct JointForces : ElementBatch {
     off = t.integer("off");
   }
 
-  void eval(Context& X, bool) const override {
+  void frames_of(int e, std::vector<int>& out) const override { out = {f[e]}; }
+
+  void eval(Context& X, bool, Span span) const override {
     const FrameTables& T = *X.T;
-    for (int e = 0; e < n; ++e) {
+    for (int i_span = span.first; i_span < span.last; ++i_span) {
+      const int e = span.order[i_span];
       int fr = f[e], k = T.k[fr], d = T.dof[fr];
       const double* al = X.coords + d;
       const double* v = X.vq + d;

@@ -38,10 +38,13 @@ struct SpringDampers : ElementBatch {
     off_bb = t.integer("off_bb");
   }
 
-  void eval(Context& X, bool) const override {
+  void frames_of(int e, std::vector<int>& out) const override { out = {fa[e], fb[e]}; }
+
+  void eval(Context& X, bool, Span span) const override {
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
-    for (int e = 0; e < n; ++e) {
+    for (int i_span = span.first; i_span < span.last; ++i_span) {
+      const int e = span.order[i_span];
       int fr[2] = {fa[e], fb[e]};
       const double* cs[2] = {&ca[3 * e], &cb[3 * e]};
       double p[2][3], J[2][18], Pm[2][18], q[2][3], Pv[2][3];

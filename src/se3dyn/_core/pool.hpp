@@ -1,0 +1,170 @@
+// A small fork-join pool for the element kernels and the frame updates of an iterate
+// (engine.hpp): the caller and up to `threads() - 1` workers each take one part of a loop.
+//
+// * One pool per process (`Pool::get()`), its size set by `set_threads` (se3dyn.set_threads,
+//   the SE3DYN_THREADS environment variable; default: the cores the process may run on).
+// * Workers are created on the first parallel loop. Between loops they spin for a while (the
+//   loops of one Newton iterate follow each other within microseconds) and then sleep on a
+//   condition variable (a factorisation or a return to Python takes longer), so an idle pool
+//   costs no CPU.
+// * A loop that finds the pool busy (another engine running in another Python thread) runs
+//   serially in its caller. What each part computes never depends on how many parts there
+//   are: the callers split their loops so that the numbers are the same for any thread count
+//   (engine.hpp: elements of one colour write disjoint entries).
+#pragma once
+#include <algorithm>
+#include <atomic>
+#include <condition_variable>
+#include <mutex>
+#include <new>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include <pthread.h>
+
+#if defined(__x86_64__) || defined(_M_X64)
+#include <immintrin.h>
+#define SE3DYN_PAUSE() _mm_pause()
+#else
+#define SE3DYN_PAUSE() std::this_thread::yield()
+#endif
+
+namespace se3dyn {
+
+class Pool {
+ public:
+  static Pool& get() {
+    static Pool pool;
+    return pool;
+  }
+
+  // Number of threads (the caller included) parallel loops use; n >= 1
+  void set_threads(int n) {
+    std::lock_guard<std::mutex> busy(run_mutex_);
+    n = std::max(1, n);
+    if (n < int(workers_.size()) + 1) stop();
+    threads_ = n;
+  }
+  int threads() const { return threads_; }
+
+  // f(p) for p in [0, parts), parts <= threads(); p = 0 in the caller. Serial (p in order, in
+  // the caller) when parts == 1 or the pool is busy.
+  template <class F>
+  void run(int parts, F&& f) {
+    parts = std::min(parts, threads_);
+    std::unique_lock<std::mutex> busy(run_mutex_, std::try_to_lock);
+    if (parts <= 1 || !busy.owns_lock()) {
+      for (int p = 0; p < std::max(parts, 1); ++p) f(p);
+      return;
+    }
+    start(parts - 1);
+    job_ = [](void* c, int p) { (*static_cast<F*>(c))(p); };
+    ctx_ = &f;
+    parts_ = parts;
+    pending_.store(parts - 1, std::memory_order_relaxed);
+    {
+      std::lock_guard<std::mutex> lk(sleep_mutex_);
+      epoch_.fetch_add(1, std::memory_order_release);
+    }
+    if (sleepers_.load(std::memory_order_acquire) > 0) wake_.notify_all();
+    f(0);
+    while (pending_.load(std::memory_order_acquire) != 0) SE3DYN_PAUSE();
+  }
+
+  ~Pool() { stop(); }
+
+ private:
+  Pool() {
+    unsigned hw = std::thread::hardware_concurrency();
+    threads_ = std::max(1, int(hw ? hw : 1));
+    pthread_atfork(nullptr, nullptr, [] { Pool::get().forget(); });
+  }
+
+  // In the child of a fork: the workers did not come along. Their handles are left (joining or
+  // detaching a thread of the parent is undefined), the synchronisation starts afresh.
+  void forget() {
+    workers_.release_all();
+    new (&run_mutex_) std::mutex();
+    new (&sleep_mutex_) std::mutex();
+    new (&wake_) std::condition_variable();
+    epoch_.store(0);
+    pending_.store(0);
+    sleepers_.store(0);
+    quit_ = false;
+  }
+
+  // thread handles that a forked child can drop without touching them
+  struct Workers {
+    std::vector<std::thread*> t;
+    size_t size() const { return t.size(); }
+    bool empty() const { return t.empty(); }
+    template <class G>
+    void emplace_back(G&& g) { t.push_back(new std::thread(std::forward<G>(g))); }
+    void join_all() {
+      for (std::thread* p : t) {
+        p->join();
+        delete p;
+      }
+      t.clear();
+    }
+    void release_all() { t.clear(); }
+  };
+
+  void start(int nw) {
+    while (int(workers_.size()) < nw) {
+      int id = int(workers_.size()) + 1;
+      unsigned seen = epoch_.load(std::memory_order_acquire);  // (before this loop's epoch)
+      workers_.emplace_back([this, id, seen] { work(id, seen); });
+    }
+  }
+
+  void stop() {
+    if (workers_.empty()) return;
+    {
+      std::lock_guard<std::mutex> lk(sleep_mutex_);
+      quit_ = true;
+      epoch_.fetch_add(1, std::memory_order_release);
+    }
+    wake_.notify_all();
+    workers_.join_all();
+    quit_ = false;
+  }
+
+  void work(int id, unsigned seen) {
+    for (;;) {
+      // spin about 0.2 ms before sleeping
+      unsigned now = seen;
+      for (int i = 0; i < 20000 && (now = epoch_.load(std::memory_order_acquire)) == seen; ++i)
+        SE3DYN_PAUSE();
+      if (now == seen) {
+        std::unique_lock<std::mutex> lk(sleep_mutex_);
+        sleepers_.fetch_add(1, std::memory_order_acq_rel);
+        wake_.wait(lk, [&] { return epoch_.load(std::memory_order_acquire) != seen; });
+        sleepers_.fetch_sub(1, std::memory_order_acq_rel);
+        now = epoch_.load(std::memory_order_acquire);
+      }
+      seen = now;
+      if (quit_) return;
+      if (id < parts_) {
+        job_(ctx_, id);
+        pending_.fetch_sub(1, std::memory_order_acq_rel);
+      }
+    }
+  }
+
+  int threads_ = 1;
+  Workers workers_;
+  std::mutex run_mutex_;    // one parallel loop at a time
+  std::mutex sleep_mutex_;  // workers sleeping between loops
+  std::condition_variable wake_;
+  std::atomic<unsigned> epoch_{0};
+  std::atomic<int> pending_{0};
+  std::atomic<int> sleepers_{0};
+  void (*job_)(void*, int) = nullptr;
+  void* ctx_ = nullptr;
+  int parts_ = 0;
+  bool quit_ = false;
+};
+
+}  // namespace se3dyn

@@ -1,0 +1,82 @@
+"""How many threads the compiled engine's element kernels use.
+
+The engine evaluates the element kernels, the frame updates and the products of the
+stabilised index-2 iteration in parts on a small pool of threads (``se3dyn/_core/pool.hpp``);
+the sparse factorisation and the triangular solves stay on one thread. The elements are
+evaluated in a fixed order of colours and chunks (``se3dyn/_core/engine.hpp``), so **the
+results are the same to the last bit for any number of threads**; only the time changes.
+Models with fewer than 64 elements of every type never leave one thread (the parts would cost
+more than they save).
+
+The number of threads is one setting of the process:
+
+* ``SE3DYN_THREADS`` in the environment, read when the engine is first loaded;
+* :func:`set_threads` (``se3dyn run --threads N`` on the command line);
+* by default, the cores this process may run on (``os.sched_getaffinity``).
+
+Worker processes of a sweep (:mod:`se3dyn.sweep`) run one thread each: the sweep already
+keeps every core busy with a run.
+"""
+from __future__ import annotations
+
+import numbers
+import os
+
+from se3dyn.errors import Se3dynError
+
+__all__ = ["set_threads", "get_threads", "default_threads"]
+
+ENV = "SE3DYN_THREADS"
+
+
+def default_threads() -> int:
+    """The cores this process may run on (``os.sched_getaffinity``; ``os.cpu_count`` where
+    that does not exist)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _check(n, where: str) -> int:
+    whole = isinstance(n, numbers.Integral) and not isinstance(n, bool)
+    if not (whole or isinstance(n, str) and n.strip().isdigit()):
+        raise Se3dynError(f"{where}: expected a whole number of threads >= 1, got {n!r}")
+    k = int(n)
+    if k < 1:
+        raise Se3dynError(f"{where}: expected a whole number of threads >= 1, got {n!r}")
+    return k
+
+
+def from_environment() -> int:
+    """The thread count of ``SE3DYN_THREADS``, or :func:`default_threads` when it is unset or
+    empty."""
+    raw = os.environ.get(ENV, "").strip()
+    return default_threads() if raw == "" else _check(raw, f"environment variable {ENV}")
+
+
+def set_threads(n: int | None = None) -> int:
+    """Set the number of threads of the element kernels (the process's one pool).
+
+    Parameters
+    ----------
+    n : int or None
+        Threads, >= 1; None: ``SE3DYN_THREADS`` or the cores this process may run on.
+
+    Returns
+    -------
+    int
+        The number now in use.
+    """
+    k = from_environment() if n is None else _check(n, "set_threads(n)")
+    from se3dyn.system import _core
+
+    _core().set_threads(k)
+    return k
+
+
+def get_threads() -> int:
+    """The number of threads the element kernels use."""
+    from se3dyn.system import _core
+
+    return int(_core().threads())
