@@ -368,6 +368,13 @@ NB_MODULE(_engine, m) {
              }
              return nb::make_tuple(n, l, u, f, sn);
            }, nb::arg("part") = "all")
+      .def("lu_parts",
+           [](const Stepper& S) {
+             // (n, n1, n2) of the iteration matrix's LU: the steps of the two parts its
+             // refactorisation and solves take at once ([0, n1), [n1, n2); 0, 0: none)
+             auto [n1, n2] = S.lu.parallel_parts();
+             return nb::make_tuple(S.lu.n(), n1, n2);
+           })
       .def("full_steps", [](const Stepper& S) { return S.full_steps; })
       .def("memory_size", [](const Stepper& S) { return S.memory_size(); })
       .def("serials",

@@ -48,14 +48,14 @@ class Pool {
   }
   int threads() const { return threads_; }
 
-  // f(p) for p in [0, parts), parts <= threads(); p = 0 in the caller. Serial (p in order, in
-  // the caller) when parts == 1 or the pool is busy.
+  // f(p) for p in [0, parts), each part on its own thread, p = 0 in the caller. Serially (p
+  // in order, in the caller) when parts == 1, when there are more parts than threads, or when
+  // the pool is busy.
   template <class F>
   void run(int parts, F&& f) {
-    parts = std::min(parts, threads_);
     std::unique_lock<std::mutex> busy(run_mutex_, std::try_to_lock);
-    if (parts <= 1 || !busy.owns_lock()) {
-      for (int p = 0; p < std::max(parts, 1); ++p) f(p);
+    if (parts <= 1 || parts > threads_ || !busy.owns_lock()) {
+      for (int p = 0; p < parts; ++p) f(p);
       return;
     }
     start(parts - 1);

@@ -61,6 +61,8 @@
 #include <limits>
 #include <vector>
 
+#include "pool.hpp"
+
 // The short loops of refactor and solve (trip counts of one to a few tens) run faster as scalar
 // code than vectorised with the vector loops' prologues and epilogues (GCC 12, AVX-512:
 // refactor -8 %, solve -6 % on the slider-crank's matrix); the arithmetic is the same.
@@ -179,6 +181,69 @@ inline int tdfs(int j, int k, int* head, const int* next, int* post, int* stack)
 // approximate external degrees (variables) or element sizes (elements); the lists head/next/last
 // are the degree lists of the variables (head indexed by degree), hhead/next/last the hash
 // buckets during supervariable detection; w[] the marker array of the set differences.
+// Two-way dissection of a graph of n weighted nodes (Cp, Ci: adjacency lists without self
+// loops) by one level of a breadth-first level structure from a pseudo-peripheral node (George
+// & Liu, "Computer Solution of Large Sparse Positive Definite Systems", 1981, ch. 4 and 8):
+// part[b] = 0 or 1 for the nodes before and after the separating level, 2 for the level
+// itself; a constraint node (weak) none of whose neighbours lies in its own part joins the
+// separator (it could not be a pivot inside its part). Only for graphs of at least
+// DISSECT_MIN weight; false (part unset) unless both parts hold at least 30 % of the weight
+// and the separator at most 2 %: a chain or a long mechanism, not a compact one.
+constexpr int DISSECT_MIN = 3000;
+inline bool dissect(int n, const std::vector<int>& Cp, const std::vector<int>& Ci,
+                    const int* weight, const char* weak, std::vector<int>& part) {
+  long total = 0;
+  for (int b = 0; b < n; ++b) total += weight[b];
+  if (total < DISSECT_MIN) return false;
+  std::vector<int> level(n, -1), queue(n);
+  // levels of the component of `root` from root (-1 elsewhere); returns the last node reached
+  auto bfs = [&](int root, int base) {
+    int head = 0, tail = 0;
+    queue[tail++] = root;
+    level[root] = base;
+    while (head < tail) {
+      const int u = queue[head++];
+      for (int q = Cp[u]; q < Cp[u + 1]; ++q)
+        if (level[Ci[q]] < 0) {
+          level[Ci[q]] = level[u] + 1;
+          queue[tail++] = Ci[q];
+        }
+    }
+    return std::make_pair(tail, queue[tail - 1]);
+  };
+  // pseudo-peripheral root of the first component: repeat the search from its last node
+  int root = 0, depth = -1;
+  for (int it = 0; it < 4; ++it) {
+    std::fill(level.begin(), level.end(), -1);
+    const int last = bfs(root, 0).second;
+    if (level[last] <= depth) break;
+    depth = level[last];
+    root = last;
+  }
+  std::fill(level.begin(), level.end(), -1);
+  int base = level[bfs(root, 0).second] + 1;
+  for (int b = 0; b < n; ++b)  // further components: their levels follow
+    if (level[b] < 0) base = level[bfs(b, base).second] + 1;
+  std::vector<long> lw(base, 0);
+  for (int b = 0; b < n; ++b) lw[level[b]] += weight[b];
+  long before = 0;
+  int sep = 0;
+  while (sep < base && 2 * (before + lw[sep]) <= total) before += lw[sep++];
+  if (sep >= base) return false;
+  part.assign(n, 0);
+  for (int b = 0; b < n; ++b) part[b] = level[b] < sep ? 0 : level[b] > sep ? 1 : 2;
+  if (weak)
+    for (int b = 0; b < n; ++b) {
+      if (!weak[b] || part[b] == 2) continue;
+      bool own = false;
+      for (int q = Cp[b]; q < Cp[b + 1] && !own; ++q) own = part[Ci[q]] == part[b];
+      if (!own) part[b] = 2;
+    }
+  long w[3] = {0, 0, 0};
+  for (int b = 0; b < n; ++b) w[part[b]] += weight[b];
+  return 10 * w[0] >= 3 * total && 10 * w[1] >= 3 * total && 50 * w[2] <= total;
+}
+
 inline void amd_order(int n, int nvar, std::vector<int>& Cp, std::vector<int>& Ci,
                       const int* weight, int* perm, const char* weak = nullptr) {
   if (n == 0) return;
@@ -598,6 +663,11 @@ class SparseLU {
 
   int n() const { return n_; }
   bool ok() const { return valid_; }
+  // Steps of the two parts of a two-way dissection that refactor and solve take at once
+  // (0, 0: none, or the pivots of the last factor left a part)
+  std::pair<int, int> parallel_parts() const {
+    return split_ ? std::make_pair(split_n1_, split_n2_) : std::make_pair(0, 0);
+  }
   Status status() const { return status_; }
   // Ordering (column order Q: step k eliminates column col_perm()[k]; computed by analyze, or
   // by the first factor when analyze had no values and order_with_values is set) and the row
@@ -664,6 +734,23 @@ class SparseLU {
   std::vector<int> mark_, xi_, pstack_;  // factor workspace
   std::vector<int> Lpend_;               // factor: end of the pruned pattern of L(:, j), or -1
   mutable std::vector<double> work_;     // zero between calls
+  // Two-way dissection (compute_ordering): steps [0, n1) and [n1, n2) eliminate the two parts,
+  // [n2, n) the separator; 0, 0 without. split_ (set by factor when the pivots stayed inside
+  // the parts, see split_plan): refactor and solve take the two parts at once on the pool of
+  // pool.hpp, the second with work2_; the same operations in the same order for any number of
+  // threads.
+  int split_n1_ = 0, split_n2_ = 0;
+  bool split_ = false;
+  mutable std::vector<double> work2_;  // zero between calls
+  struct RefactorStats {
+    double rg = std::numeric_limits<double>::infinity(), anorm = 0.0;
+    double dmin = std::numeric_limits<double>::infinity(), dmax = 0.0;
+  };
+  int refactor_columns(int k0, int k1, const double* values, double* x, RefactorStats& st,
+                       Status& status);
+  void split_plan();
+  void forward(int j0, int j1, double* w) const;
+  void backward(int j1, int j0, double* w) const;
   mutable std::vector<double> xwork_, rwork_;  // solve_refined
   double anorm1_ = 0.0, rgrowth_ = 0.0, rcond_piv_ = 0.0;
   long long flops_ = 0;
@@ -744,6 +831,7 @@ inline int SparseLU::analyze(int n, std::vector<int>&& colptr, std::vector<int>&
   xi_.assign(n, 0);
   pstack_.assign(n, 0);
   work_.assign(n, 0.0);
+  work2_.assign(n, 0.0);
   xwork_.assign(n, 0.0);
   rwork_.assign(n, 0.0);
   analyzed_ = true;
@@ -862,8 +950,54 @@ inline void SparseLU::compute_ordering(const double* values) {
       weak[b] = singular;
     }
   }
-  sparse_lu_detail::amd_order(nb, n, Cp, Ci, weight.data(), bperm.data(),
-                              weak.empty() ? nullptr : weak.data());
+  // --- two-way dissection (Engine threads: refactor and solve take the two parts at once),
+  // else minimum degree on the whole graph
+  std::vector<int> part;
+  split_n1_ = split_n2_ = 0;
+  if (sparse_lu_detail::dissect(nb, Cp, Ci, weight.data(), weak.empty() ? nullptr : weak.data(),
+                                part)) {
+    int t0 = 0;
+    for (int p = 0; p < 3; ++p) {
+      // minimum degree on the graph of part p's blocks with the separator's (for p = 2: the
+      // separator's alone), whose blocks wait as constraint blocks do (below): they count in
+      // their neighbours' degrees, so the part is eliminated towards the separator, not from
+      // it (which would fill the separator's rows of every column); the part's blocks in that
+      // order. The separator's constraint blocks with a neighbour in a part are eligible at
+      // once (that neighbour is eliminated before).
+      std::vector<int> idx(nb, -1), mem;
+      for (int b = 0; b < nb; ++b)
+        if (part[b] == p || part[b] == 2) {
+          idx[b] = int(mem.size());
+          mem.push_back(b);
+        }
+      const int m = int(mem.size());
+      std::vector<int> sp(m + 1, 0), si, sw(m), sperm(m);
+      std::vector<char> sweak(m, 0);
+      int nvar = 0, own = 0;
+      for (int i = 0; i < m; ++i) {
+        const int b = mem[i];
+        bool outside = false;
+        for (int q = Cp[b]; q < Cp[b + 1]; ++q) {
+          if (idx[Ci[q]] >= 0) si.push_back(idx[Ci[q]]);
+          else outside = true;
+        }
+        sp[i + 1] = int(si.size());
+        sw[i] = weight[b];
+        nvar += weight[b];
+        const bool w = !weak.empty() && weak[b];
+        sweak[i] = part[b] == p ? w : p < 2 || (w && !outside);
+        if (part[b] == p) own += weight[b];
+      }
+      sparse_lu_detail::amd_order(m, nvar, sp, si, sw.data(), sperm.data(), sweak.data());
+      for (int i = 0; i < m; ++i)
+        if (part[mem[sperm[i]]] == p) bperm[t0++] = mem[sperm[i]];
+      if (p == 0) split_n1_ = own;
+      if (p == 1) split_n2_ = split_n1_ + own;
+    }
+  } else {
+    sparse_lu_detail::amd_order(nb, n, Cp, Ci, weight.data(), bperm.data(),
+                                weak.empty() ? nullptr : weak.data());
+  }
   // --- expand the block order
   Q_.resize(n);
   int k = 0;
@@ -1103,6 +1237,7 @@ inline int SparseLU::factor(const double* values) {
   anorm1_ = anorm;
   have_pattern_ = valid_ = true;
   count_flops();
+  split_plan();
   have_pattern_ = valid_ = true;
   status_ = kOk;
   return 0;
@@ -1190,16 +1325,46 @@ SE3DYN_LU_SCALAR inline int SparseLU::refactor(const double* values) {
     return 1;
   }
   const int n = n_;
+  RefactorStats st;
+  int code = 0;
+  if (split_) {  // the two parts at once, then the separator
+    RefactorStats s2;
+    Status st1 = kOk, st2 = kOk;
+    int c1 = 0, c2 = 0;
+    Pool::get().run(2, [&](int p) {
+      if (p == 0) c1 = refactor_columns(0, split_n1_, values, work_.data(), st, st1);
+      else c2 = refactor_columns(split_n1_, split_n2_, values, work2_.data(), s2, st2);
+    });
+    // (the first failing step's column, as one pass would report it)
+    code = c1 ? c1 : c2;
+    status_ = c1 ? st1 : st2;
+    st.rg = std::min(st.rg, s2.rg);
+    st.anorm = std::max(st.anorm, s2.anorm);
+    st.dmin = std::min(st.dmin, s2.dmin);
+    st.dmax = std::max(st.dmax, s2.dmax);
+    if (!code) code = refactor_columns(split_n2_, n, values, work_.data(), st, status_);
+  } else {
+    code = refactor_columns(0, n, values, work_.data(), st, status_);
+  }
+  if (code) return code;
+  rcond_piv_ = n ? st.dmin / st.dmax : 1.0;
+  rgrowth_ = n ? st.rg : 1.0;
+  anorm1_ = st.anorm;
+  valid_ = true;
+  status_ = kOk;
+  return 0;
+}
+
+// Steps k0 .. k1-1 of refactor with the work vector x (all zero before and after)
+SE3DYN_LU_SCALAR inline int SparseLU::refactor_columns(int k0, int k1, const double* values,
+                                                      double* x, RefactorStats& st,
+                                                      Status& status) {
   const double dtol = opt_.drop_tol;
-  double* x = work_.data();
   const int* Lp = Lp_.data();
   const int* Li = Li_.data();
   double* Lx = Lx_.data();
   const double rtol = opt_.refactor_tol;
-  double rg = std::numeric_limits<double>::infinity();
-  double anorm = 0.0;
-  double dmin = std::numeric_limits<double>::infinity(), dmax = 0.0;
-  for (int k = 0; k < n; ++k) {
+  for (int k = k0; k < k1; ++k) {
     // scatter A(:, Q[k]) in pivot numbering
     double amax = 0.0, asum = 0.0;
     for (int q = Rp_[k]; q < Rp_[k + 1]; ++q) {
@@ -1221,11 +1386,11 @@ SE3DYN_LU_SCALAR inline int SparseLU::refactor(const double* values) {
       asum += zmax;
       if (!(zmax <= dtol * std::max(amax, zmax))) {
         for (int q = Rp_[k]; q < Rp_[k + 1]; ++q) x[Rr_[q]] = 0.0;
-        status_ = std::isfinite(zmax) ? kPatternChanged : kNotFinite;
+        status = std::isfinite(zmax) ? kPatternChanged : kNotFinite;
         return 1 + Q_[k];
       }
     }
-    anorm = std::max(anorm, asum);
+    st.anorm = std::max(st.anorm, asum);
     // U(:, k) in increasing order, a supernode suffix j..l-1 at a time: the values inside the
     // supernode by a unit lower triangular solve, then the update of the rows below
     double usum = 0.0, umax = 0.0;
@@ -1260,7 +1425,7 @@ SE3DYN_LU_SCALAR inline int SparseLU::refactor(const double* values) {
     const bool finite = std::isfinite(usum + csum + asum);
     if (!finite || !(std::fabs(piv) > rtol * cmax) || piv == 0.0) {
       for (int p = Lp[k]; p < Lp[k + 1]; ++p) x[Li[p]] = 0.0;
-      status_ = finite ? (piv == 0.0 ? kNumericallyZero : kSmallPivot) : kNotFinite;
+      status = finite ? (piv == 0.0 ? kNumericallyZero : kSmallPivot) : kNotFinite;
       return 1 + Q_[k];
     }
     Ud_[k] = piv;
@@ -1270,16 +1435,28 @@ SE3DYN_LU_SCALAR inline int SparseLU::refactor(const double* values) {
       x[Li[p]] = 0.0;
     }
     umax = std::max(umax, std::fabs(piv));
-    rg = std::min(rg, amax / umax);
-    dmin = std::min(dmin, std::fabs(piv));
-    dmax = std::max(dmax, std::fabs(piv));
+    st.rg = std::min(st.rg, amax / umax);
+    st.dmin = std::min(st.dmin, std::fabs(piv));
+    st.dmax = std::max(st.dmax, std::fabs(piv));
   }
-  rcond_piv_ = n ? dmin / dmax : 1.0;
-  rgrowth_ = n ? rg : 1.0;
-  anorm1_ = anorm;
-  valid_ = true;
-  status_ = kOk;
   return 0;
+}
+
+// Whether refactor and solve may take the two parts of the dissection at once: no step of the
+// second part updates from a step of the first (U(:, k), k in [n1, n2), has no row < n1), no
+// column of the first part reaches a row of the second (L(:, j), j < n1, has no row in
+// [n1, n2)), and no supernode crosses a boundary. Partial pivoting outside a part's own rows
+// would break it; then both go in one pass, as without dissection.
+inline void SparseLU::split_plan() {
+  const int n1 = split_n1_, n2 = split_n2_;
+  split_ = n1 > 0 && n2 > n1 && n2 <= n_;
+  for (int k = n1; k < n2 && split_; ++k)
+    for (int q = Up_[k]; q < Up_[k + 1] && split_; ++q) split_ = Ui_[q] >= n1;
+  for (int j = 0; j < n1 && split_; ++j) {
+    for (int p = Lp_[j]; p < Lp_[j + 1] && split_; ++p) split_ = Li_[p] < n1 || Li_[p] >= n2;
+    split_ = split_ && snend_[j] <= n1;
+  }
+  for (int j = n1; j < n2 && split_; ++j) split_ = snend_[j] <= n2;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1292,10 +1469,53 @@ SE3DYN_LU_SCALAR inline void SparseLU::solve(double* b) const {
     return;
   }
   double* w = work_.data();
-  for (int k = 0; k < n; ++k) w[k] = b[P_[k]];
+  if (!split_) {
+    for (int k = 0; k < n; ++k) w[k] = b[P_[k]];
+    forward(0, n, w);
+    backward(n, 0, w);
+  } else {
+    // L y = P b: the parts at once (the second in work2_, whose separator rows then hold its
+    // updates, added after the first part's), then the separator; U z = y: the separator,
+    // then the parts at once (their rows are disjoint)
+    const int n1 = split_n1_, n2 = split_n2_;
+    double* w2 = work2_.data();
+    Pool::get().run(2, [&](int p) {
+      if (p == 0) {
+        for (int k = 0; k < n1; ++k) w[k] = b[P_[k]];
+        for (int k = n2; k < n; ++k) w[k] = b[P_[k]];
+        forward(0, n1, w);
+      } else {
+        for (int k = n1; k < n2; ++k) w2[k] = b[P_[k]];
+        forward(n1, n2, w2);
+      }
+    });
+    for (int k = n1; k < n2; ++k) {
+      w[k] = w2[k];
+      w2[k] = 0.0;
+    }
+    for (int k = n2; k < n; ++k) {
+      w[k] += w2[k];
+      w2[k] = 0.0;
+    }
+    forward(n2, n, w);
+    backward(n, n2, w);
+    Pool::get().run(2, [&](int p) {
+      if (p == 0) backward(n1, 0, w);
+      else backward(n2, n1, w);
+    });
+  }
+  for (int k = 0; k < n; ++k) {  // x = Q z
+    b[Q_[k]] = w[k];
+    w[k] = 0.0;
+  }
+}
+
+// w = L^-1 w on the steps j0 .. j1-1 (L y = P b), a supernode at a time (a supernode starting
+// in the range ends in it)
+SE3DYN_LU_SCALAR inline void SparseLU::forward(int j0, int j1, double* w) const {
   const int* Lp = Lp_.data();
   const double* Lx = Lx_.data();
-  for (int j = 0; j < n;) {  // L y = P b, a supernode at a time
+  for (int j = j0; j < j1;) {
     const int l = snend_[j];
     for (int t = j; t < l; ++t) {
       const double xt = w[t];
@@ -1305,17 +1525,17 @@ SE3DYN_LU_SCALAR inline void SparseLU::solve(double* b) const {
     supernode_update(j, l, l, w + j, w);
     j = l;
   }
+}
+
+// U z = y on the steps j1-1 down to j0 (their columns' updates of the rows above)
+SE3DYN_LU_SCALAR inline void SparseLU::backward(int j1, int j0, double* w) const {
   const int* Up = Up_.data();
   const int* Ui = Ui_.data();
   const double* Ux = Ux_.data();
-  for (int j = n - 1; j >= 0; --j) {  // U z = y
+  for (int j = j1 - 1; j >= j0; --j) {
     const double xj = (w[j] /= Ud_[j]);
     if (xj == 0.0) continue;
     for (int p = Up[j]; p < Up[j + 1]; ++p) w[Ui[p]] -= Ux[p] * xj;
-  }
-  for (int k = 0; k < n; ++k) {  // x = Q z
-    b[Q_[k]] = w[k];
-    w[k] = 0.0;
   }
 }
 
