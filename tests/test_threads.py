@@ -189,18 +189,21 @@ def _chain(n):
 
 def test_a_long_chain_factorises_in_two_parts_alike_on_any_thread_count():
     """From 3000 unknowns on, the sparse LU orders a chain by a two-way dissection and its
-    refactorisation and solves take the two halves at once (sparse_lu.hpp); the numbers must
-    not depend on the thread count either, and the parts must hold the chain's halves."""
+    refactorisation and solves take the two halves at once (sparse_lu.hpp), as do the xi
+    block's LDL^T factorisation and solves (sparse_ldlt.hpp); the numbers must not depend on
+    the thread count either, and the parts must hold the chain's halves."""
     from se3dyn.integrator import GeneralizedAlpha
     from se3dyn.system import Workspace
 
-    s = sd.compile_model(_chain(300))
+    s = sd.compile_model(_chain(600))
     ws = Workspace(s)
     integ = GeneralizedAlpha(rho_inf=0.9)
     st = integ.init(s, ws=ws)
     st, _ = integ.step(s, st, 1e-3, ws=ws)
-    n, n1, n2 = ws.stepper(integ.index2, st.dropped, split=True).lu_parts()
-    assert 0.3 * n <= n1 and 0.3 * n <= n2 - n1 and n - n2 <= 0.02 * n, (n, n1, n2)
+    stepper = ws.stepper(integ.index2, st.dropped, split=True)
+    for part in ("lu", "xi"):  # the iteration block's LU, the xi block's LDL^T
+        n, n1, n2 = stepper.lu_parts(part)
+        assert 0.3 * n <= n1 and 0.3 * n <= n2 - n1 and n - n2 <= 0.02 * n, (part, n, n1, n2)
     runs = [_run(s, th, t_end=0.03, step=1e-3) for th in (1, 2, 1)]
     for ch in ("H", "v", "vd", "lam", "kinetic", "potential"):
         ref = np.asarray(getattr(runs[0], ch))

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 
 #include "block_pattern.hpp"
 #include "newton.hpp"
@@ -369,12 +370,19 @@ NB_MODULE(_engine, m) {
              return nb::make_tuple(n, l, u, f, sn);
            }, nb::arg("part") = "all")
       .def("lu_parts",
-           [](const Stepper& S) {
-             // (n, n1, n2) of the iteration matrix's LU: the steps of the two parts its
-             // refactorisation and solves take at once ([0, n1), [n1, n2); 0, 0: none)
+           [](const Stepper& S, const std::string& part) {
+             // (n, n1, n2) of the iteration matrix's LU (part "lu") or of the split
+             // iteration's xi block LDL^T ("xi"): the steps of the two parts its
+             // factorisation and solves take at once ([0, n1), [n1, n2); 0, 0: none)
+             if (part != "lu" && part != "xi")
+               throw std::invalid_argument("lu_parts: part 'lu' or 'xi'");
              auto [n1, n2] = S.lu.parallel_parts();
+             if (part == "xi") {
+               std::tie(n1, n2) = S.lux.parallel_parts();
+               return nb::make_tuple(S.lux.n(), n1, n2);
+             }
              return nb::make_tuple(S.lu.n(), n1, n2);
-           })
+           }, nb::arg("part") = "lu")
       .def("full_steps", [](const Stepper& S) { return S.full_steps; })
       .def("memory_size", [](const Stepper& S) { return S.memory_size(); })
       .def("serials",

@@ -169,6 +169,8 @@ class SparseLDLT {
   // entries below the diagonal (the updates L(r, j) d_j L(k, j), r >= k, of the later columns)
   long long factor_flops() const { return flops_; }
   int num_supernodes() const { return ns_; }
+  // Steps of the two runs that factor and solve take at once ([0, m1), [m1, m2); 0, 0: none)
+  std::pair<int, int> parallel_parts() const { return {split_m1_, split_m2_}; }
   // pivot D_kk of step k after a successful factor (row and column k - f of the panel of its
   // supernode, f its first step)
   double pivot(int k) const {
@@ -182,8 +184,8 @@ class SparseLDLT {
     status_ = kNotAnalyzed;
     n_ = ns_ = 0;
   }
-  void update(int d, int s, int p0, int p1);
-  int factor_panel(int s);
+  void update(int d, int s, int p0, int p1, const int* map, double* dlu);
+  int factor_panel(int s, double* dl, Status& status);
 
   Options opt_;
   int n_ = 0, ns_ = 0, maxw_ = 0;
@@ -201,6 +203,19 @@ class SparseLDLT {
   std::vector<int> map_, head_, next_, lpos_;
   std::vector<double> dl_, dlu_;
   mutable std::vector<double> work_;  // zero between calls
+  // Two runs of supernodes that factor and solve take at once (split_plan): [0, s1) and
+  // [s1, s2), steps [0, m1) and [m1, m2); the rest after them. The second run has its own
+  // workspace (map2_, head2_: its links to the separator's supernodes, put in front of the
+  // first run's before those are factorised, as one pass would have linked them).
+  int split_s1_ = 0, split_s2_ = 0, split_m1_ = 0, split_m2_ = 0;
+  std::vector<int> map2_, head2_;
+  std::vector<double> dl2_, dlu2_;
+  mutable std::vector<double> work2_;  // zero between calls
+  void split_plan(const std::vector<int>& part);
+  int factor_supernodes(int s0, int s1, const double* values, int* map, int* head, double* dl,
+                        double* dlu, Status& status);
+  void forward(int s0, int s1, double* y) const;
+  void backward(int s1, int s0, double* y) const;
   long long nnzL_ = 0, flops_ = 0;
 };
 
@@ -216,8 +231,9 @@ inline int SparseLDLT::analyze(int n, std::vector<int>&& colptr, std::vector<int
   auto vidx = [&](int p) { return vmap.empty() ? p : vmap[p]; };
 
   // --- the ordering of SparseLU for this pattern (its analyze, without the numeric storage
-  //     mattering: a temporary), pattern-only when there are no values
-  std::vector<int> perm;
+  //     mattering: a temporary), pattern-only when there are no values; the part of its
+  //     dissection each unknown is in (0, 1; 2: the separator or none)
+  std::vector<int> perm, part;
   {
     SparseLU::Options lo;
     lo.drop_zeros = opt_.drop_zeros;
@@ -228,6 +244,9 @@ inline int SparseLDLT::analyze(int n, std::vector<int>&& colptr, std::vector<int
                    group, values) != 0)
       return -1;
     perm = lu.col_perm();
+    auto [n1, n2] = lu.ordering_parts();
+    part.assign(n, 2);
+    for (int k = 0; k < n2; ++k) part[perm[k]] = k < n1 ? 0 : 1;
   }
   std::vector<int> pinv(n);
   for (int k = 0; k < n; ++k) pinv[perm[k]] = k;
@@ -380,10 +399,12 @@ inline int SparseLDLT::analyze(int n, std::vector<int>&& colptr, std::vector<int
         }
     }
   }
-  // --- supernodes
+  // --- supernodes (none across the boundary of two parts of the dissection: split_plan)
   std::vector<int> Sp{0}, sn(n);
+  auto same_part = [&](int j) { return part.empty() || part[perm[j - 1]] == part[perm[j]]; };
   for (int j = 1; j <= n; ++j)
-    if (j == n || !(parent[j - 1] == j && cc[j - 1] == cc[j] + 1)) Sp.push_back(j);
+    if (j == n || !(parent[j - 1] == j && cc[j - 1] == cc[j] + 1 && same_part(j)))
+      Sp.push_back(j);
   const int ns = static_cast<int>(Sp.size()) - 1;
   int maxw = 0;
   for (int s = 0; s < ns; ++s) {
@@ -512,8 +533,43 @@ inline int SparseLDLT::analyze(int n, std::vector<int>&& colptr, std::vector<int
   work_.assign(n, 0.0);
   nnzL_ = nnzL;
   flops_ = flops;
+  split_plan(part);
+  if (split_s2_ > 0) {
+    map2_.assign(n, 0);
+    head2_.assign(ns, -1);
+    dl2_.assign(dl_.size(), 0.0);
+    dlu2_.assign(dlu_.size(), 0.0);
+    work2_.assign(n, 0.0);
+  }
   analyzed_ = true;
   return 0;
+}
+
+// The supernodes of the two parts of the ordering's dissection (part: of every unknown), when
+// after the postorder they are two runs of whole supernodes followed by the separator's, and
+// no supernode of the first run has rows in the second: then factor and solve take the two
+// runs at once (as SparseLU's refactor and solve).
+inline void SparseLDLT::split_plan(const std::vector<int>& part) {
+  split_s1_ = split_s2_ = split_m1_ = split_m2_ = 0;
+  const int n = n_;
+  if (part.empty() || n == 0 || part[perm_[0]] == 2) return;
+  const int a = part[perm_[0]];
+  int m1 = 0;
+  while (m1 < n && part[perm_[m1]] == a) ++m1;
+  int m2 = m1;
+  while (m2 < n && part[perm_[m2]] == 1 - a) ++m2;
+  for (int k = m2; k < n; ++k)
+    if (part[perm_[k]] != 2) return;
+  if (m1 == 0 || m2 == m1 || m1 >= n || Sp_[sn_[m1]] != m1 || (m2 < n && Sp_[sn_[m2]] != m2))
+    return;
+  const int s1 = sn_[m1], s2 = m2 < n ? sn_[m2] : ns_;
+  for (int s = 0; s < s1; ++s)
+    for (int t = Rp_[s]; t < Rp_[s + 1]; ++t)
+      if (Ri_[t] >= m1 && Ri_[t] < m2) return;
+  split_s1_ = s1;
+  split_s2_ = s2;
+  split_m1_ = m1;
+  split_m2_ = m2;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -555,7 +611,8 @@ SE3DYN_LU_SCALAR inline void ldlt_update(const double* __restrict Ld, const doub
 
 }  // namespace sparse_ldlt_detail
 
-SE3DYN_LU_SCALAR inline void SparseLDLT::update(int d, int s, int p0, int p1) {
+SE3DYN_LU_SCALAR inline void SparseLDLT::update(int d, int s, int p0, int p1, const int* map,
+                                                double* dlu) {
   const int fd = Sp_[d], wd = Sp_[d + 1] - fd;
   const int fs = Sp_[s], ws = Sp_[s + 1] - fs;
   const int* R = Ri_.data() + Rp_[d];
@@ -564,13 +621,12 @@ SE3DYN_LU_SCALAR inline void SparseLDLT::update(int d, int s, int p0, int p1) {
   const double* Ld = Pd + static_cast<long long>(wd) * wd;  // the rows below d
   double* Ls = Lx_.data() + Lxp_[s];
   // D L(c, :)^T of the updated columns
-  double* dl = dlu_.data();
+  double* dl = dlu;
   const int nc = p1 - p0;
   for (int c = 0; c < nc; ++c) {
     const double* row = Ld + static_cast<long long>(p0 + c) * wd;
     for (int t = 0; t < wd; ++t) dl[c * wd + t] = row[t] * Pd[t * (wd + 1)];
   }
-  const int* map = map_.data();
   namespace dt = sparse_ldlt_detail;
   switch (wd) {
     case 1: dt::ldlt_update<1>(Ld, dl, R, map, Ls, ws, fs, wd, p0, nc, nr); break;
@@ -628,11 +684,10 @@ SE3DYN_LU_SCALAR inline int ldlt_panel(double* __restrict P, int nrow, int wdyn,
 
 // The panel of supernode s (ldlt_panel). Returns 0, or 1 + the step whose pivot failed
 // (status_ set).
-inline int SparseLDLT::factor_panel(int s) {
+inline int SparseLDLT::factor_panel(int s, double* dl, Status& status) {
   const int f = Sp_[s], w = Sp_[s + 1] - f;
   const int nrow = w + Rp_[s + 1] - Rp_[s];
   double* P = Lx_.data() + Lxp_[s];
-  double* dl = dl_.data();
   double* invd = invd_.data() + f;
   const double* sg = sgn_.data() + f;
   const double* ad = adiag_.data() + f;
@@ -650,7 +705,7 @@ inline int SparseLDLT::factor_panel(int s) {
     default: bad = dt::ldlt_panel<0>(P, nrow, w, dl, invd, sg, ad, ptol, &d);
   }
   if (bad < 0) return 0;
-  status_ = std::isfinite(d) ? kNotDefinite : kNotFinite;
+  status = std::isfinite(d) ? kNotDefinite : kNotFinite;
   return 1 + f + bad;
 }
 
@@ -660,11 +715,48 @@ inline int SparseLDLT::factor(const double* values) {
     status_ = kNotAnalyzed;
     return 1;
   }
-  const int ns = ns_;
+  std::fill(head_.begin(), head_.end(), -1);
+  int code = 0;
+  if (split_s2_ > 0) {
+    std::fill(head2_.begin(), head2_.end(), -1);
+    Status st1 = kOk, st2 = kOk;
+    int c1 = 0, c2 = 0;
+    Pool::get().run(2, [&](int p) {
+      if (p == 0)
+        c1 = factor_supernodes(0, split_s1_, values, map_.data(), head_.data(), dl_.data(),
+                               dlu_.data(), st1);
+      else
+        c2 = factor_supernodes(split_s1_, split_s2_, values, map2_.data(), head2_.data(),
+                               dl2_.data(), dlu2_.data(), st2);
+    });
+    code = c1 ? c1 : c2;
+    status_ = c1 ? st1 : st2;
+    if (code) return code;
+    for (int t = split_s2_; t < ns_; ++t) {  // the second run's links first
+      if (head2_[t] < 0) continue;
+      int d = head2_[t];
+      while (next_[d] >= 0) d = next_[d];
+      next_[d] = head_[t];
+      head_[t] = head2_[t];
+    }
+    code = factor_supernodes(split_s2_, ns_, values, map_.data(), head_.data(), dl_.data(),
+                             dlu_.data(), status_);
+  } else {
+    code = factor_supernodes(0, ns_, values, map_.data(), head_.data(), dl_.data(), dlu_.data(),
+                             status_);
+  }
+  if (code) return code;
+  valid_ = true;
+  status_ = kOk;
+  return 0;
+}
+
+// Supernodes s0 .. s1-1 of factor, with the workspace map, head (descendant lists), dl, dlu
+inline int SparseLDLT::factor_supernodes(int s0, int s1, const double* values, int* map,
+                                         int* head, double* dl, double* dlu, Status& status) {
   const double dtol = opt_.drop_tol;
   double* Lx = Lx_.data();
-  std::fill(head_.begin(), head_.end(), -1);
-  for (int s = 0; s < ns; ++s) {
+  for (int s = s0; s < s1; ++s) {
     const int f = Sp_[s], l = Sp_[s + 1], w = l - f;
     double* P = Lx + Lxp_[s];
     std::fill(P, Lx + Lxp_[s + 1], 0.0);
@@ -696,43 +788,41 @@ inline int SparseLDLT::factor(const double* values) {
           nan |= az != az;
         }
         if (nan || !(zmax <= dtol * std::max(amax, zmax))) {
-          status_ = std::isfinite(zmax) && !nan ? kPatternChanged : kNotFinite;
+          status = std::isfinite(zmax) && !nan ? kPatternChanged : kNotFinite;
           return 1 + perm_[f];
         }
       }
     }
     for (int i = 0; i < w; ++i) adiag_[f + i] = std::fabs(P[static_cast<long long>(i) * (w + 1)]);
     // --- the updates of the descendants with rows in s
-    for (int i = 0; i < w; ++i) map_[f + i] = i;
-    for (int t = Rp_[s]; t < Rp_[s + 1]; ++t) map_[Ri_[t]] = w + (t - Rp_[s]);
-    for (int d = head_[s]; d != -1;) {
+    for (int i = 0; i < w; ++i) map[f + i] = i;
+    for (int t = Rp_[s]; t < Rp_[s + 1]; ++t) map[Ri_[t]] = w + (t - Rp_[s]);
+    for (int d = head[s]; d != -1;) {
       const int dn = next_[d];
       const int* R = Ri_.data() + Rp_[d];
       const int nr = Rp_[d + 1] - Rp_[d];
       const int p0 = lpos_[d];
       int p1 = p0 + 1;
       while (p1 < nr && R[p1] < l) ++p1;
-      update(d, s, p0, p1);
+      update(d, s, p0, p1, map, dlu);
       lpos_[d] = p1;
       if (p1 < nr) {
         const int t = sn_[R[p1]];
-        next_[d] = head_[t];
-        head_[t] = d;
+        next_[d] = head[t];
+        head[t] = d;
       }
       d = dn;
     }
     // --- the panel's own LDL^T
-    const int bad = factor_panel(s);
+    const int bad = factor_panel(s, dl, status);
     if (bad) return 1 + perm_[bad - 1];
     if (Rp_[s + 1] > Rp_[s]) {
       lpos_[s] = 0;
       const int t = sn_[Ri_[Rp_[s]]];
-      next_[s] = head_[t];
-      head_[t] = s;
+      next_[s] = head[t];
+      head[t] = s;
     }
   }
-  valid_ = true;
-  status_ = kOk;
   return 0;
 }
 
@@ -800,11 +890,58 @@ inline void SparseLDLT::solve(double* b) const {
     return;
   }
   double* y = work_.data();
-  for (int k = 0; k < n; ++k) y[k] = b[perm_[k]];
+  if (split_s2_ == 0) {
+    for (int k = 0; k < n; ++k) y[k] = b[perm_[k]];
+    forward(0, ns_, y);
+    for (int k = 0; k < n; ++k) y[k] *= invd_[k];
+    backward(ns_, 0, y);
+    for (int k = 0; k < n; ++k) {
+      b[perm_[k]] = y[k];
+      y[k] = 0.0;
+    }
+    return;
+  }
+  // the two runs at once (the second in work2_, whose separator rows then hold its updates,
+  // added after the first run's), the separator; backwards the separator, then the runs
+  const int m1 = split_m1_, m2 = split_m2_;
+  double* y2 = work2_.data();
+  Pool::get().run(2, [&](int p) {
+    if (p == 0) {
+      for (int k = 0; k < m1; ++k) y[k] = b[perm_[k]];
+      for (int k = m2; k < n; ++k) y[k] = b[perm_[k]];
+      forward(0, split_s1_, y);
+    } else {
+      for (int k = m1; k < m2; ++k) y2[k] = b[perm_[k]];
+      forward(split_s1_, split_s2_, y2);
+    }
+  });
+  for (int k = m1; k < m2; ++k) {
+    y[k] = y2[k];
+    y2[k] = 0.0;
+  }
+  for (int k = m2; k < n; ++k) {
+    y[k] += y2[k];
+    y2[k] = 0.0;
+  }
+  forward(split_s2_, ns_, y);
+  for (int k = m2; k < n; ++k) y[k] *= invd_[k];
+  backward(ns_, split_s2_, y);
+  Pool::get().run(2, [&](int p) {
+    const int k0 = p == 0 ? 0 : m1, k1 = p == 0 ? m1 : m2;
+    for (int k = k0; k < k1; ++k) y[k] *= invd_[k];
+    backward(p == 0 ? split_s1_ : split_s2_, p == 0 ? 0 : split_s1_, y);
+    for (int k = k0; k < (p == 0 ? k1 : n); ++k) {
+      b[perm_[k]] = y[k];
+      y[k] = 0.0;
+    }
+  });
+}
+
+// L y = P b over the supernodes s0 .. s1-1 (their steps and the rows below them in y)
+inline void SparseLDLT::forward(int s0, int s1, double* y) const {
   const double* Lx = Lx_.data();
-  const int ns = ns_;
   namespace dt = sparse_ldlt_detail;
-  for (int s = 0; s < ns; ++s) {  // L y = P b
+  for (int s = s0; s < s1; ++s) {
     const int f = Sp_[s], w = Sp_[s + 1] - f;
     const double* P = Lx + Lxp_[s];
     const int* R = Ri_.data() + Rp_[s];
@@ -817,8 +954,13 @@ inline void SparseLDLT::solve(double* b) const {
       default: dt::ldlt_forward<0>(P, w, R, nr, y + f, y);
     }
   }
-  for (int k = 0; k < n; ++k) y[k] *= invd_[k];
-  for (int s = ns - 1; s >= 0; --s) {  // L^T z = D^-1 y
+}
+
+// L^T z = D^-1 y over the supernodes s1-1 down to s0
+inline void SparseLDLT::backward(int s1, int s0, double* y) const {
+  const double* Lx = Lx_.data();
+  namespace dt = sparse_ldlt_detail;
+  for (int s = s1 - 1; s >= s0; --s) {
     const int f = Sp_[s], w = Sp_[s + 1] - f;
     const double* P = Lx + Lxp_[s];
     const int* R = Ri_.data() + Rp_[s];
@@ -830,10 +972,6 @@ inline void SparseLDLT::solve(double* b) const {
       case 6: dt::ldlt_backward<6>(P, w, R, nr, y + f, y); break;
       default: dt::ldlt_backward<0>(P, w, R, nr, y + f, y);
     }
-  }
-  for (int k = 0; k < n; ++k) {
-    b[perm_[k]] = y[k];
-    y[k] = 0.0;
   }
 }
 

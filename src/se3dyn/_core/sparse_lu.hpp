@@ -663,6 +663,9 @@ class SparseLU {
 
   int n() const { return n_; }
   bool ok() const { return valid_; }
+  // Steps of the two parts of the ordering's two-way dissection ([0, n1), [n1, n2); 0, 0:
+  // none), after analyze (with values or without, order_with_values off) or factor
+  std::pair<int, int> ordering_parts() const { return {split_n1_, split_n2_}; }
   // Steps of the two parts of a two-way dissection that refactor and solve take at once
   // (0, 0: none, or the pivots of the last factor left a part)
   std::pair<int, int> parallel_parts() const {
@@ -1500,9 +1503,15 @@ SE3DYN_LU_SCALAR inline void SparseLU::solve(double* b) const {
     forward(n2, n, w);
     backward(n, n2, w);
     Pool::get().run(2, [&](int p) {
+      const int k0 = p == 0 ? 0 : n1, k1 = p == 0 ? n1 : n;
       if (p == 0) backward(n1, 0, w);
       else backward(n2, n1, w);
+      for (int k = k0; k < k1; ++k) {  // x = Q z
+        b[Q_[k]] = w[k];
+        w[k] = 0.0;
+      }
     });
+    return;
   }
   for (int k = 0; k < n; ++k) {  // x = Q z
     b[Q_[k]] = w[k];
