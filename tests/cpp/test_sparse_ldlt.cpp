@@ -2,7 +2,7 @@
 //
 // Build and run:
 //
-//   g++ -O2 -std=c++17 -I src/se3dyn/_core tests/cpp/test_sparse_ldlt.cpp -o test_sparse_ldlt
+//   g++ -O2 -std=c++17 -pthread -I src/se3dyn/_core tests/cpp/test_sparse_ldlt.cpp -o test_sparse_ldlt
 //   ./test_sparse_ldlt [SEED]
 //
 // Checks

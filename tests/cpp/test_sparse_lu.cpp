@@ -3,7 +3,7 @@
 // Build and run (matrices from tests/cpp/make_lu_matrices.py, written outside the repository):
 //
 //   python tests/cpp/make_lu_matrices.py /work/scratch-lu/matrices [--big]
-//   g++ -O2 -std=c++17 -I src/se3dyn/_core tests/cpp/test_sparse_lu.cpp -o test_sparse_lu
+//   g++ -O2 -std=c++17 -pthread -I src/se3dyn/_core tests/cpp/test_sparse_lu.cpp -o test_sparse_lu
 //   ./test_sparse_lu [MATRIX_DIR]          (default /work/scratch-lu/matrices; missing: skipped)
 //
 // Checks
