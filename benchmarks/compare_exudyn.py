@@ -67,7 +67,8 @@ Timings and the targets of issue 12 (PASS/MISS printed beside each):
    compiled them from source; installed packages such as EXUDYN, numpy and a non-editable
    se3dyn have theirs written by pip at install).
 4. Cost per step vs N = 100 ... 10^4 links (``chain_scaling.scaling_row``: set-up excluded,
-   (wall(0.1 s) - wall(0.02 s)) / 80 steps, se3dyn defaults): fitted exponent <= 1.1; peak RSS
+   (wall(0.1 s) - wall(0.02 s)) / 80 steps, each the minimum of two runs, se3dyn defaults):
+   fitted exponent <= 1.1; peak RSS
    of the N = 10^4 chain (0.1 s, every 10th step stored) in its own subprocess
    (``chain_scaling.py --memory``) <= 600 MB. The peak is VmHWM of /proc/self/status in that
    process: ``resource.getrusage`` maxrss of a child started by vfork (as ``subprocess`` does)
@@ -1138,9 +1139,9 @@ def main(argv) -> int:
         report = {**env, "load_average_start": load(), "exudyn_defaults_read": defaults,
                   "settings": {
                       "se3dyn": "sd.simulate(model, t_end, h, rho_inf=0.9): index2, modified "
-                                "Newton, tol_residual 1e-10, tol_constraint 1e-11; element "
-                                f"kernels on {env['se3dyn_engine']['threads']} threads (the "
-                                "default: the cores; results identical for any count)",
+                                "Newton, tol_residual 1e-10, tol_constraint 1e-11; engine on "
+                                f"{env['se3dyn_engine']['threads']} threads (the default: the "
+                                "cores; results identical for any count)",
                       "exudyn_defaults": "SimulationSettings() + endTime, numberOfSteps, "
                                          "sensors.writePeriod = h, solution.file.write = False; "
                                          "chains: linearSolver EigenSparse",
@@ -1150,8 +1151,8 @@ def main(argv) -> int:
                                       "checks at the small step)"},
                   "targets": TARGETS}
         print(f"se3dyn vs EXUDYN at EXUDYN's defaults; {env['date']}; {load_str()}")
-        print(f"threads: se3dyn's element kernels {env['se3dyn_engine']['threads']} (its "
-              f"default, the cores), EXUDYN parallel.numberOfThreads "
+        print(f"threads: se3dyn's engine {env['se3dyn_engine']['threads']} (its default, the "
+              f"cores), EXUDYN parallel.numberOfThreads "
               f"{defaults.get('parallel.numberOfThreads')} (its default)")
         print(f"machine: {env['machine']['platform']}, {env['machine']['cpu']}, "
               f"{env['machine']['cpu_count']} CPUs (shared)")

@@ -846,7 +846,7 @@ def _run_args(r) -> None:
                    "with --t-end, further than it was planned")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--threads", type=_whole_positive, metavar="N",
-                   help="threads of the element kernels (default: SE3DYN_THREADS or the "
+                   help="threads of the compiled engine (default: SE3DYN_THREADS or the "
                    "cores; the results do not depend on it)")
     r.set_defaults(func=cmd_run)
 

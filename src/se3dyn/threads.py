@@ -1,12 +1,14 @@
-"""How many threads the compiled engine's element kernels use.
+"""How many threads the compiled engine uses.
 
 The engine evaluates the element kernels, the frame updates and the products of the
-stabilised index-2 iteration in parts on a small pool of threads (``se3dyn/_core/pool.hpp``);
-the sparse factorisation and the triangular solves stay on one thread. The elements are
-evaluated in a fixed order of colours and chunks (``se3dyn/_core/engine.hpp``), so **the
-results are the same to the last bit for any number of threads**; only the time changes.
-Models with fewer than 64 elements of every type never leave one thread (the parts would cost
-more than they save).
+stabilised index-2 iteration in parts on a small pool of threads (``se3dyn/_core/pool.hpp``),
+and the sparse factorisations and triangular solves of large models (3000 unknowns and more
+whose graph a two-way dissection splits, a chain or a long mechanism) take the two halves of
+the dissection at once (``sparse_lu.hpp``, ``sparse_ldlt.hpp``). The elements are evaluated in a
+fixed order of colours and chunks (``se3dyn/_core/engine.hpp``) and the factorisations follow
+the dissection whatever the thread count, so **the results are the same to the last bit for any
+number of threads**; only the time changes. Models with fewer than 64 elements of every type
+and fewer than 3000 unknowns never leave one thread (the parts would cost more than they save).
 
 The number of threads is one setting of the process:
 
@@ -56,7 +58,7 @@ def from_environment() -> int:
 
 
 def set_threads(n: int | None = None) -> int:
-    """Set the number of threads of the element kernels (the process's one pool).
+    """Set the number of threads of the compiled engine (the process's one pool).
 
     Parameters
     ----------
@@ -76,7 +78,7 @@ def set_threads(n: int | None = None) -> int:
 
 
 def get_threads() -> int:
-    """The number of threads the element kernels use."""
+    """The number of threads the compiled engine uses."""
     from se3dyn.system import _core
 
     return int(_core().threads())

@@ -1,5 +1,7 @@
-// A small fork-join pool for the element kernels and the frame updates of an iterate
-// (engine.hpp): the caller and up to `threads() - 1` workers each take one part of a loop.
+// A small fork-join pool: the caller and up to `threads() - 1` workers each take one part of a
+// loop. Its users: the element kernels, frame updates and index-2 products of an iterate
+// (engine.hpp), and the two halves of a dissection in the sparse LU's refactorisation and
+// solves and in the LDL^T's factorisation and solves (sparse_lu.hpp, sparse_ldlt.hpp).
 //
 // * One pool per process (`Pool::get()`), its size set by `set_threads` (se3dyn.set_threads,
 //   the SE3DYN_THREADS environment variable; default: the cores the process may run on).
@@ -7,10 +9,12 @@
 //   loops of one Newton iterate follow each other within microseconds) and then sleep on a
 //   condition variable (a factorisation or a return to Python takes longer), so an idle pool
 //   costs no CPU.
-// * A loop that finds the pool busy (another engine running in another Python thread) runs
-//   serially in its caller. What each part computes never depends on how many parts there
-//   are: the callers split their loops so that the numbers are the same for any thread count
-//   (engine.hpp: elements of one colour write disjoint entries).
+// * A loop that finds the pool busy (another engine running in another Python thread), or
+//   that has more parts than the pool has threads, runs its parts serially in its caller, in
+//   order. What each part computes never depends on how many threads run them: the callers
+//   split their work so that the numbers are the same for any thread count (engine.hpp:
+//   elements of one colour write disjoint entries; sparse_lu.hpp: the two parts of the
+//   dissection, whatever runs them).
 #pragma once
 #include <algorithm>
 #include <atomic>

@@ -32,6 +32,10 @@
 //   rows below it. Every factor is a full numeric factorisation (nothing like a pivot sequence
 //   is kept between them: the result depends only on the values).
 // * solve: the permutation, L y = P b and L^T z = D^-1 y a supernode at a time, and back.
+// * Two runs at once: when the ordering is SparseLU's two-way dissection, the postorder keeps
+//   each part's steps together and no supernode crosses a part boundary; factor and solve then
+//   take the two parts' supernodes at once on the pool of pool.hpp (split_plan), then the
+//   separator's, with the same operations as one pass.
 //
 // Only one triangle is read: of an entry (i, j) of the pattern and its transpose (j, i), the one
 // in the lower triangle of P A P^T (when the pattern has only the other one, that one). The

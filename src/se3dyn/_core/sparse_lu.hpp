@@ -31,6 +31,14 @@
 //   columns) at a time, and a check of every pivot.
 // * solve / solve_transposed / solve_refined: the two triangular solves (column oriented, L by
 //   supernodes), the permutations, and optionally iterative refinement.
+// * Two halves at once: a graph of 3000 unknowns or more that one level of a breadth-first
+//   level structure splits into two parts of at least 30 % each by a separator of at most 2 %
+//   (a chain, a long mechanism) is ordered part by part, the separator last (dissect, and
+//   minimum degree in each part with the separator's blocks waiting, so that each part is
+//   eliminated towards the separator). When the pivots of factor stay inside the parts
+//   (split_plan), refactor and solve take the two parts at once on the pool of pool.hpp (the
+//   second with its own work vector), then the separator: the same operations in the same
+//   order whatever the number of threads.
 //
 // Data structure invariants after a successful factor (all indices 0-based):
 //   Q_[k]      original column eliminated at step k; P_[k] original row pivotal at step k;
@@ -46,7 +54,8 @@
 //              (value index Rv_[q], pivot row Rr_[q]) for q in [Rp_[k], Rp_[k+1]); the value
 //              indices of its entries left out of the pattern (only with drop_zeros) are
 //              Rz_[Rzp_[k] .. Rzp_[k+1]).
-//   work_      n doubles, all zero between calls (every routine that scatters clears again).
+//   work_      n doubles, all zero between calls (every routine that scatters clears again);
+//   work2_     the same, of the second part of the dissection.
 //
 // No exceptions are thrown by factor/refactor/solve (status codes); refactor and solve do not
 // allocate (all memory is sized in analyze and factor). solve() is const but uses the mutable
