@@ -211,3 +211,41 @@ def test_a_long_chain_factorises_in_two_parts_alike_on_any_thread_count():
             assert np.array_equal(np.asarray(getattr(r, ch)), ref), ch
     # and they are a solution: the joints hold (Eq. (55) at every stored step)
     assert np.abs(np.asarray(runs[0].constraint)).max() < 1e-11
+
+
+def test_the_command_line_takes_threads_and_gives_the_same_file(tmp_path):
+    """``se3dyn run --threads N``: the same results file for 1 and 2 threads; a bad count is
+    refused with the value, no traceback."""
+    from se3dyn.h5 import read_results
+    from test_cli import run
+
+    model = tmp_path / "chain.yaml"
+    lines = ["se3dyn: 1", "name: chain", "gravity: [0, 0, -9.81]", "nodes:",
+             "  ground: {position: [0, 0, 0], fixed: true}"]
+    lines += [f"  b{i}: {{position: [{0.1 * i + 0.05:.2f}, 0, 0], mass: 1, "
+              f"inertia: [0.0001, 0.001, 0.001]}}" for i in range(70)]
+    lines += ["joints:"]
+    lines += [f"  j{i}: {{type: spherical, a: {'ground' if i == 0 else f'b{i - 1}'}, b: b{i}, "
+              f"at: [{0.1 * i:.2f}, 0, 0]}}" for i in range(70)]
+    lines += ["simulation: {t_end: 0.02, step: 0.002}"]
+    model.write_text("\n".join(lines) + "\n")
+    res = {}
+    for th in (1, 2):
+        p = run("run", model, "--out", tmp_path / f"t{th}", "--quiet", "--threads", th)
+        assert p.returncode == 0, p.stderr
+        res[th] = read_results(tmp_path / f"t{th}" / "chain.h5")
+    for ch in ("H", "v", "lam"):
+        assert np.array_equal(np.asarray(getattr(res[1], ch)), np.asarray(getattr(res[2], ch)))
+    p = run("run", model, "--out", tmp_path / "bad", "--threads", "0")
+    assert p.returncode != 0 and "--threads" in p.stderr and "'0'" in p.stderr
+
+
+def test_sweep_workers_run_the_engine_on_one_thread():
+    from se3dyn.sweep.execute import warm_up
+
+    sd.set_threads(2)
+    try:
+        warm_up()
+        assert sd.get_threads() == 1
+    finally:
+        sd.set_threads()
