@@ -908,25 +908,11 @@ inline void SparseLDLT::solve(double* b) const {
   // the two runs at once (the second in work2_, whose separator rows then hold its updates,
   // added after the first run's), the separator; backwards the separator, then the runs
   const int m1 = split_m1_, m2 = split_m2_;
-  double* y2 = work2_.data();
-  Pool::get().run(2, [&](int p) {
-    if (p == 0) {
-      for (int k = 0; k < m1; ++k) y[k] = b[perm_[k]];
-      for (int k = m2; k < n; ++k) y[k] = b[perm_[k]];
-      forward(0, split_s1_, y);
-    } else {
-      for (int k = m1; k < m2; ++k) y2[k] = b[perm_[k]];
-      forward(split_s1_, split_s2_, y2);
-    }
-  });
-  for (int k = m1; k < m2; ++k) {
-    y[k] = y2[k];
-    y2[k] = 0.0;
-  }
-  for (int k = m2; k < n; ++k) {
-    y[k] += y2[k];
-    y2[k] = 0.0;
-  }
+  sparse_lu_detail::forward_two_parts(b, perm_.data(), m1, m2, n, y, work2_.data(),
+                                      [&](int p, double* x) {
+                                        if (p == 0) forward(0, split_s1_, x);
+                                        else forward(split_s1_, split_s2_, x);
+                                      });
   forward(split_s2_, ns_, y);
   for (int k = m2; k < n; ++k) y[k] *= invd_[k];
   backward(ns_, split_s2_, y);

@@ -190,6 +190,34 @@ inline int tdfs(int j, int k, int* head, const int* next, int* post, int* stack)
 // approximate external degrees (variables) or element sizes (elements); the lists head/next/last
 // are the degree lists of the variables (head indexed by degree), hhead/next/last the hash
 // buckets during supervariable detection; w[] the marker array of the set differences.
+// The forward substitution of a two-way dissection (SparseLU::solve, SparseLDLT::solve): the
+// permutation (step k takes b[perm[k]]) and the two parts' substitutions at once, fwd(0, w)
+// on w and fwd(1, w2) on w2, whose separator rows collect the second part's updates; those are
+// then added to w's after the first part's, and w2 is zero again. Steps [0, m1), [m1, m2) are
+// the parts, [m2, n) the separator.
+template <class Fwd>
+inline void forward_two_parts(const double* b, const int* perm, int m1, int m2, int n,
+                              double* w, double* w2, Fwd&& fwd) {
+  Pool::get().run(2, [&](int p) {
+    if (p == 0) {
+      for (int k = 0; k < m1; ++k) w[k] = b[perm[k]];
+      for (int k = m2; k < n; ++k) w[k] = b[perm[k]];
+      fwd(0, w);
+    } else {
+      for (int k = m1; k < m2; ++k) w2[k] = b[perm[k]];
+      fwd(1, w2);
+    }
+  });
+  for (int k = m1; k < m2; ++k) {
+    w[k] = w2[k];
+    w2[k] = 0.0;
+  }
+  for (int k = m2; k < n; ++k) {
+    w[k] += w2[k];
+    w2[k] = 0.0;
+  }
+}
+
 // Two-way dissection of a graph of n weighted nodes (Cp, Ci: adjacency lists without self
 // loops) by one level of a breadth-first level structure from a pseudo-peripheral node (George
 // & Liu, "Computer Solution of Large Sparse Positive Definite Systems", 1981, ch. 4 and 8):
@@ -1490,25 +1518,11 @@ SE3DYN_LU_SCALAR inline void SparseLU::solve(double* b) const {
     // updates, added after the first part's), then the separator; U z = y: the separator,
     // then the parts at once (their rows are disjoint)
     const int n1 = split_n1_, n2 = split_n2_;
-    double* w2 = work2_.data();
-    Pool::get().run(2, [&](int p) {
-      if (p == 0) {
-        for (int k = 0; k < n1; ++k) w[k] = b[P_[k]];
-        for (int k = n2; k < n; ++k) w[k] = b[P_[k]];
-        forward(0, n1, w);
-      } else {
-        for (int k = n1; k < n2; ++k) w2[k] = b[P_[k]];
-        forward(n1, n2, w2);
-      }
-    });
-    for (int k = n1; k < n2; ++k) {
-      w[k] = w2[k];
-      w2[k] = 0.0;
-    }
-    for (int k = n2; k < n; ++k) {
-      w[k] += w2[k];
-      w2[k] = 0.0;
-    }
+    sparse_lu_detail::forward_two_parts(b, P_.data(), n1, n2, n, w, work2_.data(),
+                                        [&](int p, double* x) {
+                                          if (p == 0) forward(0, n1, x);
+                                          else forward(n1, n2, x);
+                                        });
     forward(n2, n, w);
     backward(n, n2, w);
     Pool::get().run(2, [&](int p) {
