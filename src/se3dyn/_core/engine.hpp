@@ -94,7 +94,6 @@ struct Engine {
   struct Colours {
     std::vector<int> chunk;  // chunk numbers, a colour after the other
     std::vector<int> start;  // where colour c starts in chunk, with the end last
-    std::vector<int> order;  // 0 .. n-1 (the Span of a chunk)
   };
   std::vector<Colours> colours;
   size_t joint_batch = 0;  // batches[joint_batch] is joints
@@ -177,8 +176,6 @@ struct Engine {
       C.chunk.resize(nch);
       std::vector<int> next(C.start.begin(), C.start.end() - 1);
       for (int k = 0; k < nch; ++k) C.chunk[next[col[k]]++] = k;
-      C.order.resize(B.n);
-      for (int e = 0; e < B.n; ++e) C.order[e] = e;
     }
   }
 
@@ -451,7 +448,7 @@ struct Engine {
         for (int q = int(long(chunks) * p / parts); q < int(long(chunks) * (p + 1) / parts); ++q) {
           const int k = C.chunk[first + q];
           if (X.energy) Y.energy = &chunk_energy[size_t(N_ENERGY) * q];
-          B.eval(Y, prod, Span{C.order.data(), CHUNK * k, std::min(B.n, CHUNK * (k + 1))});
+          B.eval(Y, prod, Span{CHUNK * k, std::min(B.n, CHUNK * (k + 1))});
         }
         fs[p] = Y.fscale;
       });

@@ -72,8 +72,7 @@ struct Beams : ElementBatch {
   void eval(Context& X, bool, Span span) const override {
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
-    for (int i_span = span.first; i_span < span.last; ++i_span) {
-      const int e = span.order[i_span];
+    for (int e = span.first; e < span.last; ++e) {
       const double* Ke = &K[36 * e];
       const double* De = &D[36 * e];
       const double* AA = &AdA[36 * e];

@@ -37,8 +37,7 @@ struct Bodies : ElementBatch {
   void eval(Context& X, bool, Span span) const override {
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
-    for (int i_span = span.first; i_span < span.last; ++i_span) {
-      const int e = span.order[i_span];
+    for (int e = span.first; e < span.last; ++e) {
       int fr = f[e];
       if (T.dof[fr] < 0 && !X.energy) continue;
       const double* Me = &M[36 * e];

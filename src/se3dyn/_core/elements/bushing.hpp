@@ -151,8 +151,7 @@ struct Bushings : ElementBatch {
     using bushing_detail::Dual;
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
-    for (int i_span = span.first; i_span < span.last; ++i_span) {
-      const int e = span.order[i_span];
+    for (int e = span.first; e < span.last; ++e) {
       const double* Pa = &PA[36 * e];
       const double* Pb = &PB[36 * e];
       const double* Ke = &K[36 * e];

@@ -79,10 +79,9 @@ struct Tables {
   }
 };
 
-// The elements one call of a kernel evaluates: order[first .. last) (engine.hpp: the elements
-// of one colour, or a part of them)
+// The elements one call of a kernel evaluates: first .. last-1 (engine.hpp: a chunk of
+// consecutive elements)
 struct Span {
-  const int* order;
   int first, last;
 };
 

@@ -118,8 +118,7 @@ struct Joints : ElementBatch {
     const FrameTables& T = *X.T;
     constant_slots(T);
     const FrameState& S = *X.S;
-    for (int i_span = span.first; i_span < span.last; ++i_span) {
-      const int e = span.order[i_span];
+    for (int e = span.first; e < span.last; ++e) {
       int a = fa[e], b = fb[e], j = fj[e];
       const Frame& HJ = S.H[j];
       Frame HA = S.H[a], HB = S.H[b], G, t1;

@@ -67,8 +67,7 @@ struct JointForces : ElementBatch {
 
   void eval(Context& X, bool, Span span) const override {
     const FrameTables& T = *X.T;
-    for (int i_span = span.first; i_span < span.last; ++i_span) {
-      const int e = span.order[i_span];
+    for (int e = span.first; e < span.last; ++e) {
       int fr = f[e], k = T.k[fr], d = T.dof[fr];
       const double* al = X.coords + d;
       const double* v = X.vq + d;

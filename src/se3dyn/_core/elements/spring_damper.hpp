@@ -43,8 +43,7 @@ struct SpringDampers : ElementBatch {
   void eval(Context& X, bool, Span span) const override {
     const FrameTables& T = *X.T;
     const FrameState& S = *X.S;
-    for (int i_span = span.first; i_span < span.last; ++i_span) {
-      const int e = span.order[i_span];
+    for (int e = span.first; e < span.last; ++e) {
       int fr[2] = {fa[e], fb[e]};
       const double* cs[2] = {&ca[3 * e], &cb[3 * e]};
       double p[2][3], J[2][18], Pm[2][18], q[2][3], Pv[2][3];
