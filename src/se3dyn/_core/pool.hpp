@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <atomic>
 #include <condition_variable>
+#include <cstdint>
 #include <mutex>
 #include <new>
 #include <thread>
@@ -58,19 +59,15 @@ class Pool {
   template <class F>
   void run(int parts, F&& f) {
     std::unique_lock<std::mutex> busy(run_mutex_, std::try_to_lock);
-    if (parts <= 1 || parts > threads_ || !busy.owns_lock()) {
+    if (parts <= 1 || parts > threads_ || parts >= int(kQuit) || !busy.owns_lock()) {
       for (int p = 0; p < parts; ++p) f(p);
       return;
     }
     start(parts - 1);
     job_ = [](void* c, int p) { (*static_cast<F*>(c))(p); };
     ctx_ = &f;
-    parts_ = parts;
     pending_.store(parts - 1, std::memory_order_relaxed);
-    {
-      std::lock_guard<std::mutex> lk(sleep_mutex_);
-      epoch_.fetch_add(1, std::memory_order_release);
-    }
+    publish(std::uint64_t(parts));
     if (sleepers_.load(std::memory_order_acquire) > 0) wake_.notify_all();
     f(0);
     while (pending_.load(std::memory_order_acquire) != 0) SE3DYN_PAUSE();
@@ -95,7 +92,6 @@ class Pool {
     epoch_.store(0);
     pending_.store(0);
     sleepers_.store(0);
-    quit_ = false;
   }
 
   // thread handles that a forked child can drop without touching them
@@ -118,27 +114,36 @@ class Pool {
   void start(int nw) {
     while (int(workers_.size()) < nw) {
       int id = int(workers_.size()) + 1;
-      unsigned seen = epoch_.load(std::memory_order_acquire);  // (before this loop's epoch)
+      std::uint64_t seen = epoch_.load(std::memory_order_acquire);  // (before this loop)
       workers_.emplace_back([this, id, seen] { work(id, seen); });
+    }
+  }
+
+  // A new epoch carrying the loop's number of parts (kQuit: stop). The parts travel in the
+  // same atomic word as the epoch: a worker that takes no part in a loop (id >= parts) may
+  // read the word late, when the caller has already gone on to the next loop, and must then
+  // neither run nor count itself in that next loop from a stale part count (with 3 threads a
+  // worker skipping a 2-part loop could otherwise run a part of the next loop twice).
+  static constexpr std::uint64_t kPartBits = 8, kQuit = (1u << kPartBits) - 1;
+  void publish(std::uint64_t parts) {
+    {
+      std::lock_guard<std::mutex> lk(sleep_mutex_);
+      const std::uint64_t e = epoch_.load(std::memory_order_relaxed);
+      epoch_.store((((e >> kPartBits) + 1) << kPartBits) | parts, std::memory_order_release);
     }
   }
 
   void stop() {
     if (workers_.empty()) return;
-    {
-      std::lock_guard<std::mutex> lk(sleep_mutex_);
-      quit_ = true;
-      epoch_.fetch_add(1, std::memory_order_release);
-    }
+    publish(kQuit);
     wake_.notify_all();
     workers_.join_all();
-    quit_ = false;
   }
 
-  void work(int id, unsigned seen) {
+  void work(int id, std::uint64_t seen) {
     for (;;) {
       // spin about 0.2 ms before sleeping
-      unsigned now = seen;
+      std::uint64_t now = seen;
       for (int i = 0; i < 20000 && (now = epoch_.load(std::memory_order_acquire)) == seen; ++i)
         SE3DYN_PAUSE();
       if (now == seen) {
@@ -149,8 +154,9 @@ class Pool {
         now = epoch_.load(std::memory_order_acquire);
       }
       seen = now;
-      if (quit_) return;
-      if (id < parts_) {
+      const std::uint64_t parts = now & kQuit;
+      if (parts == kQuit) return;
+      if (std::uint64_t(id) < parts) {
         job_(ctx_, id);
         pending_.fetch_sub(1, std::memory_order_acq_rel);
       }
@@ -162,13 +168,11 @@ class Pool {
   std::mutex run_mutex_;    // one parallel loop at a time
   std::mutex sleep_mutex_;  // workers sleeping between loops
   std::condition_variable wake_;
-  std::atomic<unsigned> epoch_{0};
+  std::atomic<std::uint64_t> epoch_{0};  // (loop count << kPartBits) | parts
   std::atomic<int> pending_{0};
   std::atomic<int> sleepers_{0};
   void (*job_)(void*, int) = nullptr;
   void* ctx_ = nullptr;
-  int parts_ = 0;
-  bool quit_ = false;
 };
 
 }  // namespace se3dyn

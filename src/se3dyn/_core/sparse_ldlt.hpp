@@ -916,15 +916,22 @@ inline void SparseLDLT::solve(double* b) const {
   forward(split_s2_, ns_, y);
   for (int k = m2; k < n; ++k) y[k] *= invd_[k];
   backward(ns_, split_s2_, y);
+  // Each run's backward substitution reads the separator's rows of y (L^T: the rows below its
+  // supernodes), so they are written out and cleared only after both runs (a run clearing
+  // them while the other still reads them was the race of issue 28).
   Pool::get().run(2, [&](int p) {
     const int k0 = p == 0 ? 0 : m1, k1 = p == 0 ? m1 : m2;
     for (int k = k0; k < k1; ++k) y[k] *= invd_[k];
     backward(p == 0 ? split_s1_ : split_s2_, p == 0 ? 0 : split_s1_, y);
-    for (int k = k0; k < (p == 0 ? k1 : n); ++k) {
+    for (int k = k0; k < k1; ++k) {
       b[perm_[k]] = y[k];
       y[k] = 0.0;
     }
   });
+  for (int k = m2; k < n; ++k) {
+    b[perm_[k]] = y[k];
+    y[k] = 0.0;
+  }
 }
 
 // L y = P b over the supernodes s0 .. s1-1 (their steps and the rows below them in y)
