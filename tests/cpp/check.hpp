@@ -7,7 +7,11 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <cstring>
 #include <string>
+#include <vector>
+
+#include "pool.hpp"
 
 namespace check_detail {
 inline int g_pass = 0, g_fail = 0;
@@ -53,4 +57,28 @@ inline double timeit(const std::function<void()>& f, int inner, int rounds) {
     best = std::min(best, (thread_seconds() - t0) / inner);
   }
   return best;
+}
+
+// factor() then solve(y) on a copy y of b (n values), on 1, 2 and 3 threads of the engine's
+// pool, `rounds` times each: true when factor() always returned 0 and every solution equals
+// the first to the last bit (the parts of a dissection run the same operations whatever
+// thread runs them; issue 28). The pool's thread count is restored.
+template <class Factor, class Solve>
+bool same_bits_on_any_threads(int n, const double* b, Factor&& factor, Solve&& solve,
+                              int rounds = 10) {
+  se3dyn::Pool& pool = se3dyn::Pool::get();
+  const int before = pool.threads();
+  std::vector<double> ref, y;
+  bool same = true;
+  for (int r = 0; r < rounds; ++r)
+    for (int th : {1, 2, 3}) {
+      pool.set_threads(th);
+      same = same && factor() == 0;
+      y.assign(b, b + n);
+      solve(y.data());
+      if (ref.empty()) ref = y;
+      same = same && std::memcmp(y.data(), ref.data(), sizeof(double) * size_t(n)) == 0;
+    }
+  pool.set_threads(before);
+  return same;
 }

@@ -3,7 +3,7 @@
 // Build and run:
 //
 //   g++ -O2 -std=c++17 -pthread -I src/se3dyn/_core tests/cpp/test_sparse_ldlt.cpp -o test_sparse_ldlt
-//   ./test_sparse_ldlt [SEED]
+//   ./test_sparse_ldlt [SEED] [--no-timing]
 //
 // Checks
 //   * random symmetric positive definite matrices: block-tridiagonal (blocks of 1 to 7
@@ -22,6 +22,10 @@
 //     gives NaN;
 //   * the fill of block chains and trees grows linearly with their length, and nnz(L) and the
 //     multiply-adds agree with a dense count of the same elimination;
+//   * threads: the two parts of a two-way dissection (the xi block of a 1000-link chain, and a
+//     diagonally dominant one for SparseLU) refactorised and solved on 1, 2 and 3 threads give
+//     bit-identical solutions (tests/test_cpp_drivers.py runs this driver built with
+//     ThreadSanitizer);
 //   * timing (printed, not checked; build with the engine's flags, -O3 -march=native
 //     -ffp-contract=off -fno-math-errno, for numbers like its): the xi block of the 1000-link
 //     chain's split iteration, block tridiagonal with 1000 dense 6 x 6 blocks, SparseLU (the
@@ -34,6 +38,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <ctime>
 #include <functional>
 #include <random>
@@ -612,13 +617,19 @@ void test_failures(std::mt19937_64& rng) {
 // The xi block of a chain of nb links (built sparse): block tridiagonal, dense 6 x 6 blocks,
 // B B^T of random couplings of neighbouring blocks (each link's joint shares a body with the
 // next), both triangles in CSC, grouped by link.
-void timing(std::mt19937_64& rng, int nb) {
+// The xi block of an nb-link chain's split iteration: block tridiagonal with dense 6 x 6
+// blocks, B B^T + shift I of random 12 x 6 joint blocks (n = 6 nb), both triangles in CSC form.
+struct BlockCsc {
+  std::vector<int> cp, ri, group;
+  std::vector<double> x;
+};
+BlockCsc chain_xi_block(std::mt19937_64& rng, int nb, double shift = 1.0) {
   const int n = 6 * nb;
   std::normal_distribution<double> nd;
   std::vector<double> D(36 * static_cast<std::size_t>(nb), 0.0),
       O(36 * static_cast<std::size_t>(nb), 0.0);  // diagonal blocks; O[b]: block (b+1, b)
   for (int b = 0; b < nb; ++b)
-    for (int i = 0; i < 6; ++i) D[36 * b + 7 * i] += 1.0;
+    for (int i = 0; i < 6; ++i) D[36 * b + 7 * i] += shift;
   for (int b = 0; b + 1 < nb; ++b) {
     double C[12][6];
     for (auto& row : C)
@@ -636,8 +647,11 @@ void timing(std::mt19937_64& rng, int nb) {
         O[36 * b + 6 * i + j] = o;
       }
   }
-  std::vector<int> cp(n + 1, 0), ri, group(n);
-  std::vector<double> x;
+  BlockCsc M;
+  std::vector<int>&cp = M.cp, &ri = M.ri, &group = M.group;
+  std::vector<double>& x = M.x;
+  cp.assign(n + 1, 0);
+  group.resize(n);
   for (int j = 0; j < n; ++j) {
     const int b = j / 6, c = j % 6;
     group[j] = b;
@@ -657,10 +671,56 @@ void timing(std::mt19937_64& rng, int nb) {
       }
     cp[j + 1] = static_cast<int>(ri.size());
   }
+  return M;
+}
+
+SparseLU::Options xi_lu_options() {
   SparseLU::Options lo;
   lo.drop_zeros = true;
   lo.refactor_tol = 1e-6;
-  SparseLU lu(lo);
+  return lo;
+}
+
+// Refactorisations and solves of the two parts of a two-way dissection (n >= DISSECT_MIN) on
+// 1, 2 and 3 threads, ten rounds each: the solutions must agree to the last bit (the parts run
+// the same operations whatever runs them). SparseLDLT::solve failed this with two threads
+// before issue 28's fix (its second part cleared the separator's rows while the first part
+// still read them); a ThreadSanitizer build (tests/test_cpp_drivers.py) reports such a race
+// even when the bits happen to agree.
+void test_threads(std::mt19937_64& rng) {
+  const int nb = 1000, n = 6 * nb;
+  BlockCsc M = chain_xi_block(rng, nb);
+  // (diagonally dominant for the LU: its partial pivoting keeps the pivots inside the parts)
+  BlockCsc D = chain_xi_block(rng, nb, 100.0);
+  SparseLU lu(xi_lu_options());
+  lu.analyze(n, D.cp.data(), D.ri.data(), D.group.data(), D.x.data());
+  SparseLDLT::Options o;
+  o.drop_zeros = true;
+  SparseLDLT ld(o);
+  ld.analyze(n, M.cp.data(), M.ri.data(), M.group.data(), M.x.data());
+  check(lu.factor(D.x.data()) == 0, "threads: LU factor");
+  check(lu.parallel_parts().second > 0, "threads: the LU's refactor and solve take two parts");
+  check(ld.parallel_parts().second > 0, "threads: the LDL^T takes two parts");
+  std::normal_distribution<double> nd;
+  std::vector<double> b(n);
+  for (double& v : b) v = nd(rng);
+  check(same_bits_on_any_threads(
+            n, b.data(), [&] { return lu.refactor(D.x.data()); },
+            [&](double* y) { lu.solve(y); }),
+        "threads: SparseLU refactor + solve bit-identical on 1, 2, 3 threads");
+  check(same_bits_on_any_threads(
+            n, b.data(), [&] { return ld.factor(M.x.data()); },
+            [&](double* y) { ld.solve(y); }),
+        "threads: SparseLDLT factor + solve bit-identical on 1, 2, 3 threads");
+}
+
+void timing(std::mt19937_64& rng, int nb) {
+  const int n = 6 * nb;
+  BlockCsc M = chain_xi_block(rng, nb);
+  std::vector<int>&cp = M.cp, &ri = M.ri, &group = M.group;
+  std::vector<double>& x = M.x;
+  std::normal_distribution<double> nd;
+  SparseLU lu(xi_lu_options());
   lu.analyze(n, cp.data(), ri.data(), group.data(), x.data());
   SparseLDLT::Options o;
   o.drop_zeros = true;
@@ -684,12 +744,19 @@ void timing(std::mt19937_64& rng, int nb) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::mt19937_64 rng(argc > 1 ? std::strtoull(argv[1], nullptr, 10) : 20261124ull);
+  bool timed = true;  // --no-timing: skip the timing (a sanitizer build, tests/test_cpp_drivers.py)
+  unsigned long long seed = 20261124ull;
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--no-timing") timed = false;
+    else seed = std::strtoull(argv[i], nullptr, 10);
+  }
+  std::mt19937_64 rng(seed);
   test_random(rng);
   test_counts(rng);
   test_quasi_definite(rng);
   test_xi_block(rng);
   test_failures(rng);
-  timing(rng, 1000);
+  test_threads(rng);
+  if (timed) timing(rng, 1000);
   return report();
 }

@@ -1291,7 +1291,8 @@ inline int SparseLU::factor(const double* values) {
 // later j' < k of it (L(j', j) != 0 fills it), so the U(:, k) entries in a supernode form a
 // range j..min(l, k)-1: refactor and solve then apply the updates of those columns to R together (one pass
 // over R for up to four columns instead of one per column). The suffix property is checked here
-// (a violated one would mean a bug; then no supernodes are used).
+// (a violated one would mean a bug; then no supernodes are used). No supernode crosses a
+// boundary of the two-way dissection's parts (split_plan).
 inline void SparseLU::find_supernodes() {
   const int n = n_;
   snend_.assign(n, 0);
@@ -1311,7 +1312,10 @@ inline void SparseLU::find_supernodes() {
           }
       }
     }
-    if (!joins) l = j + 1;
+    // (a supernode ends at a boundary of the dissection's parts, so that refactor and solve
+    // may take the parts at once: a cut supernode is still one, its rows and U's ranges are
+    // subsets of the whole one's)
+    if (!joins || (split_n2_ > 0 && (j + 1 == split_n1_ || j + 1 == split_n2_))) l = j + 1;
     snend_[j] = l;
   }
   // verify the suffix property of U(:, k) in every supernode
