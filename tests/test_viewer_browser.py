@@ -303,3 +303,62 @@ def test_chain_of_1000_links_loads_and_plays(browser, tmp_path):
     assert per_frame < 50
     browser.frames()
     assert_clean(browser)
+
+
+@pytest.fixture(scope="module")
+def flexible_page(tmp_path_factory):
+    from se3dyn.modelfile import load_model
+
+    model, _ = load_model(Path(__file__).resolve().parents[1] / "examples"
+                          / "slider_crank_flexible.yaml")
+    res = sd.simulate(model, t_end=0.4, step=5e-3)
+    path = tmp_path_factory.mktemp("page") / "slider_crank_flexible.html"
+    write_html(res, path)
+    return model, res, path
+
+
+def test_the_flexible_connecting_rod_is_drawn_with_its_section(browser, flexible_page):
+    """examples/slider_crank_flexible.yaml: the beam (d = 28 mm) is drawn where its nodes are,
+    as wide as its section seen from the camera, and nowhere beside it; the page's tube
+    vertices are the Python scene's skinning of the results' frames."""
+    model, res, path = flexible_page
+    names = list(res.system.node_names)
+    k = 60  # t = 0.3 s, a stored time
+    browser.open(url(path, float(res.t[k])))
+    img = browser.screenshot()
+    background = np.array([244, 245, 247])
+    project = lambda p: np.array(browser.evaluate(  # noqa: E731
+        f"se3dyn.project({p[0]}, {p[1]}, {p[2]})"))
+    x = {nm: res.H[k, names.index(nm), :3, 3] for nm in ("rod/1", "rod/2", "rod/3")}
+    for nm, p in x.items():  # interior beam nodes: no body, glyph or link there, only the rod
+        xy = project(p)
+        assert on_canvas(browser, xy), nm
+        rgb = region(img, xy, 1).reshape(-1, 3).mean(axis=0)
+        assert np.abs(rgb - background).max() > 40, (nm, rgb)
+        assert rgb[2] >= rgb[0] - 5, (nm, rgb)  # the rod's steel blue-grey, not the orange crank
+    # across the rod at its midpoint: drawn over the projected diameter, background beyond
+    a, b, c = project(x["rod/1"]), project(x["rod/2"]), project(x["rod/3"])
+    d = (c - a) / np.linalg.norm(c - a)
+    nrm = np.array([-d[1], d[0]])  # screen normal of the rod
+    u = (x["rod/3"] - x["rod/1"]) / np.linalg.norm(x["rod/3"] - x["rod/1"])
+    e1 = np.cross(u, [0.0, 0.0, 1.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+    ang = np.linspace(0, np.pi, 37)
+    width = max(abs((project(x["rod/2"] + 0.014 * (np.cos(t) * e1 + np.sin(t) * e2)) - b) @ nrm)
+                for t in ang) * 2
+    assert width > 6  # pixels: the 28 mm rod is resolved
+    s = np.arange(-3 * width, 3 * width + 1, 0.5)
+    pts = np.rint(b[None, :] + s[:, None] * nrm[None, :]).astype(int)
+    drawn = np.abs(img[pts[:, 1], pts[:, 0]].astype(int) - background).max(axis=1) > 25
+    covered = np.ptp(s[drawn]) if drawn.any() else 0.0
+    assert covered == pytest.approx(width, rel=0.3)
+    # the page's tube is the scene's, skinned on the decoded frames
+    from se3dyn.viewer.shapes import build_scene, tube_vertices
+
+    (tube,) = build_scene(res).tubes
+    want, _ = tube_vertices(tube, res.H[k])
+    got = np.array(browser.evaluate("se3dyn.tubePositions()")).reshape(-1, 3)
+    span = np.ptp(res.H[:, :, :3, 3], axis=0).max()
+    assert np.abs(got - want).max() < span / 131070 + 0.014 * 2 * ANGLE_BOUND + 1e-6
+    assert_clean(browser)

@@ -248,6 +248,7 @@ let partLocal = [];
 let partNode = null;
 let partLabel = null;
 const groups = [];
+let tube = null;  // the beams: one skinned mesh (see se3dyn/viewer/shapes.py, Tube)
 const nodeMat = Array.from({ length: M }, () => new THREE.Matrix4());
 const tmp = new THREE.Matrix4();
 
@@ -301,11 +302,71 @@ function applyTime() {
     }
     g.mesh.instanceMatrix.needsUpdate = true;
   }
+  updateTube();
   updateFrames();
   updateTraces(k, w);
   updateReadout();
   drawCursor();
   requestRender();
+}
+
+// ------------------------------------------------------------------------------------------
+// beams: vertex v = (1 - w) H_a p_a + w H_b p_b (linear blend of its element's two node frames)
+async function buildTube() {
+  if (!META.tubes || !META.tubes.length) return;
+  const [node, w, p, nrm, rgb, f] = await Promise.all(['tube_node', 'tube_w', 'tube_p',
+    'tube_n', 'tube_rgb', 'tube_f'].map(blob));
+  const V = w.length;
+  const geo = new THREE.BufferGeometry();
+  geo.setAttribute('position', new THREE.BufferAttribute(new Float32Array(3 * V), 3)
+    .setUsage(THREE.DynamicDrawUsage));
+  geo.setAttribute('normal', new THREE.BufferAttribute(new Float32Array(3 * V), 3)
+    .setUsage(THREE.DynamicDrawUsage));
+  const col = new Float32Array(3 * V);
+  const c = new THREE.Color();
+  for (let v = 0; v < V; v++) {
+    c.setRGB(rgb[3 * v] / 255, rgb[3 * v + 1] / 255, rgb[3 * v + 2] / 255, THREE.SRGBColorSpace);
+    col[3 * v] = c.r; col[3 * v + 1] = c.g; col[3 * v + 2] = c.b;
+  }
+  geo.setAttribute('color', new THREE.BufferAttribute(col, 3));
+  geo.setIndex(new THREE.BufferAttribute(f, 1));
+  const mesh = new THREE.Mesh(geo, new THREE.MeshStandardMaterial({
+    vertexColors: true, roughness: 0.45, metalness: 0.25 }));
+  mesh.frustumCulled = false;
+  scene.add(mesh);
+  tube = { node, w, p, nrm, V, mesh };
+}
+
+// out[v] = (1 - w) A pa + w B pb, A and B column-major 4x4; translate: points, else unit normals
+function blend(out, v, local, A, B, w, translate) {
+  const o = 6 * v;
+  const u = 1 - w;
+  let len = 0;
+  for (let r = 0; r < 3; r++) {
+    let x = u * (A[r] * local[o] + A[4 + r] * local[o + 1] + A[8 + r] * local[o + 2])
+      + w * (B[r] * local[o + 3] + B[4 + r] * local[o + 4] + B[8 + r] * local[o + 5]);
+    if (translate) x += u * A[12 + r] + w * B[12 + r];
+    out[3 * v + r] = x;
+    len += x * x;
+  }
+  if (!translate && len > 0) {
+    len = 1 / Math.sqrt(len);
+    for (let r = 0; r < 3; r++) out[3 * v + r] *= len;
+  }
+}
+
+function updateTube() {
+  if (!tube) return;
+  const pos = tube.mesh.geometry.attributes.position;
+  const nrm = tube.mesh.geometry.attributes.normal;
+  for (let v = 0; v < tube.V; v++) {
+    const a = nodeMat[tube.node[2 * v]].elements;
+    const b = nodeMat[tube.node[2 * v + 1]].elements;
+    blend(pos.array, v, tube.p, a, b, tube.w[v], true);
+    blend(nrm.array, v, tube.nrm, a, b, tube.w[v], false);
+  }
+  pos.needsUpdate = true;
+  nrm.needsUpdate = true;
 }
 
 // ------------------------------------------------------------------------------------------
@@ -786,6 +847,7 @@ async function main() {
     groups.push(g);
     scene.add(mesh);
   }
+  await buildTube();
   buildFrames();
   setupUI();
   $('channel').value = META.plot || '';
@@ -801,6 +863,7 @@ async function main() {
       return [r.left + ((v.x + 1) / 2) * r.width, r.top + ((1 - v.y) / 2) * r.height];
     },
     selectChannel,
+    tubePositions: () => (tube ? Array.from(tube.mesh.geometry.attributes.position.array) : []),
   };
   const h = hashTime();
   state.t = h === null ? t0 : Math.min(t1, Math.max(t0, h));
