@@ -373,35 +373,17 @@ class GeneralizedAlpha:
     @staticmethod
     def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,
                           v0: np.ndarray) -> np.ndarray:
-        """Velocities satisfying the velocity constraints ``Phi_q v = 0``.
-
-        First the unknowns without mass (massless nodes, joint coordinates), which the
-        constraints determine, are solved by least squares with the given body velocities held:
-        consistent body velocities are kept exactly. If that leaves a violation, the closest
-        consistent velocity in the mass-weighted norm is taken instead.
-        """
+        """Velocities satisfying the velocity constraints ``Phi_q v = 0`` with the given speeds
+        kept (:func:`se3dyn.kinematics.project_velocities`; the redundant equations
+        ``solver.drop`` left out); the changes are reported by the caller per node."""
         import scipy.sparse as sp
-        import scipy.sparse.linalg as spla
 
-        A = sp.csr_matrix(solver.matrix(values))
+        from se3dyn.kinematics import project_velocities
+
+        A = solver.matrix(values)
+        A = sp.csr_matrix(A) if sp.issparse(A) else A
         nq = s.nq
-        Wm = A[:nq, :nq]
-        Phi = A[nq:, :nq]
-        body = np.abs(Wm.diagonal()) > 0
-        scale = max(float(np.abs(v0).max(initial=0.0)), 1e-300)
-        if nq <= 3000:
-            PU = Phi[:, ~body].toarray()
-            rhs = -(Phi[:, body] @ v0[body])
-            vU = np.linalg.lstsq(PU, rhs, rcond=None)[0] if PU.size else np.zeros(0)
-            v = v0.copy()
-            v[~body] = vU
-            if np.abs(Phi @ v).max(initial=0.0) <= 1e-12 * scale * s.length_scale:
-                return v
-        w = 1e-12 * max(float(np.abs(Wm.diagonal()).max(initial=0.0)), 1e-300)
-        W = Wm + w * sp.identity(nq)
-        K = sp.bmat([[W, Phi.T], [Phi, None]], format="csc")
-        sol = spla.spsolve(K, np.concatenate([W @ v0, np.zeros(s.nm)]))
-        return np.asarray(sol[:nq])
+        return project_velocities(s, A[:nq, :nq], A[nq:, :nq], v0, dropped=solver.drop)[0]
 
     # -----------------------------------------------------------------------------------------
     def step(self, s: System, st: State, h: float, solver: LinearSolver | None = None,

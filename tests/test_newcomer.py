@@ -1,0 +1,155 @@
+"""What a newcomer tripped on (issue 28, part 4), each as the behaviour a new user sees.
+
+* An initial velocity on an over-constrained planar four-bar (four hinges on parallel axes: three
+  redundant equations): the crank keeps its given speed and the other links get the velocities
+  of the analytic velocity constraint of the four-bar; nothing but se3dyn's own report is
+  printed; ``assemble`` keeps the speed too and says which velocities it changed.
+"""
+
+from __future__ import annotations
+
+import importlib
+import warnings
+
+import numpy as np
+import pytest
+
+import se3dyn as sd
+from se3dyn.errors import Se3dynWarning
+from se3dyn.kinematics import assemble
+from se3dyn.modelfile import loads_model
+from test_cli import run
+
+kin = importlib.import_module("se3dyn.kinematics")
+
+W2 = 12.566  # crank speed, rad/s
+# pivots and joint points of the planar four-bar (m): ground A0-D0, crank A0-B, coupler B-C,
+# rocker C-D0; bodies at the link centres
+A0, B, C, D0 = (np.array(p, float) for p in ((0, 0), (0, 0.1), (0.2, 0.2), (0.3, 0)))
+FOUR_BAR = f"""\
+se3dyn: 1
+name: four_bar
+gravity: [0.0, -9.81, 0.0]
+nodes:
+  ground: {{position: [0, 0, 0], fixed: true}}
+  crank: {{position: [0.0, 0.05, 0.0], mass: 0.2, inertia: [1.0e-4, 1.0e-4, 2.0e-4],
+          angular_velocity: [0, 0, {W2}]}}
+  coupler: {{position: [0.1, 0.15, 0.0], mass: 0.5, inertia: [1.0e-4, 2.0e-3, 2.0e-3]}}
+  rocker: {{position: [0.25, 0.1, 0.0], mass: 0.3, inertia: [1.0e-4, 6.0e-4, 6.0e-4]}}
+joints:
+  A: {{type: hinge, a: ground, b: crank, axis: [0, 0, 1], at: [0, 0, 0]}}
+  B: {{type: hinge, a: crank, b: coupler, axis: [0, 0, 1], at: [0, 0.1, 0]}}
+  C: {{type: hinge, a: coupler, b: rocker, axis: [0, 0, 1], at: [0.2, 0.2, 0]}}
+  D: {{type: hinge, a: rocker, b: ground, axis: [0, 0, 1], at: [0.3, 0, 0]}}
+simulation: {{t_end: 0.05, step: 0.001}}
+"""
+
+
+def four_bar(text=FOUR_BAR):
+    return loads_model(text, filename="four_bar.yaml")[0]
+
+
+def analytic_rates(w2):
+    """Coupler and rocker rates of the four-bar from its velocity constraint: the velocity of C
+    is the same seen from the coupler and from the rocker,
+    ``w2 x (B - A0) + w3 x (C - B) = w4 x (C - D0)`` (planar, z-rotations)."""
+    perp = lambda r: np.array([-r[1], r[0]])  # noqa: E731  (z x r)
+    M = np.column_stack([perp(C - B), -perp(C - D0)])
+    w3, w4 = np.linalg.solve(M, -w2 * perp(B - A0))
+    return w3, w4
+
+
+def _planar_velocities_ok(node_velocity, w2):
+    """The inertial velocities of the three links are those of the four-bar turning at w2."""
+    w3, w4 = analytic_rates(w2)
+    perp = lambda r: np.array([-r[1], r[0], 0.0])  # noqa: E731
+    want = {"crank": (w2 * perp(np.array([0, 0.05])), w2),
+            "coupler": (w2 * perp(B - A0) + w3 * perp(np.array([0.1, 0.15]) - B), w3),
+            "rocker": (w4 * perp(np.array([0.25, 0.1]) - D0), w4)}
+    for name, (u, w) in want.items():
+        v = node_velocity(name)
+        np.testing.assert_allclose(v[:3], u, atol=1e-12 * W2)
+        np.testing.assert_allclose(v[3:], [0, 0, w], atol=1e-12 * W2)
+
+
+def test_the_model_is_over_constrained_with_three_redundant_equations():
+    from se3dyn.analysis import rank_analysis
+    from se3dyn.system import compile_model
+
+    rep = rank_analysis(compile_model(four_bar()))
+    assert len(rep.redundant) == 3 and rep.dof == 1
+
+
+def test_initial_crank_speed_is_kept_and_the_links_follow_the_velocity_constraint():
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = sd.simulate(four_bar(), t_end=0.02, step=1e-3)
+    foreign = [w for w in caught if not issubclass(w.category, Se3dynWarning)]
+    assert foreign == [], [str(w.message) for w in foreign]  # no scipy MatrixRankWarning
+    assert not any("conflict" in str(w.message) for w in caught)
+    _planar_velocities_ok(lambda n: res.node_velocity(n, frame="inertial")[0], W2)
+    # the crank's linear velocity was changed (w x r), and reported as such
+    changed = {c["node"] for c in res.stats["initial_velocity_changes"]}
+    assert changed == {"crank", "coupler", "rocker"}
+
+
+def test_run_on_the_command_line_starts_and_prints_no_foreign_warning(tmp_path):
+    (tmp_path / "four_bar.yaml").write_text(FOUR_BAR)
+    p = run("run", tmp_path / "four_bar.yaml", "--out", tmp_path / "out", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert "Warning" not in p.stderr and ".py:" not in p.stderr, p.stderr
+    assert "singular" not in p.stderr + p.stdout
+
+
+def test_assemble_keeps_the_crank_speed_and_says_what_changed():
+    a = assemble(four_bar())
+
+    def inertial(name):
+        R = a.H[a.system.node_names.index(name), :3, :3]
+        v = a.node_velocity(name)  # material
+        return np.concatenate([R @ v[:3], R @ v[3:]])
+
+    _planar_velocities_ok(inertial, W2)
+    assert a.speeds_kept
+    text = str(a)
+    assert "initial velocities changed" in text
+    for name in ("crank", "coupler", "rocker"):
+        assert f"'{name}'" in text
+
+
+def test_conflicting_speeds_are_replaced_by_the_closest_consistent_ones_and_said():
+    text = FOUR_BAR.replace("rocker: {position: [0.25, 0.1, 0.0], mass: 0.3,",
+                            "rocker: {position: [0.25, 0.1, 0.0], angular_velocity: [0, 0, 1.0],"
+                            " mass: 0.3,")
+    with pytest.warns(Se3dynWarning, match="initial velocities projected") as caught:
+        res = sd.simulate(four_bar(text), t_end=0.005, step=1e-3)
+    assert any("'rocker'" in str(w.message) for w in caught)
+    w2 = res.node_velocity("crank", frame="inertial")[0, 5]
+    assert abs(w2) < W2  # not kept: no motion of the four-bar has w2 = 12.566 and w4 = 1
+    _planar_velocities_ok(lambda n: res.node_velocity(n, frame="inertial")[0], w2)
+    assert not assemble(four_bar(text)).speeds_kept
+
+
+def test_large_system_solver_gives_the_same_velocities():
+    """The saddle-point (sparse) path for systems above 3000 unknowns, on the four-bar."""
+    import scipy.sparse as sp
+
+    from se3dyn.analysis import redundant_equations
+    from se3dyn.system import LinearSolver, compile_model, evaluate, step_inputs
+
+    s = compile_model(four_bar())
+    v0 = np.zeros(s.nq)
+    v0[s.node_dofidx] = s.node_v0[s.node_free]
+    z = np.zeros(s.nq)
+    ev = evaluate(s, s.node_H0, s.joint_H0, s.alpha0, z, v0, z, np.zeros(s.nm),
+                  step_inputs(s, 0.0), (1.0, 0.0, 0.0), accel=True)
+    drop = redundant_equations(s)
+    A = np.asarray(LinearSolver(s, drop=drop).matrix(ev.values))
+    nq = s.nq
+    dense, kept = kin.project_velocities(s, A[:nq, :nq], A[nq:, :nq], v0, dropped=drop)
+    rows = np.setdiff1d(np.arange(s.nm), drop)
+    Bs = kin._row_scale(s, s.length_scale)[rows, None] * A[nq:, :nq][rows]
+    sparse, kept2 = kin._project_sparse(s, sp.csr_matrix(A[:nq, :nq]), Bs, v0,
+                                        kin._held_rows(s, v0))
+    assert kept and kept2
+    np.testing.assert_allclose(sparse[s.node_dofidx], dense[s.node_dofidx], atol=1e-9 * W2)
