@@ -153,3 +153,42 @@ def test_large_system_solver_gives_the_same_velocities():
                                         kin._held_rows(s, v0))
     assert kept and kept2
     np.testing.assert_allclose(sparse[s.node_dofidx], dense[s.node_dofidx], atol=1e-9 * W2)
+
+
+# ---------------------------------------------------------------------------------------------
+# a massless moving node: run and simulate give check's diagnosis
+MASSLESS = """\
+se3dyn: 1
+name: massless
+gravity: [0, 0, -9.81]
+nodes:
+  ground: {fixed: true}
+  pivot: {position: [0, 0, 0]}
+  bob: {position: [0.5, 0, 0], mass: 1.0, inertia: [1e-3, 1e-2, 1e-2]}
+  tip: {position: [1.0, 0, 0]}      # massless, hangs on a ball joint: free to spin
+joints:
+  hinge: {type: hinge, a: ground, b: pivot, axis: [0, 1, 0]}
+  arm: {type: rigid, a: pivot, b: bob}
+  link: {type: spherical, a: bob, b: tip}
+simulation: {t_end: 0.1, step: 0.01}
+"""
+
+
+def test_simulate_names_the_massless_node_and_its_joint():
+    model = loads_model(MASSLESS, filename="massless.yaml")[0]
+    with pytest.raises(sd.SimulationError) as exc:
+        sd.simulate(model, t_end=0.1, step=0.01)
+    msg = str(exc.value)
+    assert "node 'tip'" in msg and "joint 'link'" in msg and "no mass" in msg
+    assert "\n" not in msg
+
+
+def test_run_and_check_give_the_same_diagnosis(tmp_path):
+    f = tmp_path / "massless.yaml"
+    f.write_text(MASSLESS)
+    chk = run("check", f)
+    p = run("run", f, "--out", tmp_path / "out")
+    assert chk.returncode == 2 and p.returncode == 1
+    cause = chk.stderr.strip().splitlines()[-1].split("t = 0: ", 1)[1]
+    assert "node 'tip'" in cause
+    assert cause in p.stderr

@@ -211,6 +211,13 @@ def equation_name(s: System, row: int) -> str:
     return f"joint '{s.joint_names[j]}' constraint {c} ({_COMPONENT[c]})"
 
 
+def massless_message(items: list[str]) -> str:
+    """One sentence naming the items of :func:`massless_motions` (at most four) and the cure."""
+    return (", ".join(items[:4]) + (f" and {len(items) - 4} more" if len(items) > 4 else "")
+            + " can move with no mass and no joint determining the motion (a node meant as "
+            "ground needs 'fixed: true'; a massless node needs joints that fix its motion)")
+
+
 def massless_motions(s: System, rtol: float = 1e-10) -> list[str]:
     """Items (nodes, joint coordinates) that can move with neither inertia nor constraint to
     determine their motion: the iteration matrix ``[M B^T; B 0]`` of the initial accelerations

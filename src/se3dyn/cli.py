@@ -133,15 +133,11 @@ def _check_one(path: str, rank_max: int) -> None:
                                 subsequent_indent="    "))
         else:
             print("  no redundant constraints")
-        from se3dyn.analysis import massless_motions
+        from se3dyn.analysis import massless_message, massless_motions
 
         free = massless_motions(s)
         if free:
-            raise _Usage(f"{path}: {', '.join(free[:4])}"
-                         + (f" and {len(free) - 4} more" if len(free) > 4 else "")
-                         + " can move with no mass and no joint determining the motion: a "
-                         "simulation would stop at t = 0 (a node meant as ground needs "
-                         "'fixed: true'; a massless node needs joints that fix its motion)")
+            raise _Usage(f"{path}: a simulation would stop at t = 0: {massless_message(free)}")
     if settings:
         print("  simulation settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()))
     _check_start(path, s, settings)

@@ -57,6 +57,28 @@ class SolverMemory:
         self.ref.flags.writeable = False
 
 
+#: Largest number of unknowns for which a singular start is diagnosed (a dense SVD, as check's).
+DIAGNOSE_MAX = 3000
+
+
+def _singular_start_cause(s: System) -> str:
+    """Why the initial acceleration matrix is singular: the motions with no mass found by
+    :func:`se3dyn.analysis.massless_motions` (the diagnosis of ``se3dyn check``), else the
+    typical causes."""
+    if s.nq <= DIAGNOSE_MAX:
+        from se3dyn.analysis import massless_message, massless_motions
+
+        try:
+            free = massless_motions(s)
+        except (np.linalg.LinAlgError, ValueError):  # a non-finite state: no diagnosis
+            free = []
+        if free:
+            return massless_message(free)
+    return ("typical causes: redundant constraints not detected at the start (a mechanism "
+            "started in a singular configuration), a free massless node whose motion no joint "
+            "determines, or a non-finite state")
+
+
 def _velocity_changes(s: System, v: np.ndarray) -> list[dict]:
     """The free nodes with mass whose velocities in ``v`` (nq,) differ from the model's initial
     ones by more than round-off (1e-9 of the largest velocity, linear and angular apart)."""
@@ -360,11 +382,8 @@ class GeneralizedAlpha:
         stp = _stepper(s, False, dropped, ws, keep=keep)
         code = stp.solve_values(ev.values, rhs)
         if code != 0 or not np.all(np.isfinite(rhs)):
-            raise SimulationError(
-                f"t={t0:.6g} (initial accelerations): the iteration matrix is singular; typical "
-                "causes: redundant constraints not detected at the start (a mechanism started "
-                "in a singular configuration), a free massless node whose motion no joint "
-                "determines, or a non-finite state")
+            raise SimulationError(f"t={t0:.6g} (initial accelerations): the iteration matrix "
+                                  f"is singular: {_singular_start_cause(s)}")
         # powers at t0 (velocity-level: vd does not enter)
         return State(t=t0, H=H, HJ=HJ, v=v, vd=rhs[:nq].copy(), a=rhs[:nq].copy(),
                      lam=rhs[nq:].copy(), alpha=s.alpha0.copy(), power=ev.energy[3:6].copy(),
