@@ -192,3 +192,57 @@ def test_run_and_check_give_the_same_diagnosis(tmp_path):
     cause = chk.stderr.strip().splitlines()[-1].split("t = 0: ", 1)[1]
     assert "node 'tip'" in cause
     assert cause in p.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# the energy balance warning says when its largest jump happened and how large it was
+PULSE = """\
+se3dyn: 1
+name: pulse
+gravity: [0, 0, 0]
+nodes:
+  g: {{fixed: true}}
+  p: {{position: [0, 0, 0]}}
+  b: {{position: [0.5, 0, 0], mass: 1.0, inertia: [1.0e-3, 1.0e-2, 1.0e-2]}}
+joints:
+  h: {{type: hinge, a: g, b: p, axis: [0, 1, 0],
+       torque: {{step: {{value: 5.0, start: 0.0, stop: {stop}}}}}}}
+  r: {{type: rigid, a: p, b: b}}
+simulation: {{t_end: 0.5, step: 0.01}}
+"""
+
+
+def _balance(res):
+    return (res.kinetic + res.potential + res.spring - res.work_actuators - res.work_loads
+            + res.dissipation)
+
+
+@pytest.mark.parametrize("stop, first", [(0.002, True), (0.015, False)])
+def test_energy_warning_says_when_and_how_large_the_largest_jump_was(stop, first):
+    """A torque pulse of 2 ms, shorter than the 10 ms step (an impulsive start), makes the whole
+    balance error in the first step; a pulse over one and a half steps makes it in the second.
+    The warning gives the step and the size that the rows' energies show."""
+    model = loads_model(PULSE.format(stop=stop), filename="pulse.yaml")[0]
+    with pytest.warns(Se3dynWarning, match="energy balance error") as caught:
+        res = sd.simulate(model, t_end=0.5, step=0.01)
+    (msg,) = [str(w.message) for w in caught if "energy balance" in str(w.message)]
+    d = np.diff(_balance(res))
+    k = int(np.argmax(np.abs(d)))
+    assert k == (0 if first else 1)
+    assert abs(d[k]) > 0.9 * res.stats["energy_balance_error"]  # nearly all the error
+    assert f"between t = {res.t[k]:.6g} and {res.t[k + 1]:.6g} s" in msg
+    assert f"{d[k]:+.3g} J" in msg
+    assert ("impulsive start" in msg) == first
+    assert ("the step is probably too large" in msg) == (not first)
+
+
+def test_run_summary_says_when_the_largest_jump_was(tmp_path):
+    f = tmp_path / "pulse.yaml"
+    f.write_text(PULSE.format(stop=0.002))
+    p = run("run", f, "--out", tmp_path / "out")
+    assert p.returncode == 0, p.stderr
+    (line,) = [x for x in p.stdout.splitlines() if "energy balance error" in x]
+    assert "WARNING" in line and "between t = 0 and 0.01 s" in line
+    assert "impulsive start" in line
+    info = run("info", tmp_path / "out" / "pulse.h5")
+    assert "between t = 0 and 0.01 s" in info.stdout

@@ -369,6 +369,7 @@ def cmd_run(args) -> int:
         print(f"  simulation failed; {writer.rows} rows kept in {path}", file=sys.stderr)
         return 1
     st = res.stats
+    st.update(_energy_jump_in(path, st))
     print(f"  {stats['steps']} steps, {stats['newton_iterations']} Newton iterations "
           f"(max {st['max_iterations']} per step), wall time {wall:.2f} s")
     if st.get("condensed"):
@@ -546,6 +547,10 @@ def cmd_info(args) -> int:
             for k, label in keys if k in st]
     if have:
         print("  statistics: " + ", ".join(have))
+    if len(res.t) > 1:
+        from se3dyn.simulate import energy_jump, energy_rows
+
+        st = dict(st, energy_jump=energy_jump(res.t, energy_rows(res)))
     for line in run_report(st):
         print("  " + line)
     if len(res.constraint):
@@ -734,6 +739,27 @@ _OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step",
               "initial_velocities", "global_error")
 
 
+def _energy_jump_in(path, stats: dict) -> dict:
+    """``{"energy_jump": ...}`` from the energies stored in a results file when the energy
+    balance warning fires (:func:`se3dyn.simulate.energy_jump`), else nothing."""
+    from se3dyn.simulate import SCALARS, energy_jump, energy_warning
+
+    if "energy_jump" in stats or not energy_warning(stats.get("energy_balance_error", 0.0),
+                                                    stats.get("energy_scale", 0.0)):
+        return {}
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            c = [f["energy/" + k][:] for k in SCALARS[:6]]
+            t = f["time"][:]
+    except (OSError, KeyError):
+        return {}
+    n = min(len(t), *(len(x) for x in c))
+    jump = energy_jump(t[:n], np.stack([x[:n] for x in c], axis=1))
+    return {"energy_jump": jump} if jump is not None else {}
+
+
 def run_report(stats: dict) -> list[str]:
     """Summary lines on what a run's results may hide: the initial velocities changed to
     satisfy the joints, the local errors of an adaptive run, and the energy balance error
@@ -774,10 +800,12 @@ def run_report(stats: dict) -> list[str]:
         out.append(f"global error estimated until t = {stats['global_error_until']:.9g} s "
                    f"only (its companion run stopped: {stats.get('global_error_failure', '')})")
     if "energy_balance_error" in stats:
+        from se3dyn.simulate import energy_cause, energy_warning
+
         err, scale = stats["energy_balance_error"], stats["energy_scale"]
         rel = f"{100 * err / scale:.3g} % of" if scale > 0 else "with no"
-        warn = "  WARNING: large; the step is probably too large for the motion" if (
-            err > 0.1 * scale and err > 1e-12) else ""
+        warn = ("  WARNING: large" + energy_cause(err, stats.get("energy_jump"))
+                if energy_warning(err, scale) else "")
         out.append(f"energy balance error {err:.3e} J ({rel} the energy in play, "
                    f"{scale:.3e} J){warn}")
     if stats.get("condensed_until") is not None:
