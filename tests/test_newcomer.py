@@ -246,3 +246,53 @@ def test_run_summary_says_when_the_largest_jump_was(tmp_path):
     assert "impulsive start" in line
     info = run("info", tmp_path / "out" / "pulse.h5")
     assert "between t = 0 and 0.01 s" in info.stdout
+
+
+# ---------------------------------------------------------------------------------------------
+# a hinge without `at` between a pivot and a body node off its axis
+OFF_AXIS = """\
+se3dyn: 1
+name: off_axis
+gravity: [0, 0, -9.81]
+nodes:
+  ground: {{fixed: true}}
+  bob: {{position: [0.5, 0, 0], mass: 1.0, inertia: [1.0e-3, 1.0e-2, 1.0e-2]}}
+joints:
+  hinge: {{type: hinge, a: ground, b: bob, axis: [0, 1, 0]{at}}}
+simulation: {{t_end: 0.3, step: 0.01}}
+"""
+
+
+def test_check_warns_of_a_body_turning_about_itself_and_its_at_makes_the_pendulum(tmp_path):
+    f = tmp_path / "off_axis.yaml"
+    f.write_text(OFF_AXIS.format(at=""))
+    p = run("check", f)
+    assert p.returncode == 0
+    (line,) = [x for x in p.stdout.splitlines() if "WARNING" in x]
+    assert "joint 'hinge'" in line and "'ground'" in line and "'bob'" in line
+    assert "0.5 m" in line
+    # as warned, the bob turns about itself: it stays where it is under gravity
+    res = sd.simulate(four_bar(OFF_AXIS.format(at="")), t_end=0.3, step=0.01)
+    np.testing.assert_allclose(res.node_position("bob")[-1], [0.5, 0, 0], atol=1e-12)
+    # the 'at' the warning offers puts the axis through the pivot: a pendulum of 0.5 m
+    at = line.split("an axis through node 'ground': at: ", 1)[1].split(";", 1)[0]
+    model = four_bar(OFF_AXIS.format(at=f", at: {at}"))
+    res = sd.simulate(model, t_end=0.3, step=0.01)
+    x = res.node_position("bob")
+    np.testing.assert_allclose(np.linalg.norm(x, axis=1), 0.5, rtol=1e-9)
+    assert x[-1, 2] < -0.1  # it fell
+    f.write_text(OFF_AXIS.format(at=f", at: {at}"))
+    assert "WARNING" not in run("check", f).stdout
+
+
+def test_run_warns_once_and_the_paper_models_not_at_all(tmp_path):
+    f = tmp_path / "off_axis.yaml"
+    f.write_text(OFF_AXIS.format(at=""))
+    p = run("run", f, "--out", tmp_path / "out")
+    assert p.returncode == 0
+    assert p.stderr.count("joint 'hinge' (hinge): field 'at'") == 1
+    from pathlib import Path
+
+    for name in ("slider_crank.yaml", "a02_n_four_bar.yaml", "a05_flyball_governor.yaml"):
+        out = run("check", Path(__file__).parents[1] / "examples" / name).stdout
+        assert "WARNING" not in out, name

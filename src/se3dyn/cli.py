@@ -95,6 +95,10 @@ def _check_one(path: str, rank_max: int) -> None:
     n_free = int(np.sum(~s.node_fixed))
     bodies = int(np.sum(s.node_mass > 0))
     print(f"{path}: ok")
+    from se3dyn.analysis import off_axis_joints
+
+    for line in off_axis_joints(model):
+        print(f"  WARNING: {line}")
     nn, nj, extra = _counts(model)
     print(f"  model '{model.name}': {nn} nodes ({n_free - extra} free, {bodies} with mass),"
           f" {nj} joints, {len(model.loads)} loads")
@@ -300,6 +304,10 @@ def cmd_run(args) -> int:
     prog = _Progress(t_from, float(cfg["t_end"]), not quiet, cp.steps if cp is not None else 0)
     print(f"se3dyn {sd.__version__}: {args.model} -> {path}"
           + (f" (resumed at t = {cp.state.t:g} s)" if cp is not None else ""))
+    from se3dyn.analysis import off_axis_joints
+
+    for line in off_axis_joints(model):
+        print(f"se3dyn: warning: {line}", file=sys.stderr)
     nn, nj, _ = _counts(model)
     print(f"  {nn} nodes, {nj} joints; {s.nq} unknowns, {s.nm} "
           f"multipliers; t_end = {cfg['t_end']} s, h = {cfg['step']} s, "
