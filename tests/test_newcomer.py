@@ -296,3 +296,63 @@ def test_run_warns_once_and_the_paper_models_not_at_all(tmp_path):
     for name in ("slider_crank.yaml", "a02_n_four_bar.yaml", "a05_flyball_governor.yaml"):
         out = run("check", Path(__file__).parents[1] / "examples" / name).stdout
         assert "WARNING" not in out, name
+
+
+# ---------------------------------------------------------------------------------------------
+# what se3dyn does not do yet, units, the length scale in check
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+
+
+def test_readme_says_what_is_not_there_yet_and_the_units():
+    text = (ROOT / "README.md").read_text()
+    assert "## Not yet" in text
+    section = text.split("## Not yet", 1)[1].split("\n## ", 1)[0]
+    for word in ("URDF", "contact", "limits", "Coulomb", "eigenvalues", "sensors", "PID",
+                 "drives"):
+        assert word in section, word
+    assert "SI" in text and "lengths in m" in text
+
+
+def _span_line(out):
+    (line,) = [x for x in out.splitlines() if "length scale" in x]
+    return float(line.split("the nodes span ", 1)[1].split(" m", 1)[0])
+
+
+def test_check_prints_the_length_scale_so_millimetres_show(tmp_path):
+    """The same four-bar written in metres and in millimetres: check's span is the diagonal of
+    the nodes' bounding box, 1000 times larger for the second."""
+    model = four_bar()
+    x = np.array([n.position for n in model.nodes])
+    f = tmp_path / "m.yaml"
+    f.write_text(FOUR_BAR)
+    span_m = _span_line(run("check", f).stdout)
+    assert span_m == pytest.approx(np.linalg.norm(np.ptp(x, axis=0)), rel=1e-3)
+    mm = FOUR_BAR
+    for a, b in (("[0.0, 0.05, 0.0]", "[0.0, 50.0, 0.0]"), ("[0.1, 0.15, 0.0]", "[100, 150, 0]"),
+                 ("[0.25, 0.1, 0.0]", "[250, 100, 0]"), ("at: [0, 0.1, 0]", "at: [0, 100, 0]"),
+                 ("at: [0.2, 0.2, 0]", "at: [200, 200, 0]"),
+                 ("at: [0.3, 0, 0]", "at: [300, 0, 0]")):
+        assert a in mm
+        mm = mm.replace(a, b)
+    f.write_text(mm)
+    assert _span_line(run("check", f).stdout) == pytest.approx(1000 * span_m, rel=1e-3)
+
+
+def test_readme_energy_numbers_are_what_run_prints():
+    """The README's slider-crank energy balance (index 2 and index 3) against a run of
+    examples/slider_crank.yaml at its settings."""
+    from se3dyn.modelfile import load_model
+
+    text = " ".join((ROOT / "README.md").read_text().split())
+    part = text.split("The energy balance error at h = 1e-2", 1)[1][:400]
+    import re
+
+    e2, scale, e3 = (float(v) for v in re.findall(r"(\d\.\d+e-\d+|0\.\d+) J", part)[:3])
+    model, settings = load_model(ROOT / "examples" / "slider_crank.yaml")
+    for form, err in (("index2", e2), ("index3", e3)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Se3dynWarning)
+            st = sd.simulate(model, **dict(settings, formulation=form)).stats
+        assert st["energy_balance_error"] == pytest.approx(err, rel=1e-3), form
+        if form == "index2":
+            assert st["energy_scale"] == pytest.approx(scale, rel=1e-3)

@@ -102,6 +102,12 @@ def _check_one(path: str, rank_max: int) -> None:
     nn, nj, extra = _counts(model)
     print(f"  model '{model.name}': {nn} nodes ({n_free - extra} free, {bodies} with mass),"
           f" {nj} joints, {len(model.loads)} loads")
+    x = np.array([n.position for n in model.nodes], dtype=float).reshape(-1, 3)
+    box = np.ptp(x, axis=0) if len(x) else np.zeros(3)
+    m = s.node_mass[s.node_mass > 0]
+    print(f"  length scale (SI units: m, kg, s): the nodes span {np.linalg.norm(box):.4g} m "
+          f"(box {' x '.join(f'{b:.3g}' for b in box)} m)"
+          + (f", masses {m.min():.3g} to {m.max():.3g} kg" if m.size else ""))
     from se3dyn.modelfile import ELEMENT_SECTIONS
 
     others = [f"{len(getattr(model, es.key))} {es.key}" for es in ELEMENT_SECTIONS
