@@ -242,8 +242,9 @@ def page_data(res, scene: Scene, *, channels=None, plot=None,
         if part.role in ("body", "visual") and colors[part.node] is None:
             colors[part.node] = part.color
     # bounds of the drawing: node positions over the run and the body sizes
-    ext = max([float(np.max(np.abs(p.scale))) for p in scene.parts if p.role in ("body",
-               "visual") and p.kind != "mesh"] + [2.0 * scene.glyph])
+    ext = max([float(np.max(np.abs(p.scale))) if p.kind != "capsule" else
+               float(p.params[1] + 2.0 * p.params[0]) for p in scene.parts
+               if p.role in ("body", "visual") and p.kind != "mesh"] + [2.0 * scene.glyph])
     blo, bhi = scene.lo - 0.5 * ext, scene.hi + 0.5 * ext
     path = (res.stats or {}).get("path")
     meta = {
