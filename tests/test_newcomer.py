@@ -356,3 +356,52 @@ def test_readme_energy_numbers_are_what_run_prints():
         assert st["energy_balance_error"] == pytest.approx(err, rel=1e-3), form
         if form == "index2":
             assert st["energy_scale"] == pytest.approx(scale, rel=1e-3)
+
+
+# ---------------------------------------------------------------------------------------------
+# --quiet, CSV units, plot --x with equal axes
+@pytest.fixture(scope="module")
+def crank_file(tmp_path_factory):
+    d = tmp_path_factory.mktemp("crank")
+    p = run("run", ROOT / "examples" / "slider_crank.yaml", "--t-end", "2", "--out", d)
+    assert p.returncode == 0, p.stderr
+    return d / "slider_crank.h5"
+
+
+def test_quiet_prints_nothing_on_success(tmp_path):
+    (tmp_path / "four_bar.yaml").write_text(FOUR_BAR)
+    p = run("run", tmp_path / "four_bar.yaml", "--out", tmp_path / "out", "--quiet")
+    assert p.returncode == 0, p.stderr
+    assert p.stdout == ""
+    assert (tmp_path / "out" / "four_bar.h5").exists()
+
+
+def test_csv_header_carries_the_units(crank_file, tmp_path):
+    """Each column is labelled ``name [unit]`` in SI: node 6 starts at x = 0.1 m (Table 2), the
+    hinge angle in rad, energies in J, Newton iterations dimensionless."""
+    csv = tmp_path / "c.csv"
+    p = run("export", crank_file, "--csv", csv, "node/6/position/x", "joint/1/alpha/0",
+            "energy/kinetic", "solver/iterations")
+    assert p.returncode == 0, p.stderr
+    lines = csv.read_text().splitlines()
+    assert lines[0].split(",") == ["time [s]", "node/6/position/x [m]", "joint/1/alpha/0 [rad]",
+                                   "energy/kinetic [J]", "solver/iterations [1]"]
+    first = [float(v) for v in lines[1].split(",")]
+    assert first[1] == pytest.approx(0.1)
+
+
+def test_plot_of_lengths_against_a_length_has_equal_axes(crank_file, tmp_path):
+    """The crank's node 3 turns on a circle of radius 0.04 m about the x axis (Table 2: node 3
+    at z = 0.16, hinge (1) at z = 0.12): plotted z against y it must come out round."""
+    from PIL import Image
+
+    png = tmp_path / "circle.png"
+    p = run("plot", crank_file, "node/3/position/z", "--x", "node/3/position/y", "-o", png)
+    assert p.returncode == 0, p.stderr
+    img = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    curve = np.all(np.abs(img - [31, 119, 180]) < 40, axis=-1)  # matplotlib's first colour
+    curve[:, int(0.8 * img.shape[1]):] = False  # the legend's swatch, right of the axes
+    ys, xs = np.nonzero(curve)
+    w, h = np.ptp(xs), np.ptp(ys)
+    assert h > 100  # pixels: the circle fills the panel's height
+    assert w == pytest.approx(h, rel=0.06)

@@ -267,6 +267,8 @@ def cmd_run(args) -> int:
     from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
     from se3dyn.h5 import ResultsFileError, ResultsWriter
 
+    say = print if not args.quiet else (lambda *a, **k: None)  # --quiet: no summary
+
     if args.threads is not None:
         sd.set_threads(args.threads)
     model, settings = _load(args.model)
@@ -278,7 +280,7 @@ def cmd_run(args) -> int:
     if args.resume is not None:
         writer, cfg, path = _resume(args, s, text)
         if writer is None:
-            print(f"{path}: the run is complete to t_end = {cfg['t_end']:g} s already; give a "
+            say(f"{path}: the run is complete to t_end = {cfg['t_end']:g} s already; give a "
                   "later --t-end to continue it")
             return 0
         cp = writer.checkpoint
@@ -308,14 +310,14 @@ def cmd_run(args) -> int:
     quiet = args.quiet or not sys.stderr.isatty()
     t_from = cp.state.t if cp is not None else float(cfg.get("t_start", 0.0))
     prog = _Progress(t_from, float(cfg["t_end"]), not quiet, cp.steps if cp is not None else 0)
-    print(f"se3dyn {sd.__version__}: {args.model} -> {path}"
+    say(f"se3dyn {sd.__version__}: {args.model} -> {path}"
           + (f" (resumed at t = {cp.state.t:g} s)" if cp is not None else ""))
     from se3dyn.analysis import off_axis_joints
 
     for line in off_axis_joints(model):
         print(f"se3dyn: warning: {line}", file=sys.stderr)
     nn, nj, _ = _counts(model)
-    print(f"  {nn} nodes, {nj} joints; {s.nq} unknowns, {s.nm} "
+    say(f"  {nn} nodes, {nj} joints; {s.nq} unknowns, {s.nm} "
           f"multipliers; t_end = {cfg['t_end']} s, h = {cfg['step']} s, "
           f"rho_inf = {cfg.get('rho_inf', 0.9)}, {cfg.get('formulation', 'index2')}")
     t0 = time.perf_counter()
@@ -384,17 +386,17 @@ def cmd_run(args) -> int:
         return 1
     st = res.stats
     st.update(_energy_jump_in(path, st))
-    print(f"  {stats['steps']} steps, {stats['newton_iterations']} Newton iterations "
+    say(f"  {stats['steps']} steps, {stats['newton_iterations']} Newton iterations "
           f"(max {st['max_iterations']} per step), wall time {wall:.2f} s")
     if st.get("condensed"):
         names = ", ".join(repr(n) for n in st["condensed"][:8]) + (
             f" and {len(st['condensed']) - 8} more" if len(st["condensed"]) > 8 else "")
-        print(f"  rigid joints {names} condensed for the time loop (matrix "
+        say(f"  rigid joints {names} condensed for the time loop (matrix "
               f"{st['matrix_size']}; every node and joint reported)")
     for line in run_report(st):
-        print("  " + line)
-    print(f"  max constraint violation {st['max_constraint']:.2e}")
-    print(f"  results: {path} ({writer.rows} rows)")
+        say("  " + line)
+    say(f"  max constraint violation {st['max_constraint']:.2e}")
+    say(f"  results: {path} ({writer.rows} rows)")
     return 0
 
 
@@ -633,6 +635,8 @@ def cmd_plot(args) -> int:
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     xunit = channel_unit(xname, res) if xname != "time" else "s"
     axes[-1, 0].set_xlabel(f"{xname} [{xunit}]" if xunit else xname)
+    if args.x is not None and list(groups) == ["m"] and xunit == "m":
+        axes[0, 0].set_aspect("equal", adjustable="datalim")  # lengths against a length
     what = ", ".join(sorted({name.rsplit("/", 1)[0] for name, _ in data}))
     title = args.title or (f"{Path(args.results).name}: {what}"
                            + (f" against {xname}" if args.x else ""))
@@ -665,8 +669,8 @@ def _figure_path(output: str | None, default: Path) -> Path:
 
 
 def cmd_export(args) -> int:
-    """Export channels of a results file to CSV (header: time and channel names), or the
-    animation to glTF (se3dyn.viewer)."""
+    """Export channels of a results file to CSV (header: time and channel names with their
+    units, ``name [unit]``), or the animation to glTF (se3dyn.viewer)."""
     from se3dyn.channels import list_channels
 
     res = _read(args.results)
@@ -676,10 +680,14 @@ def cmd_export(args) -> int:
         path = _viewer("export_gltf", res, args.gltf)
         print(f"wrote {path}: {len(res.t)} times, t = {res.t[0]:g} ... {res.t[-1]:g} s")
         return 0
+    from se3dyn.channels import channel_unit
+
     names = args.channels or [n for n in list_channels(res) if n != "time"]  # time: column 1
     data = _channels(res, names)
     cols = np.column_stack([res.t] + [y for _, y in data])
-    header = ",".join(["time"] + [n.replace(",", "%2C") for n, _ in data])
+    # "name [unit]" (SI; [1]: dimensionless)
+    header = ",".join(["time [s]"] + [f"{n.replace(',', '%2C')} [{channel_unit(n, res) or 1}]"
+                                      for n, _ in data])
     try:
         np.savetxt(args.csv, cols, delimiter=",", header=header, comments="", fmt="%.17g")
     except OSError as exc:
