@@ -368,12 +368,18 @@ def crank_file(tmp_path_factory):
     return d / "slider_crank.h5"
 
 
-def test_quiet_prints_nothing_on_success(tmp_path):
+def test_quiet_prints_no_summary_but_still_says_what_it_changed(tmp_path):
     (tmp_path / "four_bar.yaml").write_text(FOUR_BAR)
     p = run("run", tmp_path / "four_bar.yaml", "--out", tmp_path / "out", "--quiet")
     assert p.returncode == 0, p.stderr
     assert p.stdout == ""
     assert (tmp_path / "out" / "four_bar.h5").exists()
+    # the initial velocities were completed to satisfy the joints: one line on stderr
+    (line,) = p.stderr.strip().splitlines()
+    assert line.startswith("se3dyn: warning: initial velocities projected")
+    (tmp_path / "pulse.yaml").write_text(PULSE.format(stop=0.002))
+    p = run("run", tmp_path / "pulse.yaml", "--out", tmp_path / "out", "--quiet")
+    assert p.stdout == "" and "energy balance error" in p.stderr and "WARNING" in p.stderr
 
 
 def test_csv_header_carries_the_units(crank_file, tmp_path):

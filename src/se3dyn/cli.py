@@ -267,7 +267,8 @@ def cmd_run(args) -> int:
     from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
     from se3dyn.h5 import ResultsFileError, ResultsWriter
 
-    say = print if not args.quiet else (lambda *a, **k: None)  # --quiet: no summary
+    # --quiet: no summary; what was changed (initial velocities) or looks wrong goes to stderr
+    say = print if not args.quiet else (lambda *a, **k: None)
 
     if args.threads is not None:
         sd.set_threads(args.threads)
@@ -395,6 +396,8 @@ def cmd_run(args) -> int:
               f"{st['matrix_size']}; every node and joint reported)")
     for line in run_report(st):
         say("  " + line)
+        if args.quiet and ("WARNING" in line or line.startswith("initial velocities")):
+            print(f"se3dyn: warning: {line}", file=sys.stderr)  # changes and problems: said
     say(f"  max constraint violation {st['max_constraint']:.2e}")
     say(f"  results: {path} ({writer.rows} rows)")
     return 0
