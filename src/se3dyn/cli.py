@@ -893,7 +893,9 @@ def _run_args(r) -> None:
                    help="continue the run of this results file (finished, failed, interrupted "
                    "or killed) from its last checkpoint, bit for bit as one uninterrupted run; "
                    "with --t-end, further than it was planned")
-    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--quiet", action="store_true",
+                   help="no progress bar and no summary (what it changed or flags: one line "
+                        "each on stderr)")
     r.add_argument("--threads", type=_whole_positive, metavar="N",
                    help="threads of the compiled engine (default: SE3DYN_THREADS or the "
                    "cores; the results do not depend on it)")
