@@ -270,7 +270,8 @@ def beam_tube(spec, idx: dict, H0: np.ndarray, color: str = "") -> Tube:
     Each element ``e`` (frames ``F_e``, ``F_e+1`` of ``spec.reference``) gets ``TUBE_RINGS + 1``
     section rings at the frames of the element's own interpolation ``F_e exp(s d0)``, ``d0 =
     log(F_e^-1 F_e+1)`` (:mod:`se3dyn.elements.beam`), ``s`` in [0, 1]; each ring is the
-    ellipse of :func:`beam_section` in the section plane (axes 2 and 3), ``TUBE_SIDES`` points.
+    ellipse of :func:`beam_section` in the section plane (axes 2 and 3), ``TUBE_SIDES`` points
+    (beams of more than 100 elements: the two end rings and 8 points).
 
     Parameters
     ----------
@@ -289,15 +290,17 @@ def beam_tube(spec, idx: dict, H0: np.ndarray, color: str = "") -> Tube:
     from se3dyn import lie
 
     a2, a3 = beam_section(spec.stiffness)
-    th = 2.0 * np.pi * np.arange(TUBE_SIDES) / TUBE_SIDES
+    F = np.asarray(spec.reference, dtype=float)
+    fine = len(F) - 1 <= 100  # long beams: fewer facets (the page stays light to draw)
+    sides, rings = (TUBE_SIDES, TUBE_RINGS) if fine else (8, 1)
+    th = 2.0 * np.pi * np.arange(sides) / sides
     ring = np.stack([np.zeros_like(th), a2 * np.cos(th), a3 * np.sin(th)], axis=1)  # (S, 3)
     rn = np.stack([np.zeros_like(th), np.cos(th) / a2, np.sin(th) / a3], axis=1)
     rn /= np.linalg.norm(rn, axis=1, keepdims=True)
-    F = np.asarray(spec.reference, dtype=float)
-    s = np.arange(TUBE_RINGS + 1) / TUBE_RINGS
+    s = np.arange(rings + 1) / rings
     nodes, weight, bind, nrm, faces = [], [], [], [], []
-    per = (TUBE_RINGS + 1) * TUBE_SIDES
-    S = TUBE_SIDES
+    per = (rings + 1) * sides
+    S = sides
     for e in range(len(F) - 1):
         d0 = lie.log_se3(lie.inverse(F[e]) @ F[e + 1])
         Fs = F[e] @ lie.exp_se3(s[:, None] * d0)  # (R, 4, 4)
@@ -306,7 +309,7 @@ def beam_tube(spec, idx: dict, H0: np.ndarray, color: str = "") -> Tube:
         nrm.append(np.einsum("rij,kj->rki", Fs[:, :3, :3], rn).reshape(-1, 3))
         weight.append(np.repeat(s, S))
         nodes.append(np.tile([idx[spec.nodes[e]], idx[spec.nodes[e + 1]]], (per, 1)))
-        r, k = np.meshgrid(np.arange(TUBE_RINGS), np.arange(S), indexing="ij")
+        r, k = np.meshgrid(np.arange(rings), np.arange(S), indexing="ij")
         v0 = e * per + r * S + k
         v1 = e * per + r * S + (k + 1) % S
         faces.append(np.concatenate([np.stack([v0, v1 + S, v0 + S], -1).reshape(-1, 3),
