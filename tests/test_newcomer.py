@@ -130,8 +130,9 @@ def test_conflicting_speeds_are_replaced_by_the_closest_consistent_ones_and_said
     assert not assemble(four_bar(text)).speeds_kept
 
 
-def test_large_system_solver_gives_the_same_velocities():
-    """The saddle-point (sparse) path for systems above 3000 unknowns, on the four-bar."""
+def test_sparse_and_dense_projections_agree():
+    """The two solvers of the projection (one sparse saddle-point solve, tried first; the
+    rank-revealing dense one) give the same velocities on the four-bar."""
     import scipy.sparse as sp
 
     from se3dyn.analysis import redundant_equations
@@ -146,13 +147,17 @@ def test_large_system_solver_gives_the_same_velocities():
     drop = redundant_equations(s)
     A = np.asarray(LinearSolver(s, drop=drop).matrix(ev.values))
     nq = s.nq
-    dense, kept = kin.project_velocities(s, A[:nq, :nq], A[nq:, :nq], v0, dropped=drop)
     rows = np.setdiff1d(np.arange(s.nm), drop)
-    Bs = kin._row_scale(s, s.length_scale)[rows, None] * A[nq:, :nq][rows]
-    sparse, kept2 = kin._project_sparse(s, sp.csr_matrix(A[:nq, :nq]), Bs, v0,
-                                        kin._held_rows(s, v0))
-    assert kept and kept2
+    L = s.length_scale
+    Bs = kin._row_scale(s, L)[rows, None] * A[nq:, :nq][rows]
+    E = kin._held_rows(s, v0)
+    sparse = kin._project_sparse(s, sp.csr_matrix(A[:nq, :nq]), Bs, v0, E)
+    dense, kept = kin._project_dense(s, A[:nq, :nq], Bs, v0, E, L)
+    assert kept and sparse is not None
     np.testing.assert_allclose(sparse[s.node_dofidx], dense[s.node_dofidx], atol=1e-9 * W2)
+    _planar = {n: dense[s.node_dofidx[i]] for i, n in enumerate(
+        s.node_names[j] for j in s.node_free)}
+    assert _planar["crank"][5] == pytest.approx(W2, rel=1e-12)
 
 
 # ---------------------------------------------------------------------------------------------
