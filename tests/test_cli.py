@@ -191,7 +191,7 @@ def test_export_writes_named_columns_equal_to_the_channels(slider_results, tmp_p
     p = run("export", path, "--csv", csv, "node/6/position/x", "joint/1/alpha/0")
     assert p.returncode == 0, p.stderr
     header = csv.read_text().splitlines()[0]
-    assert header == "time,node/6/position/x,joint/1/alpha/0"
+    assert header == "time [s],node/6/position/x [m],joint/1/alpha/0 [rad]"
     data = np.loadtxt(csv, delimiter=",", skiprows=1)
     res = read_results(path)
     np.testing.assert_array_equal(data[:, 0], res.t)
@@ -205,7 +205,7 @@ def test_channel_patterns_expand_to_the_matching_channels(slider_results, tmp_pa
     p = run("export", path, "--csv", csv, "node/6/displacement/[xyz]")
     assert p.returncode == 0, p.stderr
     header = csv.read_text().splitlines()[0].split(",")
-    assert header == ["time"] + [f"node/6/displacement/{c}" for c in "xyz"]
+    assert header == ["time [s]"] + [f"node/6/displacement/{c} [m]" for c in "xyz"]
     data = np.loadtxt(csv, delimiter=",", skiprows=1)
     np.testing.assert_array_equal(data[0, 1:], 0.0)  # displacement from the initial position
     assert run("plot", path, "node/6/nothing*", "-o", tmp_path / "x.png").returncode == 2

@@ -356,7 +356,7 @@ def test_resume_after_kill_9_equals_one_uninterrupted_run(tmp_path):
     # (a run of 200 s, some 2 s of wall time: the writer flushes once a second, and a run
     # over before its first flush would leave nothing to kill)
     killed = _killed_run(tmp_path / "k", t_end="200", rows=1000)
-    p = run("run", PENDULUM, "--resume", killed, "--quiet")
+    p = run("run", PENDULUM, "--resume", killed)  # (not --quiet: its summary is read)
     assert p.returncode == 0, p.stderr
     assert "resumed at t = " in p.stdout
     assert run("run", PENDULUM, "--t-end", "200", "--step", "1e-3", "--out", tmp_path / "u",

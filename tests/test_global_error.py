@@ -164,8 +164,8 @@ def test_command_line_and_model_file_report_the_estimate(tmp_path, capsys):
     with warnings.catch_warnings():
         warnings.simplefilter("error", Se3dynWarning)  # (the command reports, never warns)
         assert main(["run", str(ROOT / "examples" / "slider_crank.yaml"), "--out",
-                     str(tmp_path), "--quiet", "--t-end", "0.3", "--tol", "1e-4",
-                     "--global-error"]) == 0
+                     str(tmp_path), "--t-end", "0.3", "--tol", "1e-4",
+                     "--global-error"]) == 0  # (not --quiet: the summary is read)
     out = capsys.readouterr().out
     assert "global error estimate" in out and " tol) at t = " in out
     from se3dyn.h5 import read_results
@@ -230,8 +230,8 @@ def test_command_line_bound_writes_the_refined_run_and_refuses_to_resume_it(tmp_
     from se3dyn.h5 import read_results
 
     model = ROOT / "examples" / "slider_crank.yaml"
-    assert main(["run", str(model), "--out", str(tmp_path), "--quiet", "--t-end", "1",
-                 "--tol", "1e-5", "--global-error", "bound"]) == 0
+    assert main(["run", str(model), "--out", str(tmp_path), "--t-end", "1",
+                 "--tol", "1e-5", "--global-error", "bound"]) == 0  # (the summary is read)
     out = capsys.readouterr().out
     assert "global error bound: the first run's estimate" in out
     res = read_results(tmp_path / "slider_crank.h5")

@@ -88,8 +88,8 @@ joints:
 simulation: {t_end: 0.1, step: 0.01}
 """)
     cli = [sys.executable, "-m", "se3dyn.cli"]
-    p = subprocess.run([*cli, "run", str(f), "--out", str(tmp_path / "o"), "--quiet"],
-                       capture_output=True, text=True)
+    p = subprocess.run([*cli, "run", str(f), "--out", str(tmp_path / "o")],
+                       capture_output=True, text=True)  # (not --quiet: the summary is read)
     assert p.returncode == 0, p.stderr
     assert "initial velocities projected" in p.stdout and "'wheel'" in p.stdout
     assert "Warning" not in p.stderr  # reported once, in the summary

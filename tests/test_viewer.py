@@ -618,3 +618,153 @@ def test_the_core_never_imports_the_viewer():
             "'pygltflib'))); print(m); assert not m")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stdout + p.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# 7. beams: a tube along the centre line, following the nodes' frames, with the section
+# ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def flexible():
+    model, _ = load_model(Path(__file__).parent.parent / "examples" / "slider_crank_flexible.yaml")
+    return model, sd.simulate(model, t_end=0.4, step=5e-3)
+
+
+def _rings_at_nodes(tube, pos):
+    """Vertices of the rings that sit exactly on a node (weight 0 or 1): node -> (..., k, 3)."""
+    out = {}
+    for side in (0, 1):
+        on = tube.weight == side
+        for i in np.unique(tube.nodes[on, side]):
+            out.setdefault(int(i), []).append(pos[..., on & (tube.nodes[:, side] == i), :])
+    return {i: np.concatenate(v, axis=-2) for i, v in out.items()}
+
+
+def test_beam_tube_has_the_section_and_follows_the_nodes(flexible):
+    """The connecting rod (d = 28 mm, 4 elements) is drawn: at every stored time the tube's
+    rings at the beam nodes are circles of radius 14 mm centred on the node and normal to its
+    section axis 1 (the beam's own frames), i.e. the tube follows the computed motion."""
+    from se3dyn.viewer.shapes import tube_vertices
+
+    model, res = flexible
+    scene = build_scene(res)
+    (tube,) = scene.tubes
+    names = list(res.system.node_names)
+    beam = model.beams[0]
+    assert sorted(names[i] for i in np.unique(tube.nodes)) == sorted(beam.nodes)
+    pos, nrm = tube_vertices(tube, res.H)  # (n, V, 3)
+    rings = _rings_at_nodes(tube, pos)
+    assert set(rings) == {names.index(b) for b in beam.nodes}
+    for i, ring in rings.items():
+        x = res.H[:, i, :3, 3]  # (n, 3)
+        X = beam.offsets[beam.nodes.index(names[i])]
+        axis1 = np.einsum("nij,j->ni", res.H[:, i, :3, :3], X[:3, 0])  # section axis 1
+        r = ring - x[:, None, :]
+        np.testing.assert_allclose(np.linalg.norm(r, axis=-1), 0.014, rtol=1e-9)
+        np.testing.assert_allclose(np.einsum("nkj,nj->nk", r, axis1), 0.0, atol=1e-12)
+        np.testing.assert_allclose(r.mean(axis=1), 0.0, atol=1e-12)
+    # normals point outwards, unit
+    w = np.stack([1 - tube.weight, tube.weight], -1)[:, :, None]  # (V, 2, 1)
+    cen = np.sum(w * res.H[:, :, :3, 3][:, tube.nodes], axis=-2)  # (n, V, 3)
+    assert np.all(np.einsum("...j,...j->...", nrm, pos - cen) > 0)
+    # in the initial configuration the tube is the straight rod from node 5 to node 7
+    x5, x7 = model.nodes[names.index("5")].position, model.nodes[names.index("7")].position
+    u = (x7 - x5) / np.linalg.norm(x7 - x5)
+    off = tube.bind - x5
+    radial = off - np.outer(off @ u, u)
+    np.testing.assert_allclose(np.linalg.norm(radial, axis=1), 0.014, rtol=1e-9)
+    assert off @ u == pytest.approx(np.clip(off @ u, 0, np.linalg.norm(x7 - x5)), abs=1e-12)
+
+
+def test_beam_section_is_the_ellipse_of_the_section_moments():
+    from se3dyn.sections import rectangle
+    from se3dyn.viewer.shapes import beam_section
+
+    sec = rectangle(0.02, 0.06, E=70e9, nu=0.3, density=2700.0)  # width along 2, height along 3
+    a2, a3 = beam_section(np.diag([sec["EA"], *sec["GA"], sec["GJ"], *sec["EI"]]))
+    A, I2, I3 = 0.02 * 0.06, 0.02 * 0.06 ** 3 / 12, 0.06 * 0.02 ** 3 / 12
+    # the solid ellipse with semi-axes a2, a3: I2 = A a3^2 / 4, I3 = A a2^2 / 4
+    assert a3 ** 2 / 4 == pytest.approx(I2 / A) and a2 ** 2 / 4 == pytest.approx(I3 / A)
+    assert a3 / a2 == pytest.approx(3.0)  # the height / width of the rectangle
+
+
+def test_beam_in_the_page_and_in_gltf_skinned_on_its_nodes(tmp_path, flexible):
+    """The page carries the tube; glTF carries it as a skin on the beam's nodes: skinning it as
+    any glTF reader does (joint matrices from the animation, inverse bind matrices, weights)
+    puts the rings on the nodes with the section's radius at a later stored time too."""
+    pygltflib = pytest.importorskip("pygltflib")
+    model, res = flexible
+    meta = json.loads(re.search(r'id="se3dyn-meta"[^>]*>(.*?)</script>',
+                                html_page(res), re.S).group(1))
+    assert meta["tubes"] and "rod" in meta["tubes"][0]
+    path = export_gltf(res, tmp_path / "flex.glb")
+    g = pygltflib.GLTF2().load(str(path))
+    blob = g.binary_blob()
+    (skin,) = g.skins
+    names = list(res.system.node_names)
+    assert sorted(g.nodes[j].name for j in skin.joints) == sorted(model.beams[0].nodes)
+    (mesh_node,) = [nd for nd in g.nodes if nd.skin is not None]
+    prim = g.meshes[mesh_node.mesh].primitives[0]
+
+    def acc(i, dt, comps):
+        a = g.accessors[i]
+        v = g.bufferViews[a.bufferView]
+        return np.frombuffer(blob, dtype=dt, count=a.count * comps,
+                             offset=v.byteOffset + (a.byteOffset or 0)).reshape(a.count, comps)
+
+    bind = acc(prim.attributes.POSITION, np.float32, 3).astype(float)
+    joints = acc(prim.attributes.JOINTS_0, np.uint16, 4)
+    weights = acc(prim.attributes.WEIGHTS_0, np.float32, 4).astype(float)
+    ibm = acc(skin.inverseBindMatrices, np.float32, 16).reshape(-1, 4, 4).transpose(0, 2, 1)
+    k = len(res.t) - 1
+    anim = g.animations[0]
+    T = {}
+    for ch in anim.channels:
+        out = acc(anim.samplers[ch.sampler].output, np.float32,
+                  3 if ch.target.path == "translation" else 4)[k]
+        T.setdefault(ch.target.node, {})[ch.target.path] = out.astype(float)
+    J = []
+    for j in skin.joints:  # joint globals in the model's frame (the root rotation cancels out)
+        Hj = np.eye(4)
+        tr = T.get(j, {"translation": g.nodes[j].translation, "rotation": g.nodes[j].rotation})
+        Hj[:3, :3] = Rotation.from_quat(tr["rotation"]).as_matrix()
+        Hj[:3, 3] = tr["translation"]
+        J.append(Hj)
+    M = np.array(J) @ ibm
+    b4 = np.column_stack([bind, np.ones(len(bind))])
+    skinned = np.einsum("vc,vcij,vj->vi", weights, M[joints], b4)[:, :3]
+    for jj, j in enumerate(skin.joints):
+        sel = np.any((weights[:, :2] == 1.0) & (joints[:, :2] == jj), axis=1)
+        assert sel.sum() >= 16
+        i = names.index(g.nodes[j].name)
+        r = skinned[sel] - res.H[k, i, :3, 3]
+        np.testing.assert_allclose(np.linalg.norm(r, axis=1), 0.014, rtol=2e-4)
+        np.testing.assert_allclose(r.mean(axis=0), 0.0, atol=1e-5)
+
+
+def test_demo_model_visuals_lie_on_its_links_at_every_stored_time():
+    """examples/slider_crank.yaml draws its crank, rod and slider: the crank cylinder ends at
+    hinge (1) and joint (4), the rod capsule's tips at the rod's joint points (nodes 5 and 7),
+    the slider box is centred on node 8, at every stored time (the shapes move with the
+    bodies as the joints do)."""
+    model, settings = load_model(Path(__file__).parent.parent / "examples" / "slider_crank.yaml")
+    res = sd.simulate(model, t_end=0.5, step=1e-2)
+    names = list(res.system.node_names)
+    parts = {p.label.split("'")[1]: p for p in build_scene(res).parts if p.role == "visual"}
+    assert set(parts) == {"crank", "rod", "slider"}
+    x = res.H[:, :, :3, 3]
+
+    def ends(part, half):
+        P = part_pose(part, res.H[:, part.node])  # (n, 4, 4)
+        return [np.einsum("nij,j->ni", P, [0, 0, s * half, 1])[:, :3] for s in (-1, 1)]
+
+    crank = parts["crank"]
+    lo, hi = ends(crank, 0.5)
+    for e, node in ((lo, "2"), (hi, "4")):
+        np.testing.assert_allclose(e, x[:, names.index(node)], atol=1e-9)
+    rod = parts["rod"]
+    r, length = rod.params
+    a, b = ends(rod, 0.5 * length + r)  # the capsule's tips
+    np.testing.assert_allclose(a, x[:, names.index("5")], atol=1e-9)
+    np.testing.assert_allclose(b, x[:, names.index("7")], atol=1e-9)
+    c = part_pose(parts["slider"], res.H[:, parts["slider"].node])[:, :3, 3]
+    np.testing.assert_allclose(c, x[:, names.index("8")], atol=1e-12)

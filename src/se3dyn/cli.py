@@ -95,9 +95,19 @@ def _check_one(path: str, rank_max: int) -> None:
     n_free = int(np.sum(~s.node_fixed))
     bodies = int(np.sum(s.node_mass > 0))
     print(f"{path}: ok")
+    from se3dyn.analysis import off_axis_joints
+
+    for line in off_axis_joints(model):
+        print(f"  WARNING: {line}")
     nn, nj, extra = _counts(model)
     print(f"  model '{model.name}': {nn} nodes ({n_free - extra} free, {bodies} with mass),"
           f" {nj} joints, {len(model.loads)} loads")
+    x = np.array([n.position for n in model.nodes], dtype=float).reshape(-1, 3)
+    box = np.ptp(x, axis=0) if len(x) else np.zeros(3)
+    m = s.node_mass[s.node_mass > 0]
+    print(f"  length scale (SI units: m, kg, s): the nodes span {np.linalg.norm(box):.4g} m "
+          f"(box {' x '.join(f'{b:.3g}' for b in box)} m)"
+          + (f", masses {m.min():.3g} to {m.max():.3g} kg" if m.size else ""))
     from se3dyn.modelfile import ELEMENT_SECTIONS
 
     others = [f"{len(getattr(model, es.key))} {es.key}" for es in ELEMENT_SECTIONS
@@ -133,15 +143,11 @@ def _check_one(path: str, rank_max: int) -> None:
                                 subsequent_indent="    "))
         else:
             print("  no redundant constraints")
-        from se3dyn.analysis import massless_motions
+        from se3dyn.analysis import massless_message, massless_motions
 
         free = massless_motions(s)
         if free:
-            raise _Usage(f"{path}: {', '.join(free[:4])}"
-                         + (f" and {len(free) - 4} more" if len(free) > 4 else "")
-                         + " can move with no mass and no joint determining the motion: a "
-                         "simulation would stop at t = 0 (a node meant as ground needs "
-                         "'fixed: true'; a massless node needs joints that fix its motion)")
+            raise _Usage(f"{path}: a simulation would stop at t = 0: {massless_message(free)}")
     if settings:
         print("  simulation settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()))
     _check_start(path, s, settings)
@@ -261,6 +267,9 @@ def cmd_run(args) -> int:
     from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
     from se3dyn.h5 import ResultsFileError, ResultsWriter
 
+    # --quiet: no summary; what was changed (initial velocities) or looks wrong goes to stderr
+    say = print if not args.quiet else (lambda *a, **k: None)
+
     if args.threads is not None:
         sd.set_threads(args.threads)
     model, settings = _load(args.model)
@@ -272,7 +281,7 @@ def cmd_run(args) -> int:
     if args.resume is not None:
         writer, cfg, path = _resume(args, s, text)
         if writer is None:
-            print(f"{path}: the run is complete to t_end = {cfg['t_end']:g} s already; give a "
+            say(f"{path}: the run is complete to t_end = {cfg['t_end']:g} s already; give a "
                   "later --t-end to continue it")
             return 0
         cp = writer.checkpoint
@@ -302,10 +311,14 @@ def cmd_run(args) -> int:
     quiet = args.quiet or not sys.stderr.isatty()
     t_from = cp.state.t if cp is not None else float(cfg.get("t_start", 0.0))
     prog = _Progress(t_from, float(cfg["t_end"]), not quiet, cp.steps if cp is not None else 0)
-    print(f"se3dyn {sd.__version__}: {args.model} -> {path}"
+    say(f"se3dyn {sd.__version__}: {args.model} -> {path}"
           + (f" (resumed at t = {cp.state.t:g} s)" if cp is not None else ""))
+    from se3dyn.analysis import off_axis_joints
+
+    for line in off_axis_joints(model):
+        print(f"se3dyn: warning: {line}", file=sys.stderr)
     nn, nj, _ = _counts(model)
-    print(f"  {nn} nodes, {nj} joints; {s.nq} unknowns, {s.nm} "
+    say(f"  {nn} nodes, {nj} joints; {s.nq} unknowns, {s.nm} "
           f"multipliers; t_end = {cfg['t_end']} s, h = {cfg['step']} s, "
           f"rho_inf = {cfg.get('rho_inf', 0.9)}, {cfg.get('formulation', 'index2')}")
     t0 = time.perf_counter()
@@ -373,17 +386,20 @@ def cmd_run(args) -> int:
         print(f"  simulation failed; {writer.rows} rows kept in {path}", file=sys.stderr)
         return 1
     st = res.stats
-    print(f"  {stats['steps']} steps, {stats['newton_iterations']} Newton iterations "
+    st.update(_energy_jump_in(path, st))
+    say(f"  {stats['steps']} steps, {stats['newton_iterations']} Newton iterations "
           f"(max {st['max_iterations']} per step), wall time {wall:.2f} s")
     if st.get("condensed"):
         names = ", ".join(repr(n) for n in st["condensed"][:8]) + (
             f" and {len(st['condensed']) - 8} more" if len(st["condensed"]) > 8 else "")
-        print(f"  rigid joints {names} condensed for the time loop (matrix "
+        say(f"  rigid joints {names} condensed for the time loop (matrix "
               f"{st['matrix_size']}; every node and joint reported)")
     for line in run_report(st):
-        print("  " + line)
-    print(f"  max constraint violation {st['max_constraint']:.2e}")
-    print(f"  results: {path} ({writer.rows} rows)")
+        say("  " + line)
+        if args.quiet and ("WARNING" in line or line.startswith("initial velocities")):
+            print(f"se3dyn: warning: {line}", file=sys.stderr)  # changes and problems: said
+    say(f"  max constraint violation {st['max_constraint']:.2e}")
+    say(f"  results: {path} ({writer.rows} rows)")
     return 0
 
 
@@ -550,6 +566,10 @@ def cmd_info(args) -> int:
             for k, label in keys if k in st]
     if have:
         print("  statistics: " + ", ".join(have))
+    if len(res.t) > 1:
+        from se3dyn.simulate import energy_jump, energy_rows
+
+        st = dict(st, energy_jump=energy_jump(res.t, energy_rows(res)))
     for line in run_report(st):
         print("  " + line)
     if len(res.constraint):
@@ -618,6 +638,8 @@ def cmd_plot(args) -> int:
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     xunit = channel_unit(xname, res) if xname != "time" else "s"
     axes[-1, 0].set_xlabel(f"{xname} [{xunit}]" if xunit else xname)
+    if args.x is not None and list(groups) == ["m"] and xunit == "m":
+        axes[0, 0].set_aspect("equal", adjustable="datalim")  # lengths against a length
     what = ", ".join(sorted({name.rsplit("/", 1)[0] for name, _ in data}))
     title = args.title or (f"{Path(args.results).name}: {what}"
                            + (f" against {xname}" if args.x else ""))
@@ -650,8 +672,8 @@ def _figure_path(output: str | None, default: Path) -> Path:
 
 
 def cmd_export(args) -> int:
-    """Export channels of a results file to CSV (header: time and channel names), or the
-    animation to glTF (se3dyn.viewer)."""
+    """Export channels of a results file to CSV (header: time and channel names with their
+    units, ``name [unit]``), or the animation to glTF (se3dyn.viewer)."""
     from se3dyn.channels import list_channels
 
     res = _read(args.results)
@@ -661,10 +683,14 @@ def cmd_export(args) -> int:
         path = _viewer("export_gltf", res, args.gltf)
         print(f"wrote {path}: {len(res.t)} times, t = {res.t[0]:g} ... {res.t[-1]:g} s")
         return 0
+    from se3dyn.channels import channel_unit
+
     names = args.channels or [n for n in list_channels(res) if n != "time"]  # time: column 1
     data = _channels(res, names)
     cols = np.column_stack([res.t] + [y for _, y in data])
-    header = ",".join(["time"] + [n.replace(",", "%2C") for n, _ in data])
+    # "name [unit]" (SI; [1]: dimensionless)
+    header = ",".join(["time [s]"] + [f"{n.replace(',', '%2C')} [{channel_unit(n, res) or 1}]"
+                                      for n, _ in data])
     try:
         np.savetxt(args.csv, cols, delimiter=",", header=header, comments="", fmt="%.17g")
     except OSError as exc:
@@ -738,6 +764,27 @@ _OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step",
               "initial_velocities", "global_error")
 
 
+def _energy_jump_in(path, stats: dict) -> dict:
+    """``{"energy_jump": ...}`` from the energies stored in a results file when the energy
+    balance warning fires (:func:`se3dyn.simulate.energy_jump`), else nothing."""
+    from se3dyn.simulate import SCALARS, energy_jump, energy_warning
+
+    if "energy_jump" in stats or not energy_warning(stats.get("energy_balance_error", 0.0),
+                                                    stats.get("energy_scale", 0.0)):
+        return {}
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            c = [f["energy/" + k][:] for k in SCALARS[:6]]
+            t = f["time"][:]
+    except (OSError, KeyError):
+        return {}
+    n = min(len(t), *(len(x) for x in c))
+    jump = energy_jump(t[:n], np.stack([x[:n] for x in c], axis=1))
+    return {"energy_jump": jump} if jump is not None else {}
+
+
 def run_report(stats: dict) -> list[str]:
     """Summary lines on what a run's results may hide: the initial velocities changed to
     satisfy the joints, the local errors of an adaptive run, and the energy balance error
@@ -778,10 +825,12 @@ def run_report(stats: dict) -> list[str]:
         out.append(f"global error estimated until t = {stats['global_error_until']:.9g} s "
                    f"only (its companion run stopped: {stats.get('global_error_failure', '')})")
     if "energy_balance_error" in stats:
+        from se3dyn.simulate import energy_cause, energy_warning
+
         err, scale = stats["energy_balance_error"], stats["energy_scale"]
         rel = f"{100 * err / scale:.3g} % of" if scale > 0 else "with no"
-        warn = "  WARNING: large; the step is probably too large for the motion" if (
-            err > 0.1 * scale and err > 1e-12) else ""
+        warn = ("  WARNING: large" + energy_cause(err, stats.get("energy_jump"))
+                if energy_warning(err, scale) else "")
         out.append(f"energy balance error {err:.3e} J ({rel} the energy in play, "
                    f"{scale:.3e} J){warn}")
     if stats.get("condensed_until") is not None:
@@ -844,7 +893,9 @@ def _run_args(r) -> None:
                    help="continue the run of this results file (finished, failed, interrupted "
                    "or killed) from its last checkpoint, bit for bit as one uninterrupted run; "
                    "with --t-end, further than it was planned")
-    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--quiet", action="store_true",
+                   help="no progress bar and no summary (what it changed or flags: one line "
+                        "each on stderr)")
     r.add_argument("--threads", type=_whole_positive, metavar="N",
                    help="threads of the compiled engine (default: SE3DYN_THREADS or the "
                    "cores; the results do not depend on it)")

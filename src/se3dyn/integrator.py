@@ -57,6 +57,28 @@ class SolverMemory:
         self.ref.flags.writeable = False
 
 
+#: Largest number of unknowns for which a singular start is diagnosed (a dense SVD, as check's).
+DIAGNOSE_MAX = 3000
+
+
+def _singular_start_cause(s: System) -> str:
+    """Why the initial acceleration matrix is singular: the motions with no mass found by
+    :func:`se3dyn.analysis.massless_motions` (the diagnosis of ``se3dyn check``), else the
+    typical causes."""
+    if s.nq <= DIAGNOSE_MAX:
+        from se3dyn.analysis import massless_message, massless_motions
+
+        try:
+            free = massless_motions(s)
+        except (np.linalg.LinAlgError, ValueError):  # a non-finite state: no diagnosis
+            free = []
+        if free:
+            return massless_message(free)
+    return ("typical causes: redundant constraints not detected at the start (a mechanism "
+            "started in a singular configuration), a free massless node whose motion no joint "
+            "determines, or a non-finite state")
+
+
 def _velocity_changes(s: System, v: np.ndarray) -> list[dict]:
     """The free nodes with mass whose velocities in ``v`` (nq,) differ from the model's initial
     ones by more than round-off (1e-9 of the largest velocity, linear and angular apart)."""
@@ -360,11 +382,8 @@ class GeneralizedAlpha:
         stp = _stepper(s, False, dropped, ws, keep=keep)
         code = stp.solve_values(ev.values, rhs)
         if code != 0 or not np.all(np.isfinite(rhs)):
-            raise SimulationError(
-                f"t={t0:.6g} (initial accelerations): the iteration matrix is singular; typical "
-                "causes: redundant constraints not detected at the start (a mechanism started "
-                "in a singular configuration), a free massless node whose motion no joint "
-                "determines, or a non-finite state")
+            raise SimulationError(f"t={t0:.6g} (initial accelerations): the iteration matrix "
+                                  f"is singular: {_singular_start_cause(s)}")
         # powers at t0 (velocity-level: vd does not enter)
         return State(t=t0, H=H, HJ=HJ, v=v, vd=rhs[:nq].copy(), a=rhs[:nq].copy(),
                      lam=rhs[nq:].copy(), alpha=s.alpha0.copy(), power=ev.energy[3:6].copy(),
@@ -373,35 +392,17 @@ class GeneralizedAlpha:
     @staticmethod
     def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,
                           v0: np.ndarray) -> np.ndarray:
-        """Velocities satisfying the velocity constraints ``Phi_q v = 0``.
-
-        First the unknowns without mass (massless nodes, joint coordinates), which the
-        constraints determine, are solved by least squares with the given body velocities held:
-        consistent body velocities are kept exactly. If that leaves a violation, the closest
-        consistent velocity in the mass-weighted norm is taken instead.
-        """
+        """Velocities satisfying the velocity constraints ``Phi_q v = 0`` with the given speeds
+        kept (:func:`se3dyn.kinematics.project_velocities`; the redundant equations
+        ``solver.drop`` left out); the changes are reported by the caller per node."""
         import scipy.sparse as sp
-        import scipy.sparse.linalg as spla
 
-        A = sp.csr_matrix(solver.matrix(values))
+        from se3dyn.kinematics import project_velocities
+
+        A = solver.matrix(values)
+        A = sp.csr_matrix(A) if sp.issparse(A) else A
         nq = s.nq
-        Wm = A[:nq, :nq]
-        Phi = A[nq:, :nq]
-        body = np.abs(Wm.diagonal()) > 0
-        scale = max(float(np.abs(v0).max(initial=0.0)), 1e-300)
-        if nq <= 3000:
-            PU = Phi[:, ~body].toarray()
-            rhs = -(Phi[:, body] @ v0[body])
-            vU = np.linalg.lstsq(PU, rhs, rcond=None)[0] if PU.size else np.zeros(0)
-            v = v0.copy()
-            v[~body] = vU
-            if np.abs(Phi @ v).max(initial=0.0) <= 1e-12 * scale * s.length_scale:
-                return v
-        w = 1e-12 * max(float(np.abs(Wm.diagonal()).max(initial=0.0)), 1e-300)
-        W = Wm + w * sp.identity(nq)
-        K = sp.bmat([[W, Phi.T], [Phi, None]], format="csc")
-        sol = spla.spsolve(K, np.concatenate([W @ v0, np.zeros(s.nm)]))
-        return np.asarray(sol[:nq])
+        return project_velocities(s, A[:nq, :nq], A[nq:, :nq], v0, dropped=solver.drop)[0]
 
     # -----------------------------------------------------------------------------------------
     def step(self, s: System, st: State, h: float, solver: LinearSolver | None = None,

@@ -19,7 +19,8 @@ from se3dyn.model import Model
 from se3dyn.results import Results
 from se3dyn.system import System, Workspace, system_of
 
-__all__ = ["simulate", "check_settings", "energy_balance_check", "SCALARS"]
+__all__ = ["simulate", "check_settings", "energy_balance_check", "energy_jump",
+           "energy_warning", "energy_cause", "energy_rows", "SCALARS"]
 
 
 #: Most steps of one fixed-step run (the compiled loop counts steps in 32-bit integers), and
@@ -1001,8 +1002,7 @@ def energy_balance_check(res: Results) -> tuple[float, float]:
     """
     if not len(res.t):
         return 0.0, 0.0
-    c = np.stack([res.kinetic, res.potential, res.spring, res.work_actuators, res.work_loads,
-                  res.dissipation], axis=1)
+    c = energy_rows(res)
     return _balance_and_scale(c, c[0])
 
 
@@ -1020,6 +1020,66 @@ def _balance_and_scale(c: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
     return err, scale
 
 
+def energy_jump(t: np.ndarray, c: np.ndarray) -> dict | None:
+    """Where the energy balance changed most between two consecutive stored rows.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Stored times.
+    c : ndarray, shape (n, >= 6)
+        Energies and works in the order of :data:`SCALARS` (kinetic, potential, spring,
+        actuator work, load work, dissipated).
+
+    Returns
+    -------
+    dict or None
+        ``t0``, ``t1`` (s): the rows around the largest change; ``jump`` (J): the change of
+        ``E - W_actuators - W_loads + dissipation`` between them; ``first``: whether they are the
+        run's first two rows. None with fewer than two rows.
+    """
+    c = np.asarray(c, dtype=float)
+    if len(c) < 2:
+        return None
+    b = c[:, 0] + c[:, 1] + c[:, 2] - c[:, 3] - c[:, 4] + c[:, 5]
+    d = np.diff(b)
+    k = int(np.argmax(np.abs(d)))
+    return dict(t0=float(t[k]), t1=float(t[k + 1]), jump=float(d[k]), first=k == 0)
+
+
+def energy_warning(err: float, scale: float, jump: dict | None = None) -> str | None:
+    """The warning on a large energy balance error (above 10 % of the energy in play), with
+    when and how large its largest jump between stored rows was (:func:`energy_jump`); None
+    when the balance is fine."""
+    if not (err > 0.1 * scale and err > 1e-12):
+        return None
+    return (f"energy balance error {err:.3g} J is {100 * err / max(scale, 1e-300):.3g} % of "
+            f"the energy in play in the run ({scale:.3g} J)" + energy_cause(err, jump))
+
+
+def energy_cause(err: float, jump: dict | None) -> str:
+    """The end of :func:`energy_warning`: the largest jump (when known) and the likely cause,
+    starting with ``"; "`` or ``": "``."""
+    text = ""
+    if jump is not None:
+        share = abs(jump["jump"]) / max(err, 1e-300)
+        text = (f"; its largest jump, {jump['jump']:+.3g} J ({100 * share:.3g} % of the "
+                f"error), between t = {jump['t0']:.6g} and {jump['t1']:.6g} s")
+        if jump["first"] and share >= 0.5:
+            return text + (" (the first step): a start the step does not resolve, e.g. "
+                           "velocities or forces switched on at t0 (an impulsive start), rather "
+                           "than a step too large for the motion after it")
+    return text + (": the step is probably too large for the motion (the results may be far "
+                   "from the true motion; try a smaller step, or rho_inf < 1 with the index-3 "
+                   "form)")
+
+
+def energy_rows(res: Results) -> np.ndarray:
+    """The energies and works of a result's rows, (n, 6) in the order of :data:`SCALARS`."""
+    return np.stack([res.kinetic, res.potential, res.spring, res.work_actuators,
+                     res.work_loads, res.dissipation], axis=1)
+
+
 def _energy_check(res: Results) -> None:
     import warnings
 
@@ -1030,12 +1090,14 @@ def _energy_check(res: Results) -> None:
     else:
         err, scale = energy_balance_check(res)
         res.stats.update(energy_balance_error=err, energy_scale=scale)
-    if err > 0.1 * scale and err > 1e-12:
-        warnings.warn(Se3dynWarning(
-            f"energy balance error {err:.3g} J is {100 * err / max(scale, 1e-300):.3g} % of "
-            f"the energy in play in the run ({scale:.3g} J): the step is probably too large "
-            "for the motion (the results may be far from the true motion; try a smaller step, "
-            "or rho_inf < 1 with the index-3 form)"), stacklevel=3)
+    if energy_warning(err, scale) is None:
+        return
+    jump = None
+    if len(res.t) == res.stats.get("rows", len(res.t)):  # every row held (not streamed)
+        jump = energy_jump(res.t, energy_rows(res))
+        if jump is not None:
+            res.stats["energy_jump"] = jump
+    warnings.warn(Se3dynWarning(energy_warning(err, scale, jump)), stacklevel=3)
 
 
 def _global_error_check(res: Results) -> None:

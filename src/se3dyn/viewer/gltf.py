@@ -7,6 +7,10 @@ picture) and one animation, ``motion``:
 * per model node a glTF node of the same name whose translation and rotation are the node frame
   ``H = (R, x)``; its children carry the solids (meshes) at their fixed poses in the node's
   material frame (translation, rotation and scale of ``part.matrix @ diag(scale, 1)``);
+* per beam a skinned mesh (:class:`~se3dyn.viewer.shapes.Tube`): the tube in the initial
+  configuration, a ``skin`` whose joints are the beam's glTF nodes with the inverse initial
+  node frames as inverse bind matrices, and per vertex the two nodes of its element with the
+  weights ``1 - w``, ``w``: any glTF viewer bends it as the page does;
 * per moving (non-fixed) node two channels, ``translation`` (x) and ``rotation`` (the unit
   quaternion of R, ``(x, y, z, w)``, sign-continuous in time), LINEAR, sampled at the stored
   times of the results (one shared input accessor, ``min``/``max`` = first and last time).
@@ -27,7 +31,7 @@ from se3dyn.viewer.shapes import Scene, ViewerError, build_scene, rgb
 
 __all__ = ["export_gltf", "unit_solid"]
 
-_FLOAT, _UINT = 5126, 5125  # glTF component types
+_FLOAT, _UINT, _USHORT = 5126, 5125, 5123  # glTF component types
 _ARRAY, _ELEMENTS = 34962, 34963  # buffer view targets
 _ROLE_PBR = {"body": (0.05, 0.55), "visual": (0.05, 0.55), "joint": (0.35, 0.35),
              "link": (0.1, 0.6), "ground": (0.0, 0.9)}  # metallic, roughness
@@ -109,8 +113,8 @@ class _Buffer:
                                                byteLength=len(raw), target=target))
         self.chunks.append(raw)
         self.size += len(raw)
-        comp = _UINT if data.dtype == np.uint32 else _FLOAT
-        count = len(data) if type_ == "SCALAR" else data.shape[0]
+        comp = {np.dtype(np.uint32): _UINT, np.dtype(np.uint16): _USHORT}.get(data.dtype, _FLOAT)
+        count = data.shape[0]
         acc = G.Accessor(bufferView=len(self.g.bufferViews) - 1, componentType=comp, count=count,
                          type=type_)
         if minmax:
@@ -131,6 +135,46 @@ def _trs(part) -> tuple[list, list, list]:
     q = Rotation.from_matrix(R).as_quat()
     return ([float(x) for x in part.matrix[:3, 3]], [float(x) for x in q],
             [float(x) for x in part.scale])
+
+
+def _linear(color: str) -> list[float]:
+    """glTF base colour (linear RGB, alpha 1) of an sRGB ``"#rrggbb"``."""
+    srgb = np.array(rgb(color)) / 255.0
+    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    return [*(float(x) for x in lin), 1.0]
+
+
+def _tubes(g, buf: _Buffer, scene: Scene, node_ids: list[int]) -> None:
+    """The beams as skinned meshes (module docstring), children of the root node."""
+    import pygltflib as G
+
+    for tb in scene.tubes:
+        used = np.unique(tb.nodes)
+        joint = np.searchsorted(used, tb.nodes)  # (V, 2) indices into the skin's joints
+        J4 = np.zeros((len(joint), 4), dtype=np.uint16)
+        J4[:, :2] = joint
+        W4 = np.zeros((len(joint), 4), dtype=np.float32)
+        W4[:, 0], W4[:, 1] = 1.0 - tb.weight, tb.weight
+        ibm = np.linalg.inv(tb.frames0[used])  # (J, 4, 4), glTF stores columns first
+        ibm_acc = buf.accessor(np.ascontiguousarray(ibm.transpose(0, 2, 1)).reshape(-1, 16)
+                               .astype(np.float32), "MAT4")
+        g.skins.append(G.Skin(name=tb.label, inverseBindMatrices=ibm_acc,
+                              joints=[node_ids[i] for i in used]))
+        g.materials.append(G.Material(name=f"beam {tb.color}", doubleSided=True,
+                                      pbrMetallicRoughness=G.PbrMetallicRoughness(
+                                          baseColorFactor=_linear(tb.color),
+                                          metallicFactor=0.25, roughnessFactor=0.45)))
+        prim = G.Primitive(attributes=G.Attributes(
+            POSITION=buf.accessor(tb.bind.astype(np.float32), "VEC3", target=_ARRAY,
+                                  minmax=True),
+            NORMAL=buf.accessor(tb.bind_normal.astype(np.float32), "VEC3", target=_ARRAY),
+            JOINTS_0=buf.accessor(J4, "VEC4", target=_ARRAY),
+            WEIGHTS_0=buf.accessor(W4, "VEC4", target=_ARRAY)),
+            indices=buf.accessor(tb.faces.reshape(-1).astype(np.uint32), "SCALAR",
+                                 target=_ELEMENTS), material=len(g.materials) - 1)
+        g.meshes.append(G.Mesh(name=tb.label, primitives=[prim]))
+        g.nodes.append(G.Node(name=tb.label, mesh=len(g.meshes) - 1, skin=len(g.skins) - 1))
+        g.nodes[0].children.append(len(g.nodes) - 1)
 
 
 def export_gltf(res, path, *, model=None, model_path=None, mesh_dirs=(), scene: Scene | None =
@@ -177,7 +221,7 @@ def export_gltf(res, path, *, model=None, model_path=None, mesh_dirs=(), scene: 
     M = len(scene.node_names)
     g = G.GLTF2(asset=G.Asset(version="2.0", generator=f"se3dyn {se3dyn.__version__}"))
     g.scenes, g.nodes, g.meshes, g.materials = [], [], [], []
-    g.accessors, g.bufferViews, g.animations = [], [], []
+    g.accessors, g.bufferViews, g.animations, g.skins = [], [], [], []
     buf = _Buffer(g)
 
     # materials and meshes: one per (geometry, colour, role)
@@ -199,13 +243,10 @@ def export_gltf(res, path, *, model=None, model_path=None, mesh_dirs=(), scene: 
         mk = (part.color, part.role)
         if mk not in mat_of:
             metal, rough = _ROLE_PBR[part.role]
-            r, gg, b = rgb(part.color)
-            srgb = np.array([r, gg, b]) / 255.0
-            lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
             g.materials.append(G.Material(
                 name=f"{part.role} {part.color}",
                 pbrMetallicRoughness=G.PbrMetallicRoughness(
-                    baseColorFactor=[*(float(x) for x in lin), 1.0], metallicFactor=metal,
+                    baseColorFactor=_linear(part.color), metallicFactor=metal,
                     roughnessFactor=rough)))
             mat_of[mk] = len(g.materials) - 1
         pos, nrm, ind = geo_cache[gk]
@@ -234,9 +275,12 @@ def export_gltf(res, path, *, model=None, model_path=None, mesh_dirs=(), scene: 
         g.nodes.append(G.Node(name=part.label, mesh=mesh_index(part), translation=tr,
                               rotation=rot, scale=sc))
         g.nodes[node_ids[part.node]].children.append(ci)
+    _tubes(g, buf, scene, node_ids)
     for n_ in g.nodes:  # glTF: no empty children lists
         if n_.children == []:
             n_.children = None
+    if not g.skins:
+        g.skins = None
     g.scenes.append(G.Scene(name=scene.model_name, nodes=[0]))
     g.scene = 0
 

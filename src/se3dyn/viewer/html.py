@@ -7,8 +7,12 @@ The page holds, inline:
 * ``#se3dyn-blob-NAME``: base64 of deflated typed arrays (:mod:`se3dyn.viewer.encode`):
   ``frames`` (quantised node frames, uint16 (n, M, 6)), ``part_matrix`` (float32 (P, 12): the
   first three rows of ``matrix @ diag(scale, 1)`` of every part), ``part_info`` (int32 (P, 5):
-  node, geometry, colour 0xRRGGBB, role, label), ``channels`` (float32 (C, n)), and
-  ``mesh<k>_v`` (float32 (nv, 3)) / ``mesh<k>_f`` (uint32 (nf, 3)) per mesh file;
+  node, geometry, colour 0xRRGGBB, role, label), ``channels`` (float32 (C, n)),
+  ``mesh<k>_v`` (float32 (nv, 3)) / ``mesh<k>_f`` (uint32 (nf, 3)) per mesh file, and the
+  beams' tubes (:class:`~se3dyn.viewer.shapes.Tube`, all beams in one mesh): ``tube_node``
+  (int32 (V, 2)), ``tube_w`` (float32 (V,)), ``tube_p`` and ``tube_n`` (float32 (V, 6): the
+  vertex and its normal in the frames of the two nodes), ``tube_rgb`` (uint8 (V, 3)) and
+  ``tube_f`` (uint32 (F, 3));
 * three.js (``three.core.js``, ``three.module.js``) and ``OrbitControls.js``, vendored from the
   npm package ``three`` (see ``static/README.md`` and ``static/LICENSE-three.txt``), deflated;
 * the application module ``static/viewer.js`` and a small loader that inflates the libraries into
@@ -207,6 +211,21 @@ def page_data(res, scene: Scene, *, channels=None, plot=None,
         info[p] = (part.node, keys.index(key), (r << 16) | (gg << 8) | b, ROLES.index(part.role),
                    labels.index(part.label))
     blobs += [pack("part_matrix", mats), pack("part_info", info)]
+    tubes = scene.tubes
+    if tubes:
+        first = np.cumsum([0] + [len(tb.weight) for tb in tubes])
+        rgbs = np.concatenate([np.tile(rgb(tb.color), (len(tb.weight), 1)) for tb in tubes])
+        blobs += [
+            pack("tube_node", np.concatenate([tb.nodes for tb in tubes]).astype(np.int32)),
+            pack("tube_w", np.concatenate([tb.weight for tb in tubes]).astype(np.float32)),
+            pack("tube_p", np.concatenate([tb.local.reshape(-1, 6) for tb in tubes])
+                 .astype(np.float32)),
+            pack("tube_n", np.concatenate([tb.normal.reshape(-1, 6) for tb in tubes])
+                 .astype(np.float32)),
+            pack("tube_rgb", rgbs.astype(np.uint8)),
+            pack("tube_f", np.concatenate([tb.faces + f for tb, f in zip(tubes, first,
+                                                                          strict=False)])
+                 .astype(np.uint32))]
     for k, (V, F) in enumerate(scene.meshes):
         blobs += [pack(f"mesh{k}_v", np.asarray(V, dtype=np.float32)),
                   pack(f"mesh{k}_f", np.asarray(F, dtype=np.uint32))]
@@ -223,8 +242,9 @@ def page_data(res, scene: Scene, *, channels=None, plot=None,
         if part.role in ("body", "visual") and colors[part.node] is None:
             colors[part.node] = part.color
     # bounds of the drawing: node positions over the run and the body sizes
-    ext = max([float(np.max(np.abs(p.scale))) for p in scene.parts if p.role in ("body",
-               "visual") and p.kind != "mesh"] + [2.0 * scene.glyph])
+    ext = max([float(np.max(np.abs(p.scale))) if p.kind != "capsule" else
+               float(p.params[1] + 2.0 * p.params[0]) for p in scene.parts
+               if p.role in ("body", "visual") and p.kind != "mesh"] + [2.0 * scene.glyph])
     blo, bhi = scene.lo - 0.5 * ext, scene.hi + 0.5 * ext
     path = (res.stats or {}).get("path")
     meta = {
@@ -239,6 +259,7 @@ def page_data(res, scene: Scene, *, channels=None, plot=None,
         "bounds": {"lo": blo.tolist(), "hi": bhi.tolist()},
         "geometries": geoms, "roles": list(ROLES), "labels": labels,
         "meshes": len(scene.meshes),
+        "tubes": [tb.label for tb in scene.tubes],
         "bodies": list(scene.bodies), "traces": list(scene.traces), "colors": colors,
         "channels": {"names": names, "units": units, "note": note},
         "plot": plot,

@@ -28,6 +28,9 @@ Default picture (nodes without ``visuals``):
   node's material frame, so they stay on the joint axis as the mechanism moves;
 * **links**: a thin rod from each node to each joint point it carries (the body's arms);
 * **ground**: a pyramid on a plate under every fixed node, pointing against gravity;
+* **beams**: a :class:`Tube` per beam, drawn by default (the model's ``visuals`` do not replace
+  it): the element's centre line with an elliptic section whose area and second moments are the
+  beam's (:func:`beam_section`), skinned on the beam's nodes (see :class:`Tube`);
 * the gravity direction (drawn by the page in its axes inset).
 """
 
@@ -41,8 +44,8 @@ import numpy as np
 
 from se3dyn.viewer.errors import ViewerError
 
-__all__ = ["Part", "Scene", "ViewerError", "build_scene", "equivalent_box", "PALETTE",
-           "resolve_model"]
+__all__ = ["Part", "Scene", "Tube", "ViewerError", "build_scene", "equivalent_box", "PALETTE",
+           "resolve_model", "beam_section", "beam_tube", "tube_vertices"]
 
 #: Body colours, in order of the bodies (colour-blind friendly, no greys).
 PALETTE = ("#4e79a7", "#f28e2b", "#59a14f", "#e15759", "#76b7b2", "#edc948", "#b07aa1",
@@ -54,6 +57,10 @@ POINT_COLOR = "#7a7f87"
 #: Smallest side of a default body box relative to its largest (flat or slender bodies).
 MIN_ASPECT = 0.08
 ROLES = ("body", "visual", "joint", "link", "ground")
+#: Beam colour (steel blue-grey, apart from the body palette).
+BEAM_COLOR = "#8a96a3"
+#: Points on the outline of a beam's section, and section rings per element.
+TUBE_SIDES, TUBE_RINGS = 16, 4
 
 
 
@@ -104,6 +111,55 @@ class Part:
         return self.kind
 
 
+@dataclass(frozen=True)
+class Tube:
+    """A deformable tube along a beam, skinned on the beam's nodes.
+
+    Vertex ``v`` follows the frames of two nodes ``nodes[v]`` (those of its element) by linear
+    blend skinning: at time t its inertial position is
+
+        (1 - w_v) H_a(t) p_v,a + w_v H_b(t) p_v,b,        (a, b) = nodes[v],
+
+    with ``p`` the vertex in the material frames of the two nodes in the initial configuration
+    (so both terms agree at t0) and ``w`` the vertex's arc parameter along the element, 0 at
+    node a and 1 at node b. The normals blend alike (then normalised). The page and glTF
+    (a ``skin`` with the nodes as joints) draw the same mesh.
+
+    Attributes
+    ----------
+    label : str
+    color : str
+        ``"#rrggbb"``.
+    nodes : ndarray of int, shape (V, 2)
+        Indices into ``scene.node_names``.
+    weight : ndarray, shape (V,)
+        Weight of the second node.
+    local : ndarray, shape (V, 2, 3)
+        The vertex in the material frames of the two nodes.
+    normal : ndarray, shape (V, 2, 3)
+        Its unit normal in the same frames.
+    bind : ndarray, shape (V, 3)
+        The vertex in the inertial frame, initial configuration.
+    bind_normal : ndarray, shape (V, 3)
+        Its unit normal there.
+    faces : ndarray of int, shape (F, 3)
+        Triangles (counter-clockwise seen from outside).
+    frames0 : ndarray, shape (M, 4, 4)
+        The initial node frames that ``local`` refers to (``bind = H0 local``).
+    """
+
+    label: str
+    color: str
+    nodes: np.ndarray
+    weight: np.ndarray
+    local: np.ndarray
+    normal: np.ndarray
+    bind: np.ndarray
+    bind_normal: np.ndarray
+    faces: np.ndarray
+    frames0: np.ndarray
+
+
 @dataclass
 class Scene:
     """Everything the viewer draws, besides the motion itself.
@@ -120,6 +176,8 @@ class Scene:
         Unit vector against gravity (e_z without gravity).
     glyph : float
         Size of the joint glyphs (m): the scale of frames, traces and symbols.
+    tubes : list of Tube
+        The beams.
     bodies : list of int
         Nodes drawn as bodies (default boxes or visuals), in order.
     traces : list of int
@@ -134,6 +192,7 @@ class Scene:
     node_names: tuple
     node_fixed: np.ndarray
     parts: list = field(default_factory=list)
+    tubes: list = field(default_factory=list)
     meshes: list = field(default_factory=list)
     gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
     up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
@@ -180,6 +239,114 @@ def equivalent_box(mass: float, inertia: np.ndarray) -> tuple[np.ndarray, np.nda
     floor = MIN_ASPECT * sides.max()
     sides = np.maximum(sides, floor)
     return sides, Q
+
+
+def beam_section(stiffness: np.ndarray) -> tuple[float, float]:
+    """Semi-axes of the solid ellipse with a beam section's area and second moments.
+
+    An ellipse with semi-axes ``a2`` (along section axis 2) and ``a3`` (axis 3) has
+    ``A = pi a2 a3``, ``I2 = A a3^2 / 4`` and ``I3 = A a2^2 / 4``; with the section stiffness
+    ``diag(EA, GA2, GA3, GJ, EI2, EI3)`` of one material, ``I2 / A = EI2 / EA``. A solid circle
+    of radius r gives ``a2 = a3 = r`` exactly; other shapes an ellipse of the same bending
+    proportions.
+
+    Parameters
+    ----------
+    stiffness : ndarray, shape (6, 6)
+        Section stiffness (translation first), :attr:`se3dyn.model.BeamSpec.stiffness`.
+
+    Returns
+    -------
+    a2, a3 : float
+        Semi-axes (m).
+    """
+    K = np.diag(np.asarray(stiffness, dtype=float))
+    return 2.0 * float(np.sqrt(K[5] / K[0])), 2.0 * float(np.sqrt(K[4] / K[0]))
+
+
+def beam_tube(spec, idx: dict, H0: np.ndarray, color: str = "") -> Tube:
+    """The :class:`Tube` of a beam in its stress-free configuration.
+
+    Each element ``e`` (frames ``F_e``, ``F_e+1`` of ``spec.reference``) gets ``TUBE_RINGS + 1``
+    section rings at the frames of the element's own interpolation ``F_e exp(s d0)``, ``d0 =
+    log(F_e^-1 F_e+1)`` (:mod:`se3dyn.elements.beam`), ``s`` in [0, 1]; each ring is the
+    ellipse of :func:`beam_section` in the section plane (axes 2 and 3), ``TUBE_SIDES`` points
+    (beams of more than 100 elements: the two end rings and 8 points).
+
+    Parameters
+    ----------
+    spec : BeamSpec
+    idx : dict
+        Node name -> index into the scene's nodes.
+    H0 : ndarray, shape (M, 4, 4)
+        Initial node frames (inertial), the frames the local coordinates refer to.
+    color : str, optional
+        ``"#rrggbb"`` (default :data:`BEAM_COLOR`).
+
+    Returns
+    -------
+    Tube
+    """
+    from se3dyn import lie
+
+    a2, a3 = beam_section(spec.stiffness)
+    F = np.asarray(spec.reference, dtype=float)
+    fine = len(F) - 1 <= 100  # long beams: fewer facets (the page stays light to draw)
+    sides, rings = (TUBE_SIDES, TUBE_RINGS) if fine else (8, 1)
+    th = 2.0 * np.pi * np.arange(sides) / sides
+    ring = np.stack([np.zeros_like(th), a2 * np.cos(th), a3 * np.sin(th)], axis=1)  # (S, 3)
+    rn = np.stack([np.zeros_like(th), np.cos(th) / a2, np.sin(th) / a3], axis=1)
+    rn /= np.linalg.norm(rn, axis=1, keepdims=True)
+    s = np.arange(rings + 1) / rings
+    nodes, weight, bind, nrm, faces = [], [], [], [], []
+    per = (rings + 1) * sides
+    S = sides
+    for e in range(len(F) - 1):
+        d0 = lie.log_se3(lie.inverse(F[e]) @ F[e + 1])
+        Fs = F[e] @ lie.exp_se3(s[:, None] * d0)  # (R, 4, 4)
+        bind.append((np.einsum("rij,kj->rki", Fs[:, :3, :3], ring)
+                     + Fs[:, None, :3, 3]).reshape(-1, 3))
+        nrm.append(np.einsum("rij,kj->rki", Fs[:, :3, :3], rn).reshape(-1, 3))
+        weight.append(np.repeat(s, S))
+        nodes.append(np.tile([idx[spec.nodes[e]], idx[spec.nodes[e + 1]]], (per, 1)))
+        r, k = np.meshgrid(np.arange(rings), np.arange(S), indexing="ij")
+        v0 = e * per + r * S + k
+        v1 = e * per + r * S + (k + 1) % S
+        faces.append(np.concatenate([np.stack([v0, v1 + S, v0 + S], -1).reshape(-1, 3),
+                                     np.stack([v0, v1, v1 + S], -1).reshape(-1, 3)]))
+    nodes_ = np.concatenate(nodes).astype(np.int64)
+    bind_ = np.concatenate(bind)
+    nrm_ = np.concatenate(nrm)
+    Hn = np.asarray(H0, dtype=float)[nodes_]  # (V, 2, 4, 4)
+    local = np.einsum("vnji,vnj->vni", Hn[..., :3, :3], bind_[:, None, :] - Hn[..., :3, 3])
+    normal = np.einsum("vnji,vj->vni", Hn[..., :3, :3], nrm_)
+    return Tube(f"beam {spec.name!r} ({len(F) - 1} elements, section {2 * a2:.3g} x "
+                f"{2 * a3:.3g} m)", color or BEAM_COLOR, nodes_, np.concatenate(weight),
+                local, normal, bind_, nrm_, np.concatenate(faces).astype(np.int64),
+                np.asarray(H0, dtype=float))
+
+
+def tube_vertices(tube: Tube, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and unit normals of a tube's vertices for node frames ``H``.
+
+    Parameters
+    ----------
+    tube : Tube
+    H : ndarray, shape (..., M, 4, 4)
+        Node frames (inertial), e.g. ``Results.H`` or one row of it.
+
+    Returns
+    -------
+    positions, normals : ndarray, shape (..., V, 3)
+    """
+    H = np.asarray(H, dtype=float)
+    Hv = H[..., tube.nodes, :, :]  # (..., V, 2, 4, 4)
+    p = np.einsum("...vnij,vnj->...vni", Hv[..., :3, :3], tube.local) + Hv[..., :3, 3]
+    q = np.einsum("...vnij,vnj->...vni", Hv[..., :3, :3], tube.normal)
+    w = np.stack([1.0 - tube.weight, tube.weight], axis=-1)[..., None]  # (V, 2, 1)
+    pos = np.sum(w * p, axis=-2)
+    nrm = np.sum(w * q, axis=-2)
+    return pos, nrm / np.linalg.norm(nrm, axis=-1, keepdims=True)
 
 
 def _frame(R: np.ndarray | None = None, p: np.ndarray | None = None) -> np.ndarray:
@@ -406,6 +573,12 @@ def _from_model(scene: Scene, res, model, diag: float, dirs: list[Path]) -> None
                 scene.meshes.append(load_mesh(v.file, dirs, f"visual {v.name!r} (mesh)"))
             scene.parts.append(Part(i, "mesh", H, s.copy(), color, "visual", label,
                                     mesh=mesh_index[key]))
+
+    # beams: tubes skinned on their nodes (initial node frames H0 of the model)
+    H0 = np.broadcast_to(np.eye(4), (len(nodes), 4, 4)).copy()
+    H0[:, :3, :3], H0[:, :3, 3] = R0, x0
+    for b in model.beams:
+        scene.tubes.append(beam_tube(b, idx, H0))
 
     # fixed nodes
     for i, n in enumerate(nodes):

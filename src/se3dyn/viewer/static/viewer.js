@@ -248,6 +248,8 @@ let partLocal = [];
 let partNode = null;
 let partLabel = null;
 const groups = [];
+let tube = null;  // the beams: one skinned mesh (see se3dyn/viewer/shapes.py, Tube)
+let outline = null;  // the default bodies' inertia boxes as edges, while links are drawn
 const nodeMat = Array.from({ length: M }, () => new THREE.Matrix4());
 const tmp = new THREE.Matrix4();
 
@@ -301,11 +303,126 @@ function applyTime() {
     }
     g.mesh.instanceMatrix.needsUpdate = true;
   }
+  updateTube();
+  updateOutline();
   updateFrames();
   updateTraces(k, w);
   updateReadout();
   drawCursor();
   requestRender();
+}
+
+// ------------------------------------------------------------------------------------------
+// beams: vertex v = (1 - w) H_a p_a + w H_b p_b (linear blend of its element's two node frames)
+async function buildTube() {
+  if (!META.tubes || !META.tubes.length) return;
+  const [node, w, p, nrm, rgb, f] = await Promise.all(['tube_node', 'tube_w', 'tube_p',
+    'tube_n', 'tube_rgb', 'tube_f'].map(blob));
+  const V = w.length;
+  const geo = new THREE.BufferGeometry();
+  geo.setAttribute('position', new THREE.BufferAttribute(new Float32Array(3 * V), 3)
+    .setUsage(THREE.DynamicDrawUsage));
+  geo.setAttribute('normal', new THREE.BufferAttribute(new Float32Array(3 * V), 3)
+    .setUsage(THREE.DynamicDrawUsage));
+  const col = new Float32Array(3 * V);
+  const c = new THREE.Color();
+  for (let v = 0; v < V; v++) {
+    c.setRGB(rgb[3 * v] / 255, rgb[3 * v + 1] / 255, rgb[3 * v + 2] / 255, THREE.SRGBColorSpace);
+    col[3 * v] = c.r; col[3 * v + 1] = c.g; col[3 * v + 2] = c.b;
+  }
+  geo.setAttribute('color', new THREE.BufferAttribute(col, 3));
+  geo.setIndex(new THREE.BufferAttribute(f, 1));
+  const mesh = new THREE.Mesh(geo, new THREE.MeshStandardMaterial({
+    vertexColors: true, roughness: 0.45, metalness: 0.25 }));
+  mesh.frustumCulled = false;
+  scene.add(mesh);
+  tube = { node, w, p, nrm, V, mesh };
+}
+
+// out[v] = (1 - w) A pa + w B pb, A and B column-major 4x4; translate: points, else unit normals
+function blend(out, v, local, A, B, w, translate) {
+  const o = 6 * v;
+  const u = 1 - w;
+  let len = 0;
+  for (let r = 0; r < 3; r++) {
+    let x = u * (A[r] * local[o] + A[4 + r] * local[o + 1] + A[8 + r] * local[o + 2])
+      + w * (B[r] * local[o + 3] + B[4 + r] * local[o + 4] + B[8 + r] * local[o + 5]);
+    if (translate) x += u * A[12 + r] + w * B[12 + r];
+    out[3 * v + r] = x;
+    len += x * x;
+  }
+  if (!translate && len > 0) {
+    len = 1 / Math.sqrt(len);
+    for (let r = 0; r < 3; r++) out[3 * v + r] *= len;
+  }
+}
+
+function updateTube() {
+  if (!tube) return;
+  const pos = tube.mesh.geometry.attributes.position;
+  const nrm = tube.mesh.geometry.attributes.normal;
+  for (let v = 0; v < tube.V; v++) {
+    const a = nodeMat[tube.node[2 * v]].elements;
+    const b = nodeMat[tube.node[2 * v + 1]].elements;
+    blend(pos.array, v, tube.p, a, b, tube.w[v], true);
+    blend(nrm.array, v, tube.nrm, a, b, tube.w[v], false);
+  }
+  pos.needsUpdate = true;
+  nrm.needsUpdate = true;
+}
+
+// ------------------------------------------------------------------------------------------
+// default inertia boxes (role body, box): a quiet outline (12 edges) while the joints and links
+// are drawn, the solid box when they are hidden or the model has none
+const CORNER = [];
+for (let c = 0; c < 8; c++) CORNER.push([(c & 1) - 0.5, ((c >> 1) & 1) - 0.5, ((c >> 2) & 1) - 0.5]);
+const EDGES = [];
+for (let a = 0; a < 8; a++) for (const bit of [1, 2, 4]) if (!(a & bit)) EDGES.push([a, a | bit]);
+
+function buildOutline(pi) {
+  const boxes = groups.filter((g) => g.role === 'body' && META.geometries[g.geom].kind === 'box');
+  const linked = groups.some((g) => g.role === 'joint' || g.role === 'link');
+  if (!boxes.length || !linked) return;
+  const parts = boxes.flatMap((g) => g.parts);
+  const geo = new THREE.BufferGeometry();
+  geo.setAttribute('position', new THREE.BufferAttribute(new Float32Array(parts.length * 72), 3)
+    .setUsage(THREE.DynamicDrawUsage));
+  const col = new Float32Array(parts.length * 72);
+  const c = new THREE.Color();
+  parts.forEach((p, j) => {
+    c.setHex(pi[5 * p + 2]);
+    for (let v = 0; v < 24; v++) { col[72 * j + 3 * v] = c.r; col[72 * j + 3 * v + 1] = c.g; col[72 * j + 3 * v + 2] = c.b; }
+  });
+  geo.setAttribute('color', new THREE.BufferAttribute(col, 3));
+  const lines = new THREE.LineSegments(geo, new THREE.LineBasicMaterial({
+    vertexColors: true, transparent: true, opacity: 0.7 }));
+  lines.frustumCulled = false;
+  scene.add(lines);
+  for (const g of boxes) g.outlined = true;
+  outline = { parts, boxes, lines };
+  showOutline();
+}
+
+function showOutline() {
+  if (!outline) return;
+  outline.lines.visible = state.showJoints;
+  for (const g of outline.boxes) g.mesh.visible = !state.showJoints;
+}
+
+const _c = new THREE.Vector3();
+function updateOutline() {
+  if (!outline || !outline.lines.visible) return;
+  const pos = outline.lines.geometry.attributes.position;
+  const w = [];
+  outline.parts.forEach((p, j) => {
+    tmp.multiplyMatrices(nodeMat[partNode[p]], partLocal[p]);
+    for (let k = 0; k < 8; k++) w[k] = _c.fromArray(CORNER[k]).applyMatrix4(tmp).toArray();
+    EDGES.forEach(([a, b], e) => {
+      pos.array.set(w[a], 72 * j + 6 * e);
+      pos.array.set(w[b], 72 * j + 6 * e + 3);
+    });
+  });
+  pos.needsUpdate = true;
 }
 
 // ------------------------------------------------------------------------------------------
@@ -614,7 +731,7 @@ function pick(ev) {
   const r = renderer.domElement.getBoundingClientRect();
   pointer.set(((ev.clientX - r.left) / r.width) * 2 - 1, -((ev.clientY - r.top) / r.height) * 2 + 1);
   raycaster.setFromCamera(pointer, camera);
-  const meshes = groups.filter((g) => g.mesh.visible).map((g) => g.mesh);
+  const meshes = groups.filter((g) => g.mesh.visible || g.outlined).map((g) => g.mesh);
   for (const g of groups) g.mesh.computeBoundingSphere();
   const hit = raycaster.intersectObjects(meshes, false)[0];
   if (!hit || hit.instanceId === undefined) return null;
@@ -682,7 +799,8 @@ function setupUI() {
     for (const g of groups) {
       if (g.role === 'joint' || g.role === 'link') g.mesh.visible = state.showJoints;
     }
-    requestRender();
+    showOutline();
+    applyTime();
   });
   $('reset-view').addEventListener('click', () => { homeView(); requestRender(); });
   // channel list
@@ -786,6 +904,8 @@ async function main() {
     groups.push(g);
     scene.add(mesh);
   }
+  await buildTube();
+  buildOutline(pi);
   buildFrames();
   setupUI();
   $('channel').value = META.plot || '';
@@ -801,6 +921,7 @@ async function main() {
       return [r.left + ((v.x + 1) / 2) * r.width, r.top + ((1 - v.y) / 2) * r.height];
     },
     selectChannel,
+    tubePositions: () => (tube ? Array.from(tube.mesh.geometry.attributes.position.array) : []),
   };
   const h = hashTime();
   state.t = h === null ? t0 : Math.min(t1, Math.max(t0, h));
