@@ -353,18 +353,19 @@ def test_a_file_left_by_kill_9_is_repaired_by_the_next_command(tmp_path):
 # ---------------------------------------------------------------------------------------------
 # 4c. --resume
 def test_resume_after_kill_9_equals_one_uninterrupted_run(tmp_path):
-    # (a run of 200 s, some 2 s of wall time: the writer flushes once a second, and a run
-    # over before its first flush would leave nothing to kill)
-    killed = _killed_run(tmp_path / "k", t_end="200", rows=1000)
+    # (a run of 600 s, some 6 s of wall time: the writer flushes once a second, and a run
+    # over before its first flush would leave nothing to kill; with 200 s, some 2 s, a parent
+    # slowed by a loaded machine could see the first flush after the run had ended)
+    killed = _killed_run(tmp_path / "k", t_end="600", rows=1000)
     p = run("run", PENDULUM, "--resume", killed)  # (not --quiet: its summary is read)
     assert p.returncode == 0, p.stderr
     assert "resumed at t = " in p.stdout
-    assert run("run", PENDULUM, "--t-end", "200", "--step", "1e-3", "--out", tmp_path / "u",
+    assert run("run", PENDULUM, "--t-end", "600", "--step", "1e-3", "--out", tmp_path / "u",
                "--quiet").returncode == 0
     whole = tmp_path / "u" / "a01_simple_pendulum.h5"
     assert_same_rows(stored(killed), stored(whole))
     a, b = read_results(killed), read_results(whole)
-    assert a.stats["complete"] and a.stats["steps"] == b.stats["steps"] == 200000
+    assert a.stats["complete"] and a.stats["steps"] == b.stats["steps"] == 600000
     assert a.stats["newton_iterations"] == b.stats["newton_iterations"]
 
 
