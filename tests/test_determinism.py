@@ -33,6 +33,7 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
+from test_threads import _beam as beam  # a 1 m cantilever of n elements with a tip mass
 
 CHANNELS = ("H", "v", "vd", "lam", "kinetic", "potential", "spring", "dissipation")
 STATS = ("newton_iterations", "max_constraint", "steps")
@@ -49,16 +50,6 @@ def chain(n: int) -> sd.Model:
         mb.node(f"b{i}", position=(0.1 * i + 0.05, 0.0, 0.0), mass=1.0, inertia=(1e-4 * J, J, J))
         mb.joint(f"s{i}", "spherical", prev, f"b{i}", at=(0.1 * i, 0.0, 0.0))
         prev = f"b{i}"
-    return mb.build()
-
-
-def beam(n: int) -> sd.Model:
-    """A 1 m cantilever of n elements with a tip mass, falling under gravity."""
-    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81))
-    mb.node("a", fixed=True)
-    mb.node("b", position=(1.0, 0.0, 0.0), mass=0.1, inertia=(1e-4, 1e-4, 1e-4))
-    mb.beam("s", "a", "b", elements=n, EA=1e4, GA=(5e3, 5e3), GJ=20.0, EI=(30.0, 40.0),
-            mass_per_length=0.5, rotary_inertia=(1e-4, 5e-5, 5e-5), damping=1e-4)
     return mb.build()
 
 
