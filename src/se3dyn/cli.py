@@ -392,10 +392,9 @@ def _resume(args, s, text: str):
     and the path (writer None: nothing to do); usage errors for everything that cannot
     continue bit for bit."""
     import json
+    import os
 
-    import h5py
-
-    from se3dyn.h5 import ResultsFileError, ResultsWriter, repair
+    from se3dyn.h5 import ResultsFileError, ResultsWriter, _open, repair
 
     path = Path(args.resume)
     other = [k for k in _OVERRIDES if k != "t_end" and getattr(args, k) is not None]
@@ -407,7 +406,7 @@ def _resume(args, s, text: str):
                      "apply")
     try:
         repair(path)  # left by kill -9: readable again (not while a writer holds it)
-        with h5py.File(path, "r", libver="latest", swmr=True) as f:
+        with _open(os.fspath(path))[0] as f:  # (a truncated file refused at once)
             stored = f.attrs.get("model", "")
             stored = stored.decode() if isinstance(stored, bytes) else str(stored)
             cfg = json.loads(f.attrs.get("settings", "{}"))
@@ -462,19 +461,19 @@ def _read(path: str):
 
     if not Path(path).is_file():
         raise _Usage(f"{path}: no such results file")
+    from se3dyn.errors import Se3dynError
+
     try:
         res = read_results(path)
+    except Se3dynError as exc:  # the reader's own error class, naming the file
+        raise _Usage(str(exc)) from None
     except (OSError, ValueError, KeyError) as exc:
         raise _Usage(f"{path}: not a readable se3dyn results file ({exc})") from None
-    except Exception as exc:  # the reader's own error class
-        from se3dyn.errors import Se3dynError
-
-        if isinstance(exc, Se3dynError):
-            raise _Usage(str(exc)) from None
-        raise
     if res.stats.get("repaired"):
-        print(f"se3dyn: repaired {path}: it was left open by a run that was killed; "
-              f"{len(res.t)} rows kept up to t = {res.t[-1]:g} s", file=sys.stderr)
+        kept = (f"{len(res.t)} rows kept up to t = {res.t[-1]:g} s" if len(res.t) else
+                "it holds no rows (killed before its first rows reached the disk)")
+        print(f"se3dyn: repaired {path}: it was left open by a run that was killed; {kept}",
+              file=sys.stderr)
     return res
 
 
@@ -516,6 +515,8 @@ def cmd_channels(args) -> int:
 def cmd_info(args) -> int:
     """What a results file holds: its status (complete, failed, interrupted, cut short), the
     model, the settings and the statistics of the run."""
+    from se3dyn.h5 import _writer_alive
+
     res = _read(args.results)
     st = res.stats
     t0, t1 = (float(res.t[0]), float(res.t[-1])) if len(res.t) else (math.nan, math.nan)
@@ -529,10 +530,16 @@ def cmd_info(args) -> int:
     msg = st.get("message", "")
     if st.get("complete") and not st.get("failed"):
         status = f"complete: t = {t0:g} .. {t1:g} s"
-    elif st.get("failed") and msg == "interrupted":
-        status = f"interrupted at t = {t1:.9g} s (se3dyn run MODEL --resume {args.results})"
+    elif st.get("failed") and msg in ("interrupted", "terminated"):  # (Ctrl-C, SIGTERM)
+        status = f"{msg} at t = {t1:.9g} s (se3dyn run MODEL --resume {args.results})"
     elif st.get("failed"):
         status = f"failed at t = {t1:.9g} s: {msg}"
+    elif _writer_alive(args.results):  # (its writer's lock is held)
+        status = ("being written by a se3dyn run that is still going" + (
+            f": t = {t0:g} .. {t1:.9g} s so far" if len(res.t) else ", no rows yet"))
+    elif not len(res.t):
+        status = ("cut short before its first row (the writer stopped without closing the "
+                  "file: killed?); run the model again")
     else:
         status = (f"cut short at t = {t1:.9g} s (the writer stopped without closing the file: "
                   f"killed?); se3dyn run MODEL --resume {args.results} continues it")

@@ -731,6 +731,24 @@ def _lookup3(data: bytes, initval: int = 0) -> int:
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 
+def _superblock(path: str) -> tuple[int, int, int] | None:
+    """The superblock of a version 2 or 3 (``libver="latest"``, as se3dyn writes) at the start
+    of ``path``: (size of offsets, status flags, end-of-file address), or None for another
+    superblock or one whose checksum (lookup3) does not match."""
+    with open(path, "rb") as fh:
+        head = fh.read(12)
+        if len(head) < 12 or head[:8] != _SIGNATURE or head[8] not in (2, 3):
+            return None
+        osize = head[9]
+        fh.seek(0)
+        sb = fh.read(12 + 4 * osize + 4)
+    if len(sb) < 12 + 4 * osize + 4 or osize not in (2, 4, 8, 16, 32):
+        return None
+    if _lookup3(sb[:-4]) != int.from_bytes(sb[-4:], "little"):
+        return None
+    return osize, sb[11], int.from_bytes(sb[12 + 2 * osize:12 + 3 * osize], "little")
+
+
 def _clear_status_flags(path: str, check_lock: bool = True) -> bool:
     """Clear the superblock's file-consistency flags that a writer killed while the file was
     open (kill -9, a crash) leaves set, as ``h5clear -s`` does; True if they were set.
@@ -742,20 +760,13 @@ def _clear_status_flags(path: str, check_lock: bool = True) -> bool:
     """
     if check_lock and _writer_alive(path):
         return False
+    sb = _superblock(path)
+    if sb is None or sb[1] == 0:
+        return False  # not a superblock we understand, or no flags: leave it alone
+    osize, _, eoa = sb
     with open(path, "r+b") as fh:
-        head = fh.read(12)
-        if len(head) < 12 or head[:8] != _SIGNATURE or head[8] not in (2, 3):
-            return False
-        if head[11] == 0:
-            return False
-        osize = head[9]
-        fh.seek(0)
-        sb = bytearray(fh.read(12 + 4 * osize + 4))
-        body = sb[:-4]
-        if _lookup3(bytes(body)) != int.from_bytes(sb[-4:], "little"):
-            return False  # not a superblock we understand: leave it alone
+        body = bytearray(fh.read(12 + 4 * osize))
         body[11] = 0
-        eoa = int.from_bytes(body[12 + 2 * osize:12 + 3 * osize], "little")
         fh.seek(0)
         fh.write(bytes(body) + _lookup3(bytes(body)).to_bytes(4, "little"))
         fh.flush()
@@ -795,37 +806,77 @@ def _attr_value(val: Any):
 
 
 # ---------------------------------------------------------------------------------------------
-def _open(path: str) -> h5py.File:
+#: Reads of a metadata block a SWMR reader tries before it gives up. HDF5 retries a block
+#: whose checksum fails (the writer may be rewriting it) sleeping 1, 2, 4, ... ns between
+#: tries; its default of 100 tries sleeps some 2^100 ns on a damaged or truncated file, inside
+#: the library where Ctrl-C cannot reach. 30 tries give up after about 1 s of sleep in all.
+SWMR_READ_ATTEMPTS = 30
+
+
+def _swmr_open(path: str) -> h5py.File:
+    """Open ``path`` as a SWMR reader (a live writer's file) with at most
+    :data:`SWMR_READ_ATTEMPTS` reads of a metadata block."""
+    import ctypes
+
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    fapl.set_fclose_degree(h5py.h5f.CLOSE_STRONG)
+    fapl.set_libver_bounds(h5py.h5f.LIBVER_LATEST, h5py.h5f.LIBVER_LATEST)
+    try:  # not wrapped by h5py: the function of the HDF5 library h5py links
+        setter = ctypes.CDLL(h5py.h5p.__file__).H5Pset_metadata_read_attempts
+    except (OSError, AttributeError):  # pragma: no cover - a build without it
+        setter = None
+    if setter is not None:
+        setter.argtypes = [ctypes.c_int64, ctypes.c_uint]
+        setter.restype = ctypes.c_int
+        setter(fapl.id, SWMR_READ_ATTEMPTS)
+    fid = h5py.h5f.open(os.fsencode(path), h5py.h5f.ACC_RDONLY | h5py.h5f.ACC_SWMR_READ,
+                        fapl=fapl)
+    return h5py.File(fid)
+
+
+def _open(path: str) -> tuple[h5py.File, bool]:
+    """Open a results file for reading: (file, repaired). A file left flagged open by a killed
+    writer is repaired first (:func:`repair`), one a live writer holds is read as a SWMR
+    reader, and a file shorter than its superblock's end-of-file address (cut short: an
+    interrupted copy, a full or damaged disk) is refused before HDF5 reads it."""
     if not os.path.exists(path):
         raise ResultsFileError(path, "no such file")
     if os.path.isdir(path):
         raise ResultsFileError(path, "is a directory, expected an HDF5 results file")
     try:
         is_h5 = h5py.is_hdf5(path)
+        sb = _superblock(path)
+        size = os.path.getsize(path)
     except OSError as e:
-        raise ResultsFileError(path, f"cannot be read ({e})") from None
+        raise ResultsFileError(path, f"cannot be read ({e.strerror or e})") from None
     if not is_h5:
         raise ResultsFileError(path, "not an HDF5 file (expected an se3dyn results file)")
+    if sb is not None and sb[1] == 0 and size < sb[2]:
+        raise ResultsFileError(path, f"is truncated: {size} bytes of the {sb[2]} its "
+                               "superblock records (cut short: an interrupted copy or a full "
+                               "or damaged disk?); nothing can be read from it")
     try:
         return h5py.File(path, "r"), False
     except OSError as first:
-        # a writer that was killed leaves the file flagged "open for SWMR writing": the flags
-        # are cleared (like h5clear -s) unless a writer still holds the file, which a SWMR
-        # read follows
+        problem = f"cannot be opened ({first})"
+    if _writer_alive(path):  # a run is writing it: follow it
+        try:
+            return _swmr_open(path), False
+        except OSError as exc:
+            raise ResultsFileError(path, f"cannot be opened while it is written ({exc})"
+                                   ) from None
+    # a writer that was killed leaves the file flagged "open for SWMR writing": the flags are
+    # cleared (like h5clear -s)
+    try:
+        repaired = _clear_status_flags(path)
+    except OSError:
         repaired = False
+    if repaired:
         try:
-            repaired = _clear_status_flags(path)
-        except OSError:
-            pass
-        if repaired:
-            try:
-                return h5py.File(path, "r"), True
-            except OSError:
-                pass
-        try:
-            return h5py.File(path, "r", libver="latest", swmr=True), False
-        except OSError:
-            raise ResultsFileError(path, f"cannot be opened ({first})") from None
+            return h5py.File(path, "r"), True
+        except OSError as exc:
+            problem = f"is damaged: cannot be opened after its repair ({exc})"
+    raise ResultsFileError(path, problem)
 
 
 def _str(x) -> str:
@@ -850,28 +901,37 @@ def read_results(path: str | os.PathLike) -> Results:
     path = os.fspath(path)
     f, repaired = _open(path)
     with f:
-        fmt = _str(f.attrs.get("format", ""))
-        if fmt != FORMAT:
-            raise ResultsFileError(path, f"attribute 'format' is {fmt!r}, expected {FORMAT!r} "
-                                         "(not an se3dyn results file)")
-        ver = f.attrs.get("format_version")
-        try:
-            ver = int(ver)
-        except (TypeError, ValueError):
-            raise ResultsFileError(path, f"attribute 'format_version' is {ver!r}, expected an "
-                                         "integer") from None
-        if ver > FORMAT_VERSION:
-            raise ResultsFileError(path, f"format_version {ver} is newer than the supported "
-                                         f"{FORMAT_VERSION}; upgrade se3dyn")
         try:
             res = _read(f, path)
-            res.stats["repaired"] = repaired
-            return res
-        except KeyError as e:
-            raise ResultsFileError(path, f"damaged or incomplete layout ({e})") from None
+        except ResultsFileError:
+            raise
+        except (KeyError, TypeError, ValueError, IndexError, OSError, RuntimeError) as e:
+            # (h5py: a missing or misshapen object, a dataset whose chunks cannot be read)
+            raise ResultsFileError(path, f"damaged or incomplete ({type(e).__name__}: {e})"
+                                   ) from None
+    res.stats["repaired"] = repaired
+    return res
+
+
+def _check_format(f: h5py.File, path: str) -> None:
+    """The root attributes ``format`` and ``format_version`` of an se3dyn results file."""
+    fmt = _str(f.attrs.get("format", ""))
+    if fmt != FORMAT:
+        raise ResultsFileError(path, f"attribute 'format' is {fmt!r}, expected {FORMAT!r} "
+                                     "(not an se3dyn results file)")
+    ver = f.attrs.get("format_version")
+    try:
+        ver = int(ver)
+    except (TypeError, ValueError):
+        raise ResultsFileError(path, f"attribute 'format_version' is {ver!r}, expected an "
+                                     "integer") from None
+    if ver > FORMAT_VERSION:
+        raise ResultsFileError(path, f"format_version {ver} is newer than the supported "
+                                     f"{FORMAT_VERSION}; upgrade se3dyn")
 
 
 def _read(f: h5py.File, path: str) -> Results:
+    _check_format(f, path)
     g = f["layout"]
     names = tuple(_str(x) for x in g["node_names"][()])
     jnames = tuple(_str(x) for x in g["joint_names"][()])
