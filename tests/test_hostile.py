@@ -896,3 +896,86 @@ def test_info_on_a_file_being_written_says_so(tmp_path):
         proc.communicate(timeout=60)
     code, out, err = _cli(["info", path])
     assert code == 0 and "status: terminated at t = " in out and "--resume" in out, out
+
+
+#: Thread counts that are not one (environment, --threads, set_threads).
+BAD_THREADS = ("0", "-1", "abc", "1.5", "0x10", "9" * 5000, "", " ", "\u00b2", "255",
+               "2147483648", "1e3", "+3")
+
+
+@pytest.mark.parametrize("value", BAD_THREADS)
+def test_bad_thread_counts_in_the_environment_are_refused_in_one_line(tmp_path, monkeypatch,
+                                                                      value):
+    """SE3DYN_THREADS=0 (and -1, abc, 1.5, 0x10, a 5000-digit value): an uncaught error in
+    `check`, and `run` left a 0-row file; with --threads given, that count is used."""
+    model = ROOT / "examples" / "a01_simple_pendulum.yaml"
+    monkeypatch.setenv("SE3DYN_THREADS", value)
+    if value.strip() == "":  # unset or empty: the default
+        return
+    code, _, err = _cli(["run", model, "--t-end", "0.01", "--out", tmp_path, "--quiet"])
+    _assert_clean(code, err, value)
+    assert code == 2 and "SE3DYN_THREADS" in err and "from 1 to 254" in err, err
+    assert not list(tmp_path.iterdir())  # no results file left
+    code, out, err = _cli(["run", model, "--t-end", "0.01", "--out", tmp_path, "--quiet",
+                           "--threads", "2"])
+    assert code == 0, err
+    assert sd.get_threads() == 2
+
+
+def test_bad_thread_counts_in_the_environment_of_a_fresh_process(tmp_path):
+    """`se3dyn check` reads SE3DYN_THREADS when it first loads the engine (rank analysis)."""
+    import os
+
+    model = ROOT / "examples" / "a01_simple_pendulum.yaml"
+    for value in BAD_THREADS[:6]:
+        env = dict(os.environ, SE3DYN_THREADS=value)
+        p = subprocess.run([sys.executable, "-m", "se3dyn.cli", "check", str(model)],
+                           capture_output=True, text=True, timeout=120, env=env)
+        _assert_clean(p.returncode, p.stderr, value[:20])
+        assert p.returncode == 2 and "SE3DYN_THREADS" in p.stderr, p.stderr
+        assert len(p.stderr.splitlines()) == 1 and len(p.stderr) < 300
+
+
+@pytest.mark.parametrize("value", [v for v in BAD_THREADS if v.strip()])
+def test_bad_thread_counts_on_the_command_line_are_usage_errors(tmp_path, value):
+    code, _, err = _cli(["run", ROOT / "examples" / "a01_simple_pendulum.yaml", "--threads",
+                         value, "--out", tmp_path, "--quiet"])
+    _assert_clean(code, err, value[:20])
+    assert code == 2 and "argument --threads: expected a whole number of threads from 1 to " \
+        "254" in err, err
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("value", [0, -1, 255, 2**31, 10**30, 1.5, 2.0, True, "x", None,
+                                   np.int64(2**40), [2]])
+def test_bad_thread_counts_in_python_are_se3dyn_errors(value):
+    """set_threads(10**30): a binding TypeError."""
+    before = sd.get_threads()
+    if value is None:  # the environment's or the cores: valid
+        sd.set_threads(value)
+        sd.set_threads(before)
+        return
+    with pytest.raises(Se3dynError, match=r"set_threads\(n\): expected a whole number of "
+                                          r"threads from 1 to 254, got"):
+        sd.set_threads(value)
+    assert sd.get_threads() == before
+
+
+@pytest.mark.parametrize("value", [2147483648, 100_000_001, 10**30])
+def test_output_every_beyond_any_run_is_refused_by_check_run_and_simulate(tmp_path, value):
+    """output_every: 2147483648 passed `check` and died in `run`; simulate(output_every=
+    10**30): a binding TypeError."""
+    with pytest.raises(sd.ModelError, match="output_every.*at most 1e\\+08") as ei:
+        sd.simulate(_pendulum(), t_end=0.02, step=0.01, output_every=value)
+    assert ei.value.field == "output_every"
+    text = SMALL.replace("simulation: {t_end: 1.0, step: 0.01, rho_inf: 0.9}",
+                         f"simulation: {{t_end: 0.05, step: 0.01, output_every: {value}}}")
+    (tmp_path / "m.yaml").write_text(text)
+    for argv in (["check", tmp_path / "m.yaml"],
+                 ["run", tmp_path / "m.yaml", "--out", tmp_path / "o", "--quiet"]):
+        code, _, err = _cli(argv)
+        _assert_clean(code, err, argv[0])
+        assert code == 2 and "output_every" in err and "at most 1e+08" in err, err
+    assert not (tmp_path / "o" / "m.h5").exists()
+    r = sd.simulate(_pendulum(), t_end=0.05, step=0.01, output_every=100_000_000)
+    assert len(r.t) == 2  # the start and the end

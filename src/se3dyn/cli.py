@@ -260,8 +260,11 @@ def cmd_run(args) -> int:
     import se3dyn as sd
     from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
     from se3dyn.h5 import ResultsFileError, ResultsWriter
+    from se3dyn.threads import from_environment
 
-    if args.threads is not None:
+    if args.threads is None:  # (a bad SE3DYN_THREADS: refused before the results file is made)
+        from_environment()
+    else:
         sd.set_threads(args.threads)
     model, settings = _load(args.model)
     text = Path(args.model).read_text(encoding="utf-8")  # stored as metadata, as given
@@ -735,10 +738,15 @@ def _positive(kind):
     return conv
 
 
-def _whole_positive(text):
-    if not text.strip().isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return int(text)
+def _threads(text):
+    """The value of --threads (se3dyn.threads' own check)."""
+    from se3dyn.errors import Se3dynError
+    from se3dyn.threads import _check
+
+    try:
+        return _check(text, "--threads")
+    except Se3dynError as exc:
+        raise argparse.ArgumentTypeError(str(exc).split(": ", 1)[1]) from None
 
 
 _OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step",
@@ -852,7 +860,7 @@ def _run_args(r) -> None:
                    "or killed) from its last checkpoint, bit for bit as one uninterrupted run; "
                    "with --t-end, further than it was planned")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
-    r.add_argument("--threads", type=_whole_positive, metavar="N",
+    r.add_argument("--threads", type=_threads, metavar="N",
                    help="threads of the compiled engine (default: SE3DYN_THREADS or the "
                    "cores; the results do not depend on it)")
     r.set_defaults(func=cmd_run)
@@ -979,6 +987,13 @@ def _main(argv: list[str] | None) -> int:
         return int(args.func(args))
     except _Usage as exc:
         _err(str(exc))
+        return 2
+    except Exception as exc:
+        from se3dyn.errors import Se3dynError
+
+        if not isinstance(exc, Se3dynError):
+            raise
+        _err(str(exc))  # (e.g. a bad SE3DYN_THREADS met when the engine is first loaded)
         return 2
     except KeyboardInterrupt:
         _err("interrupted")
