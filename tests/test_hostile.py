@@ -728,7 +728,9 @@ CUTS = (10, 25, 50, 75, 90, 95, 99, 99.5, 99.9)
 READERS = (("info", "RESULTS"), ("channels", "RESULTS"),
            ("plot", "RESULTS", "time", "-o", "OUT.png"), ("view", "RESULTS", "-o", "OUT.html"),
            ("export", "RESULTS", "--csv", "OUT.csv"), ("export", "RESULTS", "--gltf", "OUT.glb"),
-           ("run", "MODEL", "--resume", "RESULTS", "--quiet"), ("read_results", "RESULTS"))
+           ("run", "MODEL", "--resume", "RESULTS", "--quiet"),
+           ("run", "MODEL", "--resume", "RESULTS", "--t-end", "0.08", "--quiet"),
+           ("read_results", "RESULTS"))
 
 # run in a child process (a reader that hangs must not hang the test run): each reader on
 # each file given, with its exit code (read_results: 2 for a Se3dynError, 3 for anything
@@ -979,3 +981,80 @@ def test_output_every_beyond_any_run_is_refused_by_check_run_and_simulate(tmp_pa
     assert not (tmp_path / "o" / "m.h5").exists()
     r = sd.simulate(_pendulum(), t_end=0.05, step=0.01, output_every=100_000_000)
     assert len(r.t) == 2  # the start and the end
+
+
+def _replace(f, name, data):
+    del f[name]
+    f[name] = data
+
+
+#: Crafted or damaged results files: (name, change of the h5py.File, what the readers say).
+#: "damaged": every reader refuses the file in one line; "motion": view and export --gltf
+#: refuse it naming the field, the other readers show what it holds.
+CRAFTED = [
+    ("composites_not_json", lambda f: f["layout"].attrs.__setitem__("composites", "{not"),
+     "damaged"),
+    ("nq_text", lambda f: f["layout"].attrs.__setitem__("nq", "x"), "damaged"),
+    ("nq_huge", lambda f: f["layout"].attrs.__setitem__("nq", 10**12), "damaged"),
+    ("nq_negative", lambda f: f["layout"].attrs.__setitem__("nq", -5), "damaged"),
+    ("nm_wrong", lambda f: f["layout"].attrs.__setitem__("nm", 7), "damaged"),
+    ("node_fixed_longer", lambda f: _replace(f, "layout/node_fixed", np.zeros(12, np.int8)),
+     "damaged"),
+    ("node_fixed_two", lambda f: _replace(f, "layout/node_fixed", np.full(9, 2, np.int8)),
+     "damaged"),
+    ("node_dofadr_out", lambda f: _replace(f, "layout/node_dofadr",
+                                           np.full(9, 10**9, np.int64)), "damaged"),
+    ("joint_k_negative", lambda f: _replace(f, "layout/joint_k", -np.ones(8, np.int64)),
+     "damaged"),
+    ("joint_columns_out", lambda f: _replace(f, "layout/joint_columns",
+                                             np.full(8, 7, np.int64)), "damaged"),
+    ("node_names_numbers", lambda f: _replace(f, "layout/node_names", np.arange(9)),
+     "damaged"),
+    ("no_layout", lambda f: f.__delitem__("layout"), "damaged"),
+    ("time_group", lambda f: (f.__delitem__("time"), f.create_group("time")), "damaged"),
+    ("time_text", lambda f: _replace(f, "time", np.array([b"a"] * 6)), "damaged"),
+    ("position_shape", lambda f: _replace(f, "nodes/position", np.zeros((6, 2, 3))),
+     "damaged"),
+    ("no_multipliers", lambda f: f.__delitem__("joints/multipliers"), "damaged"),
+    ("no_stats", lambda f: f.__delitem__("stats"), "damaged"),
+    ("format_version_text", lambda f: f.attrs.__setitem__("format_version", "x"),
+     "format_version"),
+    ("nan_rotation", lambda f: f["nodes/rotation"].__setitem__((2, 3), np.nan), "rotation"),
+    ("zero_rotation", lambda f: f["nodes/rotation"].__setitem__((2, 3), 0.0), "rotation"),
+    ("mirrored_rotation", lambda f: f["nodes/rotation"].__setitem__((2, 3), -np.eye(3)),
+     "rotation"),
+    ("nan_time", lambda f: f["time"].__setitem__(3, np.nan), "'t'"),
+    ("time_backwards", lambda f: f["time"].__setitem__(3, -1.0), "'t'"),
+    ("inf_position", lambda f: f["nodes/position"].__setitem__((1, 2), np.inf), "position"),
+    ("settings_list", lambda f: f.attrs.__setitem__("settings", "[1, 2]"), None),
+    ("settings_wrong", lambda f: f.attrs.__setitem__("settings", '{"t_end": "x"}'), None),
+]
+
+
+def test_crafted_and_damaged_results_files_get_one_line_errors(base_h5, tmp_path):
+    """A wrong layout attribute, a longer node_fixed, nq = 10**12 (a 43.7 TiB allocation),
+    /time as a group, /stats deleted before --resume, NaN or zero rotations or a NaN time in
+    view / export --gltf (a JSON ValueError, a LinAlgError): one-line errors, never a
+    traceback."""
+    import h5py
+
+    files = []
+    for name, change, _ in CRAFTED:
+        p = tmp_path / f"{name}.h5"
+        shutil.copy(base_h5, p)
+        with h5py.File(p, "r+") as f:
+            change(f)
+        files.append(p)
+    rows = _readers(files, ROOT / "examples" / "slider_crank.yaml")
+    expect = {str(p): (name, word) for p, (name, _, word) in zip(files, CRAFTED, strict=True)}
+    for path, reader, code, secs, err in rows:
+        _assert_clean(code, err, f"{reader} on {path}")
+        name, word = expect[path]
+        if word in ("damaged", "format_version"):
+            if name == "no_stats" and reader == "run MODEL --resume RESULTS --quiet":
+                assert code == 0  # (complete: nothing to continue, nothing read)
+            else:
+                assert code == 2 and word in err, (reader, path, err)
+        elif word is not None and reader.startswith(("view", "export RESULTS --gltf")):
+            assert code == 2 and word in err and "expected" in err, (reader, path, err)
+        assert secs < 30, (reader, path, secs)

@@ -397,7 +397,7 @@ def _resume(args, s, text: str):
     import json
     import os
 
-    from se3dyn.h5 import ResultsFileError, ResultsWriter, _open, repair
+    from se3dyn.h5 import ResultsFileError, ResultsWriter, _check_format, _layout, _open, repair
 
     path = Path(args.resume)
     other = [k for k in _OVERRIDES if k != "t_end" and getattr(args, k) is not None]
@@ -410,14 +410,19 @@ def _resume(args, s, text: str):
     try:
         repair(path)  # left by kill -9: readable again (not while a writer holds it)
         with _open(os.fspath(path))[0] as f:  # (a truncated file refused at once)
+            _check_format(f, os.fspath(path))
+            _layout(f, os.fspath(path))  # (a damaged or crafted layout refused)
             stored = f.attrs.get("model", "")
             stored = stored.decode() if isinstance(stored, bytes) else str(stored)
             cfg = json.loads(f.attrs.get("settings", "{}"))
             complete = bool(f.attrs.get("complete", False))
             t_last = float(f["time"][-1]) if f["time"].shape[0] else -math.inf
+        if not isinstance(cfg, dict) or not all(
+                isinstance(cfg.get(k, 0.0), (int, float)) for k in ("t_end", "step")):
+            raise ValueError(f"attribute 'settings' is {cfg!r}, expected the run's settings")
     except ResultsFileError as exc:
         raise _Usage(str(exc)) from None
-    except (OSError, KeyError, ValueError) as exc:
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError) as exc:
         raise _Usage(f"--resume {path}: not a readable se3dyn results file ({exc})") from None
     if stored != text:
         raise _Usage(f"--resume {path}: {args.model} is not the model stored in it (the texts "

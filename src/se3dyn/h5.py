@@ -36,7 +36,7 @@ import h5py
 import numpy as np
 
 from se3dyn.channels import joint_units
-from se3dyn.errors import Se3dynError
+from se3dyn.errors import Se3dynError, _short_repr
 from se3dyn.results import Results
 from se3dyn.system import LayoutCounts
 
@@ -240,15 +240,15 @@ class ResultsWriter:
         except OSError as exc:
             raise ResultsFileError(path, f"cannot be opened for writing ({exc})") from None
         try:
-            if _str(f.attrs.get("format", "")) != FORMAT:
-                raise ResultsFileError(path, "not an se3dyn results file")
-            g = f["layout"]
-            names = tuple(_str(x) for x in g["node_names"][()])
-            jn = tuple(_str(x) for x in g["joint_names"][()])
-            if (names != tuple(s.node_names) or jn != tuple(s.joint_names)
-                    or int(g.attrs["nq"]) != s.nq or int(g.attrs["nm"]) != s.nm):
+            _check_format(f, path)
+            lay = _layout(f, path)
+            if (lay.node_names != tuple(s.node_names) or lay.joint_names != tuple(s.joint_names)
+                    or lay.nq != s.nq or lay.nm != s.nm):
                 raise ResultsFileError(path, "holds the results of another model (nodes, "
                                        "joints or unknowns differ)")
+            if not isinstance(f.get("stats"), h5py.Group):
+                raise ResultsFileError(path, "damaged: /stats: expected a group (the "
+                                       "statistics of the run), got nothing")
             if "restart" not in f:
                 raise ResultsFileError(path, "has no checkpoint (written by an older se3dyn or "
                                        "stopped before its first checkpoint); run it again")
@@ -270,6 +270,12 @@ class ResultsWriter:
             f.attrs["complete"] = False
             f.flush()
             f.swmr_mode = True
+        except (KeyError, TypeError, ValueError, IndexError, OSError, RuntimeError) as e:
+            f.close()
+            if isinstance(e, ResultsFileError):
+                raise
+            raise ResultsFileError(path, f"damaged or incomplete ({type(e).__name__}: {e})"
+                                   ) from None
         except BaseException:
             f.close()
             raise
@@ -930,22 +936,98 @@ def _check_format(f: h5py.File, path: str) -> None:
                                      f"{FORMAT_VERSION}; upgrade se3dyn")
 
 
+def _layout(f: h5py.File, path: str) -> ResultsLayout:
+    """The ``/layout`` of a results file, checked against itself and against the shapes and
+    types of the row datasets (a damaged or crafted file is refused naming what is wrong,
+    before anything is allocated from its counts)."""
+
+    def bad(what: str, expected: str, got) -> ResultsFileError:
+        shown = " ".join(_short_repr(got).split())  # (one line)
+        return ResultsFileError(path, f"damaged: {what}: expected {expected}, got {shown}")
+
+    def dataset(name: str, kinds: str = "iuf") -> h5py.Dataset:
+        obj = f.get(name)
+        if not isinstance(obj, h5py.Dataset):
+            raise bad(f"/{name}", "a dataset", "a group" if isinstance(obj, h5py.Group)
+                      else "nothing")
+        if obj.dtype.kind not in kinds:
+            raise bad(f"/{name}", "numbers" if kinds == "iuf" else "text", str(obj.dtype))
+        return obj
+
+    def ints(name: str, n: int, lo: int, hi: int) -> np.ndarray:
+        ds = dataset(f"layout/{name}", "iu")
+        if ds.shape != (n,):
+            raise bad(f"/layout/{name}", f"shape ({n},)", ds.shape)
+        a = ds[()].astype(np.int64)
+        if a.size and (a.min() < lo or a.max() > hi):
+            raise bad(f"/layout/{name}", f"values in [{lo}, {hi}]", a)
+        return a
+
+    def texts(name: str) -> tuple[str, ...]:
+        ds = dataset(f"layout/{name}", "OSU")
+        if ds.ndim != 1:
+            raise bad(f"/layout/{name}", "a list of names", ds.shape)
+        return tuple(_str(x) for x in ds[()])
+
+    def count(name: str) -> int:
+        v = f["layout"].attrs.get(name)
+        if not isinstance(v, (int, np.integer)) or isinstance(v, (bool, np.bool_)):
+            raise bad(f"/layout attribute '{name}'", "an integer", v)
+        return int(v)
+
+    if not isinstance(f.get("layout"), h5py.Group):
+        raise bad("/layout", "a group", "nothing" if "layout" not in f else "a dataset")
+    names, jnames = texts("node_names"), texts("joint_names")
+    M, m = len(names), len(jnames)
+    fixed = ints("node_fixed", M, 0, 1).astype(bool)
+    jk = ints("joint_k", m, 0, 6)
+    nk = int(jk.sum())
+    nq, nm = count("nq"), count("nm")
+    if nq != 6 * int(np.sum(~fixed)) + nk:
+        raise bad("/layout attribute 'nq'", f"6 per free node plus the joints' coordinates, "
+                  f"{6 * int(np.sum(~fixed)) + nk}", nq)
+    if nm != 6 * m:
+        raise bad("/layout attribute 'nm'", f"6 per joint, {6 * m}", nm)
+    dof = ints("node_dofadr", M, -1, max(nq - 6, -1))
+    if np.any(dof[~fixed] < 0):
+        raise bad("/layout/node_dofadr", "the first unknown of every free node", dof)
+    jdof = ints("joint_dofadr", m, -1, nq)
+    if np.any((jk > 0) & ((jdof < 0) | (jdof + jk > nq))):
+        raise bad("/layout/joint_dofadr", f"the first unknown of every joint, in [0, {nq})",
+                  jdof)
+    jmult = ints("joint_multadr", m, 0, max(nm - 6, 0))
+    jcols = ints("joint_columns", m, 0, nk)
+    if np.any(jcols + jk > nk):
+        raise bad("/layout/joint_columns", f"columns of the {nk} joint coordinates", jcols)
+    jtype, units = texts("joint_type"), texts("joint_units")
+    if len(jtype) != m or len(units) != nk:
+        raise bad("/layout/joint_type, joint_units", f"{m} and {nk} names",
+                  (len(jtype), len(units)))
+    try:
+        comp = json.loads(_str(f["layout"].attrs.get("composites", "{}")))
+        composites = {str(c): tuple(str(x) for x in p) for c, p in comp.items()}
+    except (ValueError, TypeError, AttributeError):
+        raise bad("/layout attribute 'composites'", "a JSON object of lists of names",
+                  f["layout"].attrs.get("composites")) from None
+    shapes = {"time": (), "nodes/position": (M, 3), "nodes/rotation": (M, 3, 3),
+              "nodes/velocity": (M, 6), "nodes/acceleration": (M, 6), "joints/alpha": (nk,),
+              "joints/velocity": (nk,), "joints/acceleration": (nk,),
+              "joints/multipliers": (nm,), **{f"energy/{e}": () for e in ENERGIES},
+              **{f"solver/{x}": () for x in SOLVER}}
+    for name, tail in shapes.items():
+        ds = dataset(name)
+        if ds.shape[1:] != tail or ds.ndim != 1 + len(tail):
+            raise bad(f"/{name}", f"shape (rows, {', '.join(map(str, tail))})".replace(
+                ", )", ")"), ds.shape)
+    return ResultsLayout(
+        node_names=names, node_fixed=fixed, node_dofadr=dof, joint_names=jnames,
+        joint_type=jtype, joint_k=jk, joint_dofadr=jdof, joint_multadr=jmult,
+        joint_columns=jcols, joint_units=units, composites=composites, nq=nq, nm=nm)
+
+
 def _read(f: h5py.File, path: str) -> Results:
     _check_format(f, path)
-    g = f["layout"]
-    names = tuple(_str(x) for x in g["node_names"][()])
-    jnames = tuple(_str(x) for x in g["joint_names"][()])
-    lay = ResultsLayout(
-        node_names=names, node_fixed=g["node_fixed"][()].astype(bool),
-        node_dofadr=g["node_dofadr"][()].astype(np.int64), joint_names=jnames,
-        joint_type=tuple(_str(x) for x in g["joint_type"][()]),
-        joint_k=g["joint_k"][()].astype(np.int64),
-        joint_dofadr=g["joint_dofadr"][()].astype(np.int64),
-        joint_multadr=g["joint_multadr"][()].astype(np.int64),
-        joint_columns=g["joint_columns"][()].astype(np.int64),
-        joint_units=tuple(_str(x) for x in g["joint_units"][()]),
-        composites={c: tuple(p) for c, p in json.loads(_str(g.attrs["composites"])).items()},
-        nq=int(g.attrs["nq"]), nm=int(g.attrs["nm"]))
+    lay = _layout(f, path)
     series = ["time", "nodes/position", "nodes/rotation", "nodes/velocity",
               "nodes/acceleration", "joints/alpha", "joints/velocity", "joints/acceleration",
               "joints/multipliers"] + [f"energy/{e}" for e in ENERGIES] + \
@@ -974,6 +1056,9 @@ def _read(f: h5py.File, path: str) -> Results:
             vd[:, a:a + k] = d["joints/acceleration"][:, c:c + k]
             alpha[:, a:a + k] = d["joints/alpha"][:, c:c + k]
     stats: dict[str, Any] = {}
+    if not isinstance(f.get("stats"), h5py.Group):
+        raise ResultsFileError(path, "damaged: /stats: expected a group (the statistics of the "
+                               "run), got " + ("nothing" if "stats" not in f else "a dataset"))
     for key, val in f["stats"].attrs.items():
         stats[key] = _str(val) if isinstance(val, (bytes, str)) else \
             (val.item() if isinstance(val, np.generic) else val)
@@ -983,6 +1068,8 @@ def _read(f: h5py.File, path: str) -> Results:
     try:
         stats["settings"] = json.loads(_str(f.attrs.get("settings", "{}")))
     except ValueError:
+        stats["settings"] = {}
+    if not isinstance(stats["settings"], dict):  # (as unreadable JSON: none)
         stats["settings"] = {}
     stats["se3dyn_version"] = _str(f.attrs.get("se3dyn_version", ""))
     stats["created"] = _str(f.attrs.get("created", ""))
