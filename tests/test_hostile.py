@@ -1066,3 +1066,63 @@ def test_crafted_and_damaged_results_files_get_one_line_errors(base_h5, tmp_path
         elif word is not None and reader.startswith(("view", "export RESULTS --gltf")):
             assert code == 2 and word in err and "expected" in err, (reader, path, err)
         assert secs < 30, (reader, path, secs)
+
+
+@pytest.mark.parametrize("com", [(1e15, 0, 0), (1e15, 1e15, 1e15), (-1e15, 1e15, 0),
+                                 (0, 0, 1e15), (1e6, 0, 0), (0, 2e4, 0)])
+def test_a_centre_of_mass_beyond_the_digits_of_the_inertia_is_refused(com, tmp_path):
+    """com at its documented bound (1e15): a LinAlgError from the condensation of the rigid
+    joints (a unit multiplier lost against gravity moments of 1e16 N m), and `check` said
+    the node "can move with no mass" (its inertia about the centre of mass lost in the
+    round-off of m |c|^2)."""
+    mb = sd.ModelBuilder(gravity=(0, 0, -9.81))
+    mb.node("g", fixed=True)
+    with pytest.raises(sd.ModelError, match=r"within .* m of the node") as ei:
+        mb.node("a", com=com, mass=1.0, inertia=(0.01, 0.02, 0.02))
+    assert ei.value.item == "node 'a'" and ei.value.field == "com"
+    text = SMALL.replace("a: {position: [0.5, 0.0, 0.0], mass: 1.0,",
+                         f"a: {{position: [0.5, 0.0, 0.0], com: {list(com)}, mass: 1.0,")
+    (tmp_path / "m.yaml").write_text(text)
+    code, _, err = _cli(["check", tmp_path / "m.yaml"])
+    _assert_clean(code, err, "check")
+    assert code == 2 and "'com'" in err and "no mass" not in err, err
+
+
+def test_a_far_centre_of_mass_within_the_range_condenses_and_checks(tmp_path):
+    """The largest offset accepted (1e4 m for m = 1, J = 0.01): the condensed run and the
+    full one agree, and `check` finds no motion without mass."""
+    from se3dyn.analysis import massless_motions
+
+    for c in (1e4, 1e4 * (1 - 1e-12)):
+        mb = sd.ModelBuilder(gravity=(0, 0, -9.81))
+        mb.node("g", fixed=True)
+        mb.node("a", com=(c, 0, 0), mass=1.0, inertia=(0.01, 0.02, 0.02))
+        mb.node("b", position=(0.5, 0, 0), mass=1.0, inertia=(0.01, 0.02, 0.02))
+        mb.joint("h", "hinge", "g", "a", axis=(0, 1, 0))
+        mb.joint("r", "rigid", "a", "b")
+        m = mb.build()
+        assert massless_motions(sd.compile_model(m)) == []
+        a = sd.simulate(m, 0.05, 0.01)
+        b = sd.simulate(m, 0.05, 0.01, condense=False)
+        np.testing.assert_allclose(a.joint_coordinates("h"), b.joint_coordinates("h"),
+                                   rtol=1e-8, atol=1e-12)
+        np.testing.assert_allclose(a.joint_multipliers("r"), b.joint_multipliers("r"),
+                                   rtol=1e-6, atol=1e-6 * np.abs(b.joint_multipliers("r")).max())
+
+
+def test_condensation_of_bodies_with_large_forces_does_not_fail():
+    """The rigid joints' multipliers are recovered from residual differences: with gravity
+    moments of 1e18 N m a unit multiplier vanished in them (LinAlgError: Singular matrix).
+    The condensed run moves as the full one."""
+    mb = sd.ModelBuilder(gravity=(0, 0, -9.81))
+    mb.node("g", fixed=True)
+    mb.node("a", mass=1e12, inertia=(1e12, 1e12, 1e12), com=(9e4, 0, 0))
+    mb.node("b", position=(0.5, 0, 0), mass=1e12, inertia=(1e12, 1e12, 1e12), com=(9e4, 0, 0))
+    mb.joint("h", "spherical", "g", "a")
+    mb.joint("r", "rigid", "a", "b")
+    m = mb.build()
+    a = sd.simulate(m, 0.02, 0.01)
+    b = sd.simulate(m, 0.02, 0.01, condense=False)
+    assert a.stats.get("condensed")
+    assert np.all(np.isfinite(a.joint_multipliers("r")))
+    np.testing.assert_allclose(a.node_position("b"), b.node_position("b"), rtol=0, atol=1e-9)
