@@ -1126,3 +1126,113 @@ def test_condensation_of_bodies_with_large_forces_does_not_fail():
     assert a.stats.get("condensed")
     assert np.all(np.isfinite(a.joint_multipliers("r")))
     np.testing.assert_allclose(a.node_position("b"), b.node_position("b"), rtol=0, atol=1e-9)
+
+
+# ---------------------------------------------------------------------------------------------
+# sweeps
+SWEEP_EX = ROOT / "examples" / "slider_crank.yaml"
+#: Sweep command lines refused before anything is allocated or any run starts (flags only).
+SWEEP_FLAGS = [
+    (["--vary", "simulation.step=0.01:0.02:99999999999"], "N from 1 to 1e+06"),
+    (["--vary", "simulation.step=0.01:0.02:1000001"], "N from 1 to 1e+06"),
+    (["--vary", "simulation.step=uniform(0.01,0.02)", "--method", "random", "--samples",
+      "99999999999"], "(at most 1e+06)"),
+    (["--vary", "simulation.step=uniform(0.01,0.02)", "--method", "lhs", "--samples",
+      "1000001"], "(at most 1e+06)"),
+    ([a for i in (2, 3, 4, 5, 6, 7, 8) for k in (0, 1, 2)
+      for a in ("--vary", f"nodes.{i}.position.{k}=0.1,0.2,0.3")], "at most 1e+06 runs"),
+    (["--vary", "simulation.step=0.01:0.02:1000", "--vary", "simulation.t_end=1:2:1001"],
+     "at most 1e+06 runs"),
+    (["--vary", "simulation.step=uniform(0.01,0.02)", "--method", "random", "--samples", "3",
+      "--seed", "-1"], "seed"),
+    (["--vary", "simulation.step=0.01,0.02", "--seed", "-5"], "seed"),
+    (["--vary", "simulation.step=0.01,0.02", "--scheduler", "notaurl"], "--scheduler"),
+    (["--vary", "simulation.step=0.01,0.02", "--scheduler", "tcp://"], "--scheduler"),
+    (["--vary", "simulation.step=0.01,0.02", "--scheduler", "host:port"], "--scheduler"),
+    (["--vary", "simulation.step=0.01,0.02", "--scheduler", ""], "--scheduler"),
+    (["--vary", "simulation.step=0.01,0.02", "--retry-failed"], "retry_failed"),
+]
+
+
+@pytest.mark.parametrize("flags, word", SWEEP_FLAGS)
+def test_sweep_flags_are_refused_in_one_line_before_anything_is_made(tmp_path, flags, word):
+    """--vary simulation.step=0.01:0.02:99999999999 and --samples 99999999999 allocated
+    hundreds of GiB (MemoryError); a 30-path grid filled 8 GiB in 30 s; --seed -1 and
+    --scheduler notaurl passed through to numpy and dask errors."""
+    t0 = time.perf_counter()
+    code, _, err = _cli(["sweep", SWEEP_EX, *flags, "--out", tmp_path / "sw", "--t-end",
+                         "0.02", "--quiet"])
+    _assert_clean(code, err, " ".join(flags)[:80])
+    assert code == 2 and word in err, err
+    assert not (tmp_path / "sw").exists()  # nothing written: the same --out works afterwards
+    assert time.perf_counter() - t0 < 30
+
+
+def _sweep_calls():
+    """Hostile Python calls of se3dyn.sweep, each (description, call): all refused before any
+    cluster starts."""
+    ex, v = str(SWEEP_EX), {"simulation.step": "0.01,0.02"}
+    kw = dict(overrides={"t_end": 0.02}, workers=1)
+    calls = [("sweep(None)", lambda: sd.sweep(None, v)),
+             ("sweep(5)", lambda: sd.sweep(5, v)),
+             ("sweep(ex, None)", lambda: sd.sweep(ex, None)),
+             ("sweep(ex, 5)", lambda: sd.sweep(ex, 5))]
+    for name, bad in (("out", 5), ("out", 1.5), ("out", ["x"]), ("client", "x"),
+                      ("client", 5), ("as_frame", "x"), ("as_frame", 1), ("progress", "x"),
+                      ("progress", 0), ("resume", "yes"), ("resume", 1),
+                      ("retry_failed", "x"), ("log", "x"), ("log", 5), ("metrics", 5),
+                      ("metrics", None), ("overrides", "x"), ("overrides", [1]),
+                      ("workers", 0), ("workers", True), ("workers", 1.5),
+                      ("scheduler", 5), ("scheduler", "notaurl"), ("h5", 5), ("method", 5),
+                      ("seed", -1), ("seed", 1.5), ("seed", "x"), ("samples", 10**11)):
+        args = dict(kw, **{name: bad})
+        if name in ("seed", "samples"):
+            args.update(method="random", samples=args.get("samples", 2))
+            vv = {"simulation.step": "uniform(0.01,0.02)"}
+        else:
+            vv = v
+        calls.append((f"sweep(ex, vary, {name}={bad!r})",
+                      lambda args=args, vv=vv: sd.sweep(ex, vv, **args)))
+    calls += [("sweep(ex, vary, resume=True) without out",
+               lambda: sd.sweep(ex, v, resume=True, **kw)),
+              ("sweep(ex, vary, retry_failed=True) without resume",
+               lambda: sd.sweep(ex, v, out="x", retry_failed=True, **kw)),
+              ("sweep(ex, {step: 0:1:10**11})",
+               lambda: sd.sweep(ex, {"simulation.step": "0.01:0.02:100000000000"}, **kw))]
+    return calls
+
+
+def test_sweep_calls_raise_se3dyn_errors_before_any_run(monkeypatch):
+    """sd.sweep(None), sweep(out=5), sweep(client='x'): raw exceptions; sweep(as_frame='x')
+    claimed pandas was missing; sweep(progress='x') and sweep(out=None, resume=True) were
+    accepted."""
+    import se3dyn.sweep.runner as runner
+
+    def no_cluster(*a, **k):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(runner, "_client", no_cluster)
+    for what, call in _sweep_calls():
+        try:
+            call()
+        except Se3dynError:
+            continue
+        except Exception as exc:  # noqa: BLE001
+            pytest.fail(f"{what}: {type(exc).__name__}: {exc}")
+        pytest.fail(f"{what}: accepted")
+
+
+def test_a_sweep_leaves_no_scratch_folder_in_tmp(tmp_path, monkeypatch):
+    """An empty dask-scratch-space/ was left in $TMPDIR by every local sweep."""
+    import tempfile
+
+    pytest.importorskip("distributed")
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    rows = sd.sweep(str(SWEEP_EX), {"simulation.step": "0.01,0.02"}, workers=1,
+                    overrides={"t_end": 0.02}, out=tmp_path / "sw", as_frame=False,
+                    progress=False)
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    assert list(tmp.iterdir()) == []
