@@ -1236,3 +1236,78 @@ def test_a_sweep_leaves_no_scratch_folder_in_tmp(tmp_path, monkeypatch):
                     progress=False)
     assert [r["status"] for r in rows] == ["ok", "ok"]
     assert list(tmp.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# Python calls (the sweep's above)
+def _python_calls(tmp: Path):
+    """Hostile calls of the public API outside the model builder, each (description, call):
+    every one must raise a Se3dynError (a KeyError or ValueError too where it was one)."""
+    from se3dyn import viewer
+    from se3dyn.channels import get_channel
+    from se3dyn.h5 import read_results
+
+    model = _pendulum()
+    res = sd.simulate(model, t_end=0.02, step=0.01)
+    calls = []
+    for arg in (None, 5, 1.5, b"x", ["a.h5"], object()):
+        calls.append((f"read_results({arg!r})", lambda a=arg: read_results(a)))
+        calls.append((f"save_model({arg!r})", lambda a=arg: save_model(a)))
+        calls.append((f"write_html({arg!r}, path)",
+                      lambda a=arg: viewer.write_html(a, tmp / "x.html")))
+        calls.append((f"export_gltf({arg!r}, path)",
+                      lambda a=arg: viewer.export_gltf(a, tmp / "x.glb")))
+        calls.append((f"html_page({arg!r})", lambda a=arg: viewer.html_page(a)))
+        if arg is not None:
+            calls.append((f"write_html(res, {arg!r})",
+                          lambda a=arg: viewer.write_html(res, a)))
+            calls.append((f"export_gltf(res, {arg!r})",
+                          lambda a=arg: viewer.export_gltf(res, a)))
+    calls.append(("write_html(res, None)", lambda: viewer.write_html(res, None)))
+    for name in ("ghost", None, 5, ""):
+        calls.append((f"Model.node({name!r})", lambda n=name: model.node(n)))
+        calls.append((f"Model.joint({name!r})", lambda n=name: model.joint(n)))
+        calls.append((f"get_channel(res, {name!r})", lambda n=name: get_channel(res, n)))
+    for args in (("x",), ("x", 1.0), (1.0, "x"), (-1.0,), (1.0, -2.0), ([1.0, "x"],),
+                 (float("nan"),), (1.0, 0.0, "y"), (1.0, 0.0, 0.0, 5j), ([[1.0, 2.0]],)):
+        calls.append((f"PD(*{args!r})", lambda a=args: sd.PD(*a)))
+    for args in ((5,), ("x",), (None,), (lambda t: t, -1.0), (lambda t: t, "x"),
+                 (lambda t: t, float("nan"))):
+        calls.append((f"Callable(*{args!r})", lambda a=args: sd.Callable(*a)))
+    drivers = {"h": sd.Ramp(1.0, duration=1.0)}
+    calls.append(("kinematics(10**7 output times)",  # (80 MB of times; rows of 8 GB)
+                  lambda: sd.kinematics(model, drivers, np.linspace(0.0, 1.0, 10**7))))
+    for steps in (10**9, 10**30, 0, -1, 1.5, True):
+        calls.append((f"static_equilibrium(load_steps={steps!r})",
+                      lambda n=steps: sd.static_equilibrium(model, load_steps=n)))
+    return calls
+
+
+def test_python_calls_raise_se3dyn_errors(tmp_path, monkeypatch):
+    """read_results(None), save_model(None), write_html(None), kinematics with 10^7 output
+    times, Model.node('ghost') and get_channel(res, 'nope') as bare KeyErrors; PD('x') and
+    Callable(5) accepted; static_equilibrium(load_steps=10**9) ran on without end."""
+    simmod = importlib.import_module("se3dyn.simulate")
+    monkeypatch.setattr(simmod, "_available_memory", lambda: 2.0**30)  # (1 GiB, as measured)
+    calls = _python_calls(tmp_path)
+    for what, call in calls:
+        t0 = time.perf_counter()
+        try:
+            call()
+        except Se3dynError as exc:
+            assert "\n" not in str(exc), what
+            assert time.perf_counter() - t0 < 30, what
+            continue
+        except Exception as exc:  # noqa: BLE001
+            pytest.fail(f"{what}: {type(exc).__name__}: {exc}")
+        pytest.fail(f"{what}: accepted")
+
+
+def test_unknown_names_are_still_key_errors():
+    model = _pendulum()
+    with pytest.raises(KeyError, match="unknown node 'ghost'"):
+        model.node("ghost")
+    from se3dyn.channels import get_channel
+
+    with pytest.raises(KeyError, match="unknown channel 'nope'"):
+        get_channel(sd.simulate(model, t_end=0.02, step=0.01), "nope")

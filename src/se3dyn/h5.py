@@ -904,6 +904,9 @@ def read_results(path: str | os.PathLike) -> Results:
     ResultsFileError
         Missing file, not an HDF5 file, not an se3dyn results file, newer format version.
     """
+    if not isinstance(path, str | os.PathLike):
+        raise ResultsFileError(repr(path), f"expected a file name (str or path), got "
+                               f"{type(path).__name__}")
     path = os.fspath(path)
     f, repaired = _open(path)
     with f:

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from se3dyn.errors import ModelError, close_matches
+from se3dyn.errors import ModelError, UnknownNameError, close_matches
 from se3dyn.joints import JOINT_SYNONYMS, JOINT_TYPES, is_abelian, unit_vector
 from se3dyn.timefunc import Component, TimeFunction, as_timefunc
 from se3dyn.visuals import VisualSpec, make_visual
@@ -60,6 +60,16 @@ class PD:
     kd: Any = 0.0
     target: Any = 0.0
     target_rate: Any = None
+
+    def __post_init__(self):
+        # the checks joint(control=...) makes that need no joint (its k checks the lengths)
+        for fld in ("kp", "kd"):
+            v = getattr(self, fld)
+            _kvec(v, int(np.size(v)) if isinstance(v, list | tuple | np.ndarray) else 1,
+                  "PD", fld, nonneg=True)
+        as_timefunc(self.target, "PD", "target")
+        if self.target_rate is not None:
+            as_timefunc(self.target_rate, "PD", "target_rate")
 
 
 @dataclass(frozen=True)
@@ -302,18 +312,19 @@ class Model:
         self.__dict__.update(state)
 
     def node(self, name: str) -> NodeSpec:
-        """The node called ``name`` (KeyError listing valid names otherwise)."""
+        """The node called ``name`` (:class:`~se3dyn.errors.UnknownNameError`, a KeyError,
+        listing valid names otherwise)."""
         for n in self.nodes:
             if n.name == name:
                 return n
-        raise KeyError(_unknown("node", name, [n.name for n in self.nodes]))
+        raise UnknownNameError(_unknown("node", name, [n.name for n in self.nodes]))
 
     def joint(self, name: str) -> JointSpec:
         """The joint called ``name``."""
         for j in self.joints:
             if j.name == name:
                 return j
-        raise KeyError(_unknown("joint", name, [j.name for j in self.joints]))
+        raise UnknownNameError(_unknown("joint", name, [j.name for j in self.joints]))
 
     @property
     def node_names(self) -> list[str]:

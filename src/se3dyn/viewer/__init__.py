@@ -68,6 +68,14 @@ def check_motion(res) -> None:
                               f"{got} at row {i} (t = {float(t[i]):g} s)")
 
 
+def _check_path(path, suffixes: str) -> None:
+    import os
+
+    if not isinstance(path, str | os.PathLike):
+        raise ViewerError(f"output: field 'path': expected a file name ({suffixes}), got "
+                          f"{path!r}")
+
+
 def html_page(res, **kwargs) -> str:
     """The viewer page of ``res`` as a string; keyword arguments of :func:`write_html`."""
     from se3dyn.viewer.html import html_page as _page
@@ -81,6 +89,7 @@ def write_html(res, path, **kwargs):
     from se3dyn.viewer.html import write_html as _write
 
     check_motion(res)
+    _check_path(path, ".html")
     return _write(res, path, **kwargs)
 
 
@@ -89,6 +98,7 @@ def export_gltf(res, path, **kwargs):
     from se3dyn.viewer.gltf import export_gltf as _export
 
     check_motion(res)
+    _check_path(path, ".glb or .gltf")
     return _export(res, path, **kwargs)
 
 
