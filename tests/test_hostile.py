@@ -1311,3 +1311,41 @@ def test_unknown_names_are_still_key_errors():
 
     with pytest.raises(KeyError, match="unknown channel 'nope'"):
         get_channel(sd.simulate(model, t_end=0.02, step=0.01), "nope")
+
+
+DAMPED = """\
+se3dyn: 1
+name: damped
+gravity: [0.0, -9.81, 0.0]
+nodes:
+  ground: {position: [0.0, 0.0, 0.0], fixed: true}
+  bob: {position: [1.0, 0.0, 0.0], mass: 1000.0, inertia: [1.0, 1.0, 1.0]}
+joints:
+  O: {type: hinge, a: ground, b: bob, at: [0.0, 0.0, 0.0], axis: [0.0, 0.0, 1.0],
+      damping: 20000.0}
+simulation: {t_end: 20.0, step: 1.0e-2, rho_inf: 0.9}
+"""
+
+
+def test_a_resumed_run_reports_the_energy_balance_of_the_whole_run(tmp_path):
+    """A resumed run's summary measured the energy balance from the row it resumed at: a
+    damped pendulum at rest by then has next to no energy in play, and an exact run read
+    "energy balance error 1.153e-11 J (100 % of the energy in play) WARNING: large"."""
+    (tmp_path / "damped.yaml").write_text(DAMPED)
+    model = tmp_path / "damped.yaml"
+
+    def energy(out):
+        return [ln.strip() for ln in out.splitlines() if "energy balance error" in ln]
+
+    code, _, err = _cli(["run", model, "--out", tmp_path / "a", "--quiet"])
+    assert code == 0, err
+    code, out, err = _cli(["run", model, "--resume", tmp_path / "a" / "damped.h5", "--t-end",
+                           "40", "--quiet"])
+    assert code == 0, err
+    resumed = energy(out)
+    code, out, err = _cli(["run", model, "--t-end", "40", "--out", tmp_path / "b", "--quiet"])
+    assert code == 0, err
+    whole = energy(out)
+    assert len(whole) == 1 and resumed == whole and "WARNING" not in whole[0], (resumed, whole)
+    code, out, _ = _cli(["info", tmp_path / "a" / "damped.h5"])
+    assert energy(out) == whole

@@ -369,6 +369,10 @@ def cmd_run(args) -> int:
         stats["newton_iterations"] = base_its + int(stats.get("newton_iterations", 0))
         if failed is not None:
             stats.update(failed=True, message=str(failed))
+        if cp is not None and "energy_balance_error" in stats:  # (the run it continues)
+            err, scale = writer.energy_balance()
+            stats.update(energy_balance_error=err, energy_scale=scale)
+            res.stats.update(energy_balance_error=err, energy_scale=scale)
         writer.close(stats=stats, settings=cfg)
     wall = time.perf_counter() - t0
     if failed is not None:
