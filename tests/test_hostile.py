@@ -1349,3 +1349,98 @@ def test_a_resumed_run_reports_the_energy_balance_of_the_whole_run(tmp_path):
     assert len(whole) == 1 and resumed == whole and "WARNING" not in whole[0], (resumed, whole)
     code, out, _ = _cli(["info", tmp_path / "a" / "damped.h5"])
     assert energy(out) == whole
+
+
+# ---------------------------------------------------------------------------------------------
+# A second generated file corpus: the element sections added since the first (beams,
+# bushings), with springs, loads and visuals; every file is checked and run, the results of a
+# sample viewed and exported, and every 7th run resumed.
+ELEMENTS = """\
+se3dyn: 1
+name: elements
+gravity: [0.0, 0.0, -9.81]
+nodes:
+  g: {position: [0.0, 0.0, 0.0], fixed: true}
+  a: {position: [0.5, 0.0, 0.0], mass: 1.0, inertia: [0.01, 0.02, 0.02]}
+  e: {position: [0.0, 0.0, 0.3], mass: 2.0, inertia: [0.1, 0.1, 0.1]}
+  t: {position: [1.5, 0.0, 0.0]}
+joints:
+  h: {type: hinge, a: g, b: a, at: [0.0, 0.0, 0.0], axis: [0.0, 1.0, 0.0], damping: 0.01}
+beams:
+  bar: {a: a, b: t, elements: 2, EA: 1.0e6, GA: 4.0e5, GJ: 50.0, EI: 80.0,
+        mass_per_length: 0.5, rotary_inertia: [1.0e-4, 5.0e-5, 5.0e-5], damping: 1.0e-4}
+bushings:
+  mount: {a: g, b: e, at: [0.0, 0.0, 0.3], stiffness: [2.0e4, 2.0e4, 3.0e4, 100, 100, 100],
+          damping: [20, 20, 30, 0.1, 0.1, 0.1]}
+springs:
+  sp: {a: g, b: a, at_a: [0.0, 0.5, 0.0], at_b: [0.5, 0.0, 0.0], stiffness: 2.0,
+       damping: 0.1}
+loads:
+  push: {node: e, force: [0.0, 1.0, 0.0], at: [0.0, 0.0, 0.3], force_frame: body}
+visuals:
+  rod: {node: a, shape: cylinder, size: [0.01, 0.5], axis: [1, 0, 0]}
+  box: {node: e, shape: box, size: [0.2, 0.1, 0.1], color: orange}
+simulation: {t_end: 0.05, step: 0.01, rho_inf: 0.9}
+"""
+
+BASES2 = [("elements", ELEMENTS)] + [
+    (p.stem, p.read_text(encoding="utf-8"))
+    for p in (ROOT / "examples" / "slider_crank_flexible.yaml",
+              ROOT / "examples" / "a03_andrews_squeezer.yaml")]
+N_FILES2 = 450
+
+
+def corpus2(n: int) -> list[tuple[str, str, str]]:
+    rng = random.Random(SEED + 28)
+    return [(f"{k:04d}-{base}-{kind}", kind, mutated) for k in range(n)
+            for base, text in [BASES2[k % len(BASES2)]] for kind, mutated in [_mutate(rng, text)]]
+
+
+def test_second_corpus_check_run_view_export_resume(tmp_path):
+    """The commands on the second corpus: check, run (--threads 1 on every 5th file), and on
+    the results of every 10th run that succeeded: info, channels, view, export --csv and
+    --gltf, run --resume --t-end 0.06; all exit 0, 1 or 2 with one line and no traceback."""
+    pytest.importorskip("pygltflib")
+    fs = corpus2(N_FILES2)
+    assert len(fs) == N_FILES2 and len({k for _, k, _ in fs}) >= 15
+    codes = {0: 0, 1: 0, 2: 0}
+    commands = ran = 0
+    for i, (name, _kind, text) in enumerate(fs):
+        p = tmp_path / f"{name}.yaml"
+        p.write_bytes(text.encode("utf-8", "surrogatepass"))
+        code, _, err = _cli(["check", p])
+        _assert_clean(code, err, f"check {name}")
+        codes[code] += 1
+        commands += 1
+        if code != 0:
+            continue
+        out = tmp_path / "out" / name
+        argv = ["run", p, "--t-end", "0.05", "--quiet", "--out", out] + (
+            ["--threads", "1"] if i % 5 == 0 else [])
+        code, _, err = _cli(argv)
+        _assert_clean(code, err, f"run {name}")
+        codes[code] += 1
+        commands += 1
+        h5 = out / f"{name}.h5"
+        if code == 2 or not h5.exists():
+            continue
+        ran += 1
+        if ran % 10:
+            continue
+        for cmd in (["info", h5], ["channels", h5], ["view", h5, "-o", out / "v.html"],
+                    ["export", h5, "--csv", out / "c.csv"],
+                    ["export", h5, "--gltf", out / "g.glb"],
+                    ["run", p, "--resume", h5, "--t-end", "0.06", "--quiet"]):
+            code, _, err = _cli(cmd)
+            _assert_clean(code, err, f"{cmd[0]} {name}")
+            commands += 1
+    assert codes[0] > 0 and codes[2] > 0 and ran >= 50, (codes, ran)
+    assert commands >= N_FILES2 + ran + 6 * (ran // 10), commands
+
+
+def test_second_corpus_bases_are_valid(tmp_path):
+    for name, text in BASES2:
+        (tmp_path / f"{name}.yaml").write_text(text)
+        code, _, err = _cli(["run", tmp_path / f"{name}.yaml", "--t-end", "0.02", "--out",
+                             tmp_path, "--quiet"])
+        assert code == 0, (name, err)
