@@ -12,7 +12,9 @@ and fewer than 3000 unknowns never leave one thread (the parts would cost more t
 
 The number of threads is one setting of the process:
 
-* ``SE3DYN_THREADS`` in the environment, read when the engine is first loaded;
+* ``SE3DYN_THREADS`` in the environment (a whole number from 1 to :data:`MAX_THREADS`), read
+  when the engine is first loaded (``se3dyn run`` reads it first, before its results file is
+  made; ``--threads`` replaces it);
 * :func:`set_threads` (``se3dyn run --threads N`` on the command line);
 * by default, the cores this process may run on (``os.sched_getaffinity``).
 
@@ -84,7 +86,14 @@ def set_threads(n: int | None = None) -> int:
     Parameters
     ----------
     n : int or None
-        Threads, >= 1; None: ``SE3DYN_THREADS`` or the cores this process may run on.
+        Threads, 1 to :data:`MAX_THREADS`; None: ``SE3DYN_THREADS`` or the cores this process
+        may run on. Set before the engine is first loaded, it is used instead of
+        ``SE3DYN_THREADS`` (which is then not read).
+
+    Raises
+    ------
+    Se3dynError
+        ``n`` (or ``SE3DYN_THREADS``) not a whole number from 1 to :data:`MAX_THREADS`.
 
     Returns
     -------
