@@ -732,6 +732,8 @@ def test_storage_grows_as_the_run_goes_up_to_the_rows_expected(monkeypatch):
 # ---------------------------------------------------------------------------------------------
 #: Where results files are cut (% of their bytes): crashed disks and interrupted copies.
 CUTS = (10, 25, 50, 75, 90, 95, 99, 99.5, 99.9)
+#: ... and at a few bytes (inside the signature and the superblock, and just after it).
+CUT_BYTES = (0, 8, 12, 40, 47, 48, 100, 2048)
 #: Every command and call that reads a results file (RESULTS and MODEL substituted).
 READERS = (("info", "RESULTS"), ("channels", "RESULTS"),
            ("plot", "RESULTS", "time", "-o", "OUT.png"), ("view", "RESULTS", "-o", "OUT.html"),
@@ -812,12 +814,14 @@ def base_h5(tmp_path_factory):
     return d / "slider_crank.h5"
 
 
-def _cut(src: Path, dst: Path, pct: float, flags: bool = False) -> Path:
-    """``src`` cut to ``pct`` % of its bytes; ``flags``: its superblock marked open for
-    writing, as a live writer's file is."""
+def _cut(src: Path, dst: Path, pct: float, flags: bool = False, nbytes: int | None = None
+         ) -> Path:
+    """``src`` cut to ``pct`` % of its bytes (or to ``nbytes``); ``flags``: its superblock
+    marked open for writing, as a live writer's file is."""
     from se3dyn.h5 import _lookup3
 
-    data = bytearray(src.read_bytes()[:int(src.stat().st_size * pct / 100)])
+    n = int(src.stat().st_size * pct / 100) if nbytes is None else nbytes
+    data = bytearray(src.read_bytes()[:n])
     if flags:  # status flags (byte 11) and the superblock checksum (version 3, 8-byte offsets)
         data[11] = 5
         data[44:48] = _lookup3(bytes(data[:44])).to_bytes(4, "little")
@@ -842,6 +846,9 @@ def test_truncated_results_files_are_refused_at_once_by_every_reader(base_h5, tm
     rows = _readers(files, ROOT / "examples" / "slider_crank.yaml")
     assert len(rows) == len(CUTS) * len(READERS)
     _assert_refused(rows, "is truncated")
+    # cut inside the superblock (48 bytes): HDF5 refuses it itself, at once
+    files = [_cut(base_h5, tmp_path / f"head{n}.h5", 0, nbytes=n) for n in CUT_BYTES]
+    _assert_refused(_readers(files, ROOT / "examples" / "slider_crank.yaml"), "results file")
 
 
 def test_a_damaged_file_a_live_writer_holds_is_refused_in_bounded_time(base_h5, tmp_path):
