@@ -34,8 +34,8 @@ def _command_startup() -> None:
       handler; all of them go with the process). The handlers registered later, the
       teardown of the modules and the finalizers of the objects that no cycle holds run as
       before. Not for ``sweep``: dask shuts its machinery down as usual.
-    * Ctrl-C while the package loads prints one line and exits with 130, no traceback
-      (``se3dyn.cli.main`` restores the default handler once it runs).
+    * Ctrl-C while the package loads prints one line and exits with 130, no traceback, and
+      SIGTERM likewise with 143 (``se3dyn.cli.main`` installs its own handlers once it runs).
     """
     import os
     import sys
@@ -59,12 +59,17 @@ def _command_startup() -> None:
         return
 
     def interrupted(signum, frame):
+        if signum == signal.SIGTERM:
+            os.write(2, b"se3dyn: error: terminated\n")
+            os._exit(143)
         os.write(2, b"se3dyn: error: interrupted\n")
         os._exit(130)
 
     try:
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             signal.signal(signal.SIGINT, interrupted)
+        if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+            signal.signal(signal.SIGTERM, interrupted)
     except (ValueError, OSError):  # pragma: no cover - no signals here
         pass
 

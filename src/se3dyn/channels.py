@@ -29,7 +29,7 @@ import re
 
 import numpy as np
 
-from se3dyn.errors import close_matches
+from se3dyn.errors import UnknownNameError, close_matches
 from se3dyn.results import Results
 
 __all__ = ["list_channels", "get_channel", "channel_unit", "escape_name", "unescape_name",
@@ -150,7 +150,7 @@ def _beam_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
     return (x if c is None else x[:, c]).copy()
 
 
-def _unknown(res: Results, name: str, why: str = "") -> KeyError:
+def _unknown(res: Results, name: str, why: str = "") -> UnknownNameError:
     valid = list_channels(res)
     close = close_matches(str(name), valid, n=3, cutoff=0.5)
     msg = f"unknown channel {name!r}"
@@ -160,7 +160,7 @@ def _unknown(res: Results, name: str, why: str = "") -> KeyError:
         msg += "; did you mean " + ", ".join(repr(c) for c in close) + "?"
     else:
         msg += "; valid names look like " + ", ".join(repr(c) for c in valid[1:4]) + ", ..."
-    return KeyError(msg)
+    return UnknownNameError(msg)
 
 
 def _index(res: Results, name: str, text: str, size: int) -> int:

@@ -266,11 +266,14 @@ def cmd_run(args) -> int:
     import se3dyn as sd
     from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
     from se3dyn.h5 import ResultsFileError, ResultsWriter
+    from se3dyn.threads import from_environment
 
     # --quiet: no summary; what was changed (initial velocities) or looks wrong goes to stderr
     say = print if not args.quiet else (lambda *a, **k: None)
 
-    if args.threads is not None:
+    if args.threads is None:  # (a bad SE3DYN_THREADS: refused before the results file is made)
+        from_environment()
+    else:
         sd.set_threads(args.threads)
     model, settings = _load(args.model)
     text = Path(args.model).read_text(encoding="utf-8")  # stored as metadata, as given
@@ -379,6 +382,10 @@ def cmd_run(args) -> int:
         stats["newton_iterations"] = base_its + int(stats.get("newton_iterations", 0))
         if failed is not None:
             stats.update(failed=True, message=str(failed))
+        if cp is not None and "energy_balance_error" in stats:  # (the run it continues)
+            err, scale = writer.energy_balance()
+            stats.update(energy_balance_error=err, energy_scale=scale)
+            res.stats.update(energy_balance_error=err, energy_scale=scale)
         writer.close(stats=stats, settings=cfg)
     wall = time.perf_counter() - t0
     if failed is not None:
@@ -408,10 +415,9 @@ def _resume(args, s, text: str):
     and the path (writer None: nothing to do); usage errors for everything that cannot
     continue bit for bit."""
     import json
+    import os
 
-    import h5py
-
-    from se3dyn.h5 import ResultsFileError, ResultsWriter, repair
+    from se3dyn.h5 import ResultsFileError, ResultsWriter, _check_format, _layout, _open, repair
 
     path = Path(args.resume)
     other = [k for k in _OVERRIDES if k != "t_end" and getattr(args, k) is not None]
@@ -423,15 +429,20 @@ def _resume(args, s, text: str):
                      "apply")
     try:
         repair(path)  # left by kill -9: readable again (not while a writer holds it)
-        with h5py.File(path, "r", libver="latest", swmr=True) as f:
+        with _open(os.fspath(path))[0] as f:  # (a truncated file refused at once)
+            _check_format(f, os.fspath(path))
+            _layout(f, os.fspath(path))  # (a damaged or crafted layout refused)
             stored = f.attrs.get("model", "")
             stored = stored.decode() if isinstance(stored, bytes) else str(stored)
             cfg = json.loads(f.attrs.get("settings", "{}"))
             complete = bool(f.attrs.get("complete", False))
             t_last = float(f["time"][-1]) if f["time"].shape[0] else -math.inf
+        if not isinstance(cfg, dict) or not all(
+                isinstance(cfg.get(k, 0.0), (int, float)) for k in ("t_end", "step")):
+            raise ValueError(f"attribute 'settings' is {cfg!r}, expected the run's settings")
     except ResultsFileError as exc:
         raise _Usage(str(exc)) from None
-    except (OSError, KeyError, ValueError) as exc:
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError) as exc:
         raise _Usage(f"--resume {path}: not a readable se3dyn results file ({exc})") from None
     if stored != text:
         raise _Usage(f"--resume {path}: {args.model} is not the model stored in it (the texts "
@@ -478,19 +489,19 @@ def _read(path: str):
 
     if not Path(path).is_file():
         raise _Usage(f"{path}: no such results file")
+    from se3dyn.errors import Se3dynError
+
     try:
         res = read_results(path)
+    except Se3dynError as exc:  # the reader's own error class, naming the file
+        raise _Usage(str(exc)) from None
     except (OSError, ValueError, KeyError) as exc:
         raise _Usage(f"{path}: not a readable se3dyn results file ({exc})") from None
-    except Exception as exc:  # the reader's own error class
-        from se3dyn.errors import Se3dynError
-
-        if isinstance(exc, Se3dynError):
-            raise _Usage(str(exc)) from None
-        raise
     if res.stats.get("repaired"):
-        print(f"se3dyn: repaired {path}: it was left open by a run that was killed; "
-              f"{len(res.t)} rows kept up to t = {res.t[-1]:g} s", file=sys.stderr)
+        kept = (f"{len(res.t)} rows kept up to t = {res.t[-1]:g} s" if len(res.t) else
+                "it holds no rows (killed before its first rows reached the disk)")
+        print(f"se3dyn: repaired {path}: it was left open by a run that was killed; {kept}",
+              file=sys.stderr)
     return res
 
 
@@ -532,6 +543,8 @@ def cmd_channels(args) -> int:
 def cmd_info(args) -> int:
     """What a results file holds: its status (complete, failed, interrupted, cut short), the
     model, the settings and the statistics of the run."""
+    from se3dyn.h5 import _writer_alive
+
     res = _read(args.results)
     st = res.stats
     t0, t1 = (float(res.t[0]), float(res.t[-1])) if len(res.t) else (math.nan, math.nan)
@@ -545,10 +558,16 @@ def cmd_info(args) -> int:
     msg = st.get("message", "")
     if st.get("complete") and not st.get("failed"):
         status = f"complete: t = {t0:g} .. {t1:g} s"
-    elif st.get("failed") and msg == "interrupted":
-        status = f"interrupted at t = {t1:.9g} s (se3dyn run MODEL --resume {args.results})"
+    elif st.get("failed") and msg in ("interrupted", "terminated"):  # (Ctrl-C, SIGTERM)
+        status = f"{msg} at t = {t1:.9g} s (se3dyn run MODEL --resume {args.results})"
     elif st.get("failed"):
         status = f"failed at t = {t1:.9g} s: {msg}"
+    elif _writer_alive(args.results):  # (its writer's lock is held)
+        status = ("being written by a se3dyn run that is still going" + (
+            f": t = {t0:g} .. {t1:.9g} s so far" if len(res.t) else ", no rows yet"))
+    elif not len(res.t):
+        status = ("cut short before its first row (the writer stopped without closing the "
+                  "file: killed?); run the model again")
     else:
         status = (f"cut short at t = {t1:.9g} s (the writer stopped without closing the file: "
                   f"killed?); se3dyn run MODEL --resume {args.results} continues it")
@@ -754,10 +773,15 @@ def _positive(kind):
     return conv
 
 
-def _whole_positive(text):
-    if not text.strip().isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return int(text)
+def _threads(text):
+    """The value of --threads (se3dyn.threads' own check)."""
+    from se3dyn.errors import Se3dynError
+    from se3dyn.threads import _check
+
+    try:
+        return _check(text, "--threads")
+    except Se3dynError as exc:
+        raise argparse.ArgumentTypeError(str(exc).split(": ", 1)[1]) from None
 
 
 _OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step",
@@ -896,7 +920,7 @@ def _run_args(r) -> None:
     r.add_argument("--quiet", action="store_true",
                    help="no progress bar and no summary (what it changed or flags: one line "
                         "each on stderr)")
-    r.add_argument("--threads", type=_whole_positive, metavar="N",
+    r.add_argument("--threads", type=_threads, metavar="N",
                    help="threads of the compiled engine (default: SE3DYN_THREADS or the "
                    "cores; the results do not depend on it)")
     r.set_defaults(func=cmd_run)
@@ -1023,6 +1047,13 @@ def _main(argv: list[str] | None) -> int:
         return int(args.func(args))
     except _Usage as exc:
         _err(str(exc))
+        return 2
+    except Exception as exc:
+        from se3dyn.errors import Se3dynError
+
+        if not isinstance(exc, Se3dynError):
+            raise
+        _err(str(exc))  # (e.g. a bad SE3DYN_THREADS met when the engine is first loaded)
         return 2
     except KeyboardInterrupt:
         _err("interrupted")

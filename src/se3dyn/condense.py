@@ -49,6 +49,7 @@ condensed run never fails where the model itself goes on.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -414,6 +415,11 @@ def _build(s) -> Condensation | None:
     ev = lambda lam: evaluate(s, s.node_H0, s.joint_H0, s.alpha0, z, z, z, lam,  # noqa: E731
                               inputs, ws=ws).r
     r0 = ev(zl)
+    # unit multipliers scaled to the forces of r0 (a power of two: the division is exact): the
+    # difference keeps their digits however large the forces (a centre of mass 1e15 m from
+    # its node gives gravity moments of 1e16 N m, which swallowed a unit multiplier)
+    big = float(np.max(np.abs(r0))) if r0.size else 0.0
+    sc = 2.0 ** math.ceil(math.log2(big)) if math.isfinite(big) and big > 1.0 else 1.0
     todo = list(range(nr))
     while todo:
         batch, used_nodes, rest = [], set(), []
@@ -425,8 +431,8 @@ def _build(s) -> Condensation | None:
         todo = rest
         for k in range(6):
             lk = zl.copy()
-            lk[s.joint_multadr[rigid[batch]] + k] = 1.0
-            d = ev(lk) - r0
+            lk[s.joint_multadr[rigid[batch]] + k] = sc
+            d = (ev(lk) - r0) / sc
             for q in batch:
                 Dc[q, :, k] = d[child_dofs[q]]
                 if parent_dofs[q, 0] >= 0:

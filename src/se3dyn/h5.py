@@ -36,7 +36,7 @@ import h5py
 import numpy as np
 
 from se3dyn.channels import joint_units
-from se3dyn.errors import Se3dynError
+from se3dyn.errors import Se3dynError, _short_repr
 from se3dyn.results import Results
 from se3dyn.system import LayoutCounts
 
@@ -240,15 +240,15 @@ class ResultsWriter:
         except OSError as exc:
             raise ResultsFileError(path, f"cannot be opened for writing ({exc})") from None
         try:
-            if _str(f.attrs.get("format", "")) != FORMAT:
-                raise ResultsFileError(path, "not an se3dyn results file")
-            g = f["layout"]
-            names = tuple(_str(x) for x in g["node_names"][()])
-            jn = tuple(_str(x) for x in g["joint_names"][()])
-            if (names != tuple(s.node_names) or jn != tuple(s.joint_names)
-                    or int(g.attrs["nq"]) != s.nq or int(g.attrs["nm"]) != s.nm):
+            _check_format(f, path)
+            lay = _layout(f, path)
+            if (lay.node_names != tuple(s.node_names) or lay.joint_names != tuple(s.joint_names)
+                    or lay.nq != s.nq or lay.nm != s.nm):
                 raise ResultsFileError(path, "holds the results of another model (nodes, "
                                        "joints or unknowns differ)")
+            if not isinstance(f.get("stats"), h5py.Group):
+                raise ResultsFileError(path, "damaged: /stats: expected a group (the "
+                                       "statistics of the run), got nothing")
             if "restart" not in f:
                 raise ResultsFileError(path, "has no checkpoint (written by an older se3dyn or "
                                        "stopped before its first checkpoint); run it again")
@@ -270,6 +270,12 @@ class ResultsWriter:
             f.attrs["complete"] = False
             f.flush()
             f.swmr_mode = True
+        except (KeyError, TypeError, ValueError, IndexError, OSError, RuntimeError) as e:
+            f.close()
+            if isinstance(e, ResultsFileError):
+                raise
+            raise ResultsFileError(path, f"damaged or incomplete ({type(e).__name__}: {e})"
+                                   ) from None
         except BaseException:
             f.close()
             raise
@@ -468,6 +474,26 @@ class ResultsWriter:
                 ds[self._seq % 2] = row
             self._slots[self._seq % 2] = slot
             self.checkpoint = cp
+
+    def energy_balance(self, chunk: int = 1 << 16) -> tuple[float, float]:
+        """(largest energy balance drift, energy in play) over every row of the file, from
+        its first row (:func:`se3dyn.simulate.energy_balance_check`): a resumed run is
+        measured as the one run it continues, not from the row it resumed at. The buffered
+        rows are written first; the file is read ``chunk`` rows at a time."""
+        from se3dyn.simulate import _balance_and_scale
+
+        self.flush()
+        n = self.rows
+        if n == 0:
+            return 0.0, 0.0
+        ds = [self._ds[f"energy/{e}"] for e in ENERGIES]
+        ref = np.array([d[0] for d in ds])
+        err = scale = 0.0
+        for a in range(0, n, chunk):
+            c = np.stack([d[a:min(a + chunk, n)] for d in ds], axis=1)
+            e, s = _balance_and_scale(c, ref)
+            err, scale = max(err, e), max(scale, s)
+        return err, scale
 
     def flush(self) -> None:
         """Write the buffered rows (and the latest checkpoint) and flush the file."""
@@ -731,6 +757,24 @@ def _lookup3(data: bytes, initval: int = 0) -> int:
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 
+def _superblock(path: str) -> tuple[int, int, int] | None:
+    """The superblock of a version 2 or 3 (``libver="latest"``, as se3dyn writes) at the start
+    of ``path``: (size of offsets, status flags, end-of-file address), or None for another
+    superblock or one whose checksum (lookup3) does not match."""
+    with open(path, "rb") as fh:
+        head = fh.read(12)
+        if len(head) < 12 or head[:8] != _SIGNATURE or head[8] not in (2, 3):
+            return None
+        osize = head[9]
+        fh.seek(0)
+        sb = fh.read(12 + 4 * osize + 4)
+    if len(sb) < 12 + 4 * osize + 4 or osize not in (2, 4, 8, 16, 32):
+        return None
+    if _lookup3(sb[:-4]) != int.from_bytes(sb[-4:], "little"):
+        return None
+    return osize, sb[11], int.from_bytes(sb[12 + 2 * osize:12 + 3 * osize], "little")
+
+
 def _clear_status_flags(path: str, check_lock: bool = True) -> bool:
     """Clear the superblock's file-consistency flags that a writer killed while the file was
     open (kill -9, a crash) leaves set, as ``h5clear -s`` does; True if they were set.
@@ -742,20 +786,13 @@ def _clear_status_flags(path: str, check_lock: bool = True) -> bool:
     """
     if check_lock and _writer_alive(path):
         return False
+    sb = _superblock(path)
+    if sb is None or sb[1] == 0:
+        return False  # not a superblock we understand, or no flags: leave it alone
+    osize, _, eoa = sb
     with open(path, "r+b") as fh:
-        head = fh.read(12)
-        if len(head) < 12 or head[:8] != _SIGNATURE or head[8] not in (2, 3):
-            return False
-        if head[11] == 0:
-            return False
-        osize = head[9]
-        fh.seek(0)
-        sb = bytearray(fh.read(12 + 4 * osize + 4))
-        body = sb[:-4]
-        if _lookup3(bytes(body)) != int.from_bytes(sb[-4:], "little"):
-            return False  # not a superblock we understand: leave it alone
+        body = bytearray(fh.read(12 + 4 * osize))
         body[11] = 0
-        eoa = int.from_bytes(body[12 + 2 * osize:12 + 3 * osize], "little")
         fh.seek(0)
         fh.write(bytes(body) + _lookup3(bytes(body)).to_bytes(4, "little"))
         fh.flush()
@@ -795,37 +832,77 @@ def _attr_value(val: Any):
 
 
 # ---------------------------------------------------------------------------------------------
-def _open(path: str) -> h5py.File:
+#: Reads of a metadata block a SWMR reader tries before it gives up. HDF5 retries a block
+#: whose checksum fails (the writer may be rewriting it) sleeping 1, 2, 4, ... ns between
+#: tries; its default of 100 tries sleeps some 2^100 ns on a damaged or truncated file, inside
+#: the library where Ctrl-C cannot reach. 30 tries give up after about 1 s of sleep in all.
+SWMR_READ_ATTEMPTS = 30
+
+
+def _swmr_open(path: str) -> h5py.File:
+    """Open ``path`` as a SWMR reader (a live writer's file) with at most
+    :data:`SWMR_READ_ATTEMPTS` reads of a metadata block."""
+    import ctypes
+
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    fapl.set_fclose_degree(h5py.h5f.CLOSE_STRONG)
+    fapl.set_libver_bounds(h5py.h5f.LIBVER_LATEST, h5py.h5f.LIBVER_LATEST)
+    try:  # not wrapped by h5py: the function of the HDF5 library h5py links
+        setter = ctypes.CDLL(h5py.h5p.__file__).H5Pset_metadata_read_attempts
+    except (OSError, AttributeError):  # pragma: no cover - a build without it
+        setter = None
+    if setter is not None:
+        setter.argtypes = [ctypes.c_int64, ctypes.c_uint]
+        setter.restype = ctypes.c_int
+        setter(fapl.id, SWMR_READ_ATTEMPTS)
+    fid = h5py.h5f.open(os.fsencode(path), h5py.h5f.ACC_RDONLY | h5py.h5f.ACC_SWMR_READ,
+                        fapl=fapl)
+    return h5py.File(fid)
+
+
+def _open(path: str) -> tuple[h5py.File, bool]:
+    """Open a results file for reading: (file, repaired). A file left flagged open by a killed
+    writer is repaired first (:func:`repair`), one a live writer holds is read as a SWMR
+    reader, and a file shorter than its superblock's end-of-file address (cut short: an
+    interrupted copy, a full or damaged disk) is refused before HDF5 reads it."""
     if not os.path.exists(path):
         raise ResultsFileError(path, "no such file")
     if os.path.isdir(path):
         raise ResultsFileError(path, "is a directory, expected an HDF5 results file")
     try:
         is_h5 = h5py.is_hdf5(path)
+        sb = _superblock(path)
+        size = os.path.getsize(path)
     except OSError as e:
-        raise ResultsFileError(path, f"cannot be read ({e})") from None
+        raise ResultsFileError(path, f"cannot be read ({e.strerror or e})") from None
     if not is_h5:
         raise ResultsFileError(path, "not an HDF5 file (expected an se3dyn results file)")
+    if sb is not None and sb[1] == 0 and size < sb[2]:
+        raise ResultsFileError(path, f"is truncated: {size} bytes of the {sb[2]} its "
+                               "superblock records (cut short: an interrupted copy or a full "
+                               "or damaged disk?); nothing can be read from it")
     try:
         return h5py.File(path, "r"), False
     except OSError as first:
-        # a writer that was killed leaves the file flagged "open for SWMR writing": the flags
-        # are cleared (like h5clear -s) unless a writer still holds the file, which a SWMR
-        # read follows
+        problem = f"cannot be opened ({first})"
+    if _writer_alive(path):  # a run is writing it: follow it
+        try:
+            return _swmr_open(path), False
+        except OSError as exc:
+            raise ResultsFileError(path, f"cannot be opened while it is written ({exc})"
+                                   ) from None
+    # a writer that was killed leaves the file flagged "open for SWMR writing": the flags are
+    # cleared (like h5clear -s)
+    try:
+        repaired = _clear_status_flags(path)
+    except OSError:
         repaired = False
+    if repaired:
         try:
-            repaired = _clear_status_flags(path)
-        except OSError:
-            pass
-        if repaired:
-            try:
-                return h5py.File(path, "r"), True
-            except OSError:
-                pass
-        try:
-            return h5py.File(path, "r", libver="latest", swmr=True), False
-        except OSError:
-            raise ResultsFileError(path, f"cannot be opened ({first})") from None
+            return h5py.File(path, "r"), True
+        except OSError as exc:
+            problem = f"is damaged: cannot be opened after its repair ({exc})"
+    raise ResultsFileError(path, problem)
 
 
 def _str(x) -> str:
@@ -847,45 +924,133 @@ def read_results(path: str | os.PathLike) -> Results:
     ResultsFileError
         Missing file, not an HDF5 file, not an se3dyn results file, newer format version.
     """
+    if not isinstance(path, str | os.PathLike):
+        raise ResultsFileError(repr(path), f"expected a file name (str or path), got "
+                               f"{type(path).__name__}")
     path = os.fspath(path)
     f, repaired = _open(path)
     with f:
-        fmt = _str(f.attrs.get("format", ""))
-        if fmt != FORMAT:
-            raise ResultsFileError(path, f"attribute 'format' is {fmt!r}, expected {FORMAT!r} "
-                                         "(not an se3dyn results file)")
-        ver = f.attrs.get("format_version")
-        try:
-            ver = int(ver)
-        except (TypeError, ValueError):
-            raise ResultsFileError(path, f"attribute 'format_version' is {ver!r}, expected an "
-                                         "integer") from None
-        if ver > FORMAT_VERSION:
-            raise ResultsFileError(path, f"format_version {ver} is newer than the supported "
-                                         f"{FORMAT_VERSION}; upgrade se3dyn")
         try:
             res = _read(f, path)
-            res.stats["repaired"] = repaired
-            return res
-        except KeyError as e:
-            raise ResultsFileError(path, f"damaged or incomplete layout ({e})") from None
+        except ResultsFileError:
+            raise
+        except (KeyError, TypeError, ValueError, IndexError, OSError, RuntimeError) as e:
+            # (h5py: a missing or misshapen object, a dataset whose chunks cannot be read)
+            raise ResultsFileError(path, f"damaged or incomplete ({type(e).__name__}: {e})"
+                                   ) from None
+    res.stats["repaired"] = repaired
+    return res
+
+
+def _check_format(f: h5py.File, path: str) -> None:
+    """The root attributes ``format`` and ``format_version`` of an se3dyn results file."""
+    fmt = _str(f.attrs.get("format", ""))
+    if fmt != FORMAT:
+        raise ResultsFileError(path, f"attribute 'format' is {fmt!r}, expected {FORMAT!r} "
+                                     "(not an se3dyn results file)")
+    ver = f.attrs.get("format_version")
+    try:
+        ver = int(ver)
+    except (TypeError, ValueError):
+        raise ResultsFileError(path, f"attribute 'format_version' is {ver!r}, expected an "
+                                     "integer") from None
+    if ver > FORMAT_VERSION:
+        raise ResultsFileError(path, f"format_version {ver} is newer than the supported "
+                                     f"{FORMAT_VERSION}; upgrade se3dyn")
+
+
+def _layout(f: h5py.File, path: str) -> ResultsLayout:
+    """The ``/layout`` of a results file, checked against itself and against the shapes and
+    types of the row datasets (a damaged or crafted file is refused naming what is wrong,
+    before anything is allocated from its counts)."""
+
+    def bad(what: str, expected: str, got) -> ResultsFileError:
+        shown = " ".join(_short_repr(got).split())  # (one line)
+        return ResultsFileError(path, f"damaged: {what}: expected {expected}, got {shown}")
+
+    def dataset(name: str, kinds: str = "iuf") -> h5py.Dataset:
+        obj = f.get(name)
+        if not isinstance(obj, h5py.Dataset):
+            raise bad(f"/{name}", "a dataset", "a group" if isinstance(obj, h5py.Group)
+                      else "nothing")
+        if obj.dtype.kind not in kinds:
+            raise bad(f"/{name}", "numbers" if kinds == "iuf" else "text", str(obj.dtype))
+        return obj
+
+    def ints(name: str, n: int, lo: int, hi: int) -> np.ndarray:
+        ds = dataset(f"layout/{name}", "iu")
+        if ds.shape != (n,):
+            raise bad(f"/layout/{name}", f"shape ({n},)", ds.shape)
+        a = ds[()].astype(np.int64)
+        if a.size and (a.min() < lo or a.max() > hi):
+            raise bad(f"/layout/{name}", f"values in [{lo}, {hi}]", a)
+        return a
+
+    def texts(name: str) -> tuple[str, ...]:
+        ds = dataset(f"layout/{name}", "OSU")
+        if ds.ndim != 1:
+            raise bad(f"/layout/{name}", "a list of names", ds.shape)
+        return tuple(_str(x) for x in ds[()])
+
+    def count(name: str) -> int:
+        v = f["layout"].attrs.get(name)
+        if not isinstance(v, (int, np.integer)) or isinstance(v, (bool, np.bool_)):
+            raise bad(f"/layout attribute '{name}'", "an integer", v)
+        return int(v)
+
+    if not isinstance(f.get("layout"), h5py.Group):
+        raise bad("/layout", "a group", "nothing" if "layout" not in f else "a dataset")
+    names, jnames = texts("node_names"), texts("joint_names")
+    M, m = len(names), len(jnames)
+    fixed = ints("node_fixed", M, 0, 1).astype(bool)
+    jk = ints("joint_k", m, 0, 6)
+    nk = int(jk.sum())
+    nq, nm = count("nq"), count("nm")
+    if nq != 6 * int(np.sum(~fixed)) + nk:
+        raise bad("/layout attribute 'nq'", f"6 per free node plus the joints' coordinates, "
+                  f"{6 * int(np.sum(~fixed)) + nk}", nq)
+    if nm != 6 * m:
+        raise bad("/layout attribute 'nm'", f"6 per joint, {6 * m}", nm)
+    dof = ints("node_dofadr", M, -1, max(nq - 6, -1))
+    if np.any(dof[~fixed] < 0):
+        raise bad("/layout/node_dofadr", "the first unknown of every free node", dof)
+    jdof = ints("joint_dofadr", m, -1, nq)
+    if np.any((jk > 0) & ((jdof < 0) | (jdof + jk > nq))):
+        raise bad("/layout/joint_dofadr", f"the first unknown of every joint, in [0, {nq})",
+                  jdof)
+    jmult = ints("joint_multadr", m, 0, max(nm - 6, 0))
+    jcols = ints("joint_columns", m, 0, nk)
+    if np.any(jcols + jk > nk):
+        raise bad("/layout/joint_columns", f"columns of the {nk} joint coordinates", jcols)
+    jtype, units = texts("joint_type"), texts("joint_units")
+    if len(jtype) != m or len(units) != nk:
+        raise bad("/layout/joint_type, joint_units", f"{m} and {nk} names",
+                  (len(jtype), len(units)))
+    try:
+        comp = json.loads(_str(f["layout"].attrs.get("composites", "{}")))
+        composites = {str(c): tuple(str(x) for x in p) for c, p in comp.items()}
+    except (ValueError, TypeError, AttributeError):
+        raise bad("/layout attribute 'composites'", "a JSON object of lists of names",
+                  f["layout"].attrs.get("composites")) from None
+    shapes = {"time": (), "nodes/position": (M, 3), "nodes/rotation": (M, 3, 3),
+              "nodes/velocity": (M, 6), "nodes/acceleration": (M, 6), "joints/alpha": (nk,),
+              "joints/velocity": (nk,), "joints/acceleration": (nk,),
+              "joints/multipliers": (nm,), **{f"energy/{e}": () for e in ENERGIES},
+              **{f"solver/{x}": () for x in SOLVER}}
+    for name, tail in shapes.items():
+        ds = dataset(name)
+        if ds.shape[1:] != tail or ds.ndim != 1 + len(tail):
+            raise bad(f"/{name}", f"shape (rows, {', '.join(map(str, tail))})".replace(
+                ", )", ")"), ds.shape)
+    return ResultsLayout(
+        node_names=names, node_fixed=fixed, node_dofadr=dof, joint_names=jnames,
+        joint_type=jtype, joint_k=jk, joint_dofadr=jdof, joint_multadr=jmult,
+        joint_columns=jcols, joint_units=units, composites=composites, nq=nq, nm=nm)
 
 
 def _read(f: h5py.File, path: str) -> Results:
-    g = f["layout"]
-    names = tuple(_str(x) for x in g["node_names"][()])
-    jnames = tuple(_str(x) for x in g["joint_names"][()])
-    lay = ResultsLayout(
-        node_names=names, node_fixed=g["node_fixed"][()].astype(bool),
-        node_dofadr=g["node_dofadr"][()].astype(np.int64), joint_names=jnames,
-        joint_type=tuple(_str(x) for x in g["joint_type"][()]),
-        joint_k=g["joint_k"][()].astype(np.int64),
-        joint_dofadr=g["joint_dofadr"][()].astype(np.int64),
-        joint_multadr=g["joint_multadr"][()].astype(np.int64),
-        joint_columns=g["joint_columns"][()].astype(np.int64),
-        joint_units=tuple(_str(x) for x in g["joint_units"][()]),
-        composites={c: tuple(p) for c, p in json.loads(_str(g.attrs["composites"])).items()},
-        nq=int(g.attrs["nq"]), nm=int(g.attrs["nm"]))
+    _check_format(f, path)
+    lay = _layout(f, path)
     series = ["time", "nodes/position", "nodes/rotation", "nodes/velocity",
               "nodes/acceleration", "joints/alpha", "joints/velocity", "joints/acceleration",
               "joints/multipliers"] + [f"energy/{e}" for e in ENERGIES] + \
@@ -914,6 +1079,9 @@ def _read(f: h5py.File, path: str) -> Results:
             vd[:, a:a + k] = d["joints/acceleration"][:, c:c + k]
             alpha[:, a:a + k] = d["joints/alpha"][:, c:c + k]
     stats: dict[str, Any] = {}
+    if not isinstance(f.get("stats"), h5py.Group):
+        raise ResultsFileError(path, "damaged: /stats: expected a group (the statistics of the "
+                               "run), got " + ("nothing" if "stats" not in f else "a dataset"))
     for key, val in f["stats"].attrs.items():
         stats[key] = _str(val) if isinstance(val, (bytes, str)) else \
             (val.item() if isinstance(val, np.generic) else val)
@@ -923,6 +1091,8 @@ def _read(f: h5py.File, path: str) -> Results:
     try:
         stats["settings"] = json.loads(_str(f.attrs.get("settings", "{}")))
     except ValueError:
+        stats["settings"] = {}
+    if not isinstance(stats["settings"], dict):  # (as unreadable JSON: none)
         stats["settings"] = {}
     stats["se3dyn_version"] = _str(f.attrs.get("se3dyn_version", ""))
     stats["created"] = _str(f.attrs.get("created", ""))

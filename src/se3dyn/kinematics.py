@@ -1129,6 +1129,22 @@ def _driver_values(drv, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.concatenate(vals), np.concatenate(rates), np.concatenate(accs)
 
 
+def _check_rows(s: System, n: int) -> None:
+    """Refuse, before anything is computed, more output times than a run may store
+    (``simulate.MAX_STEPS``) or rows that would not fit in the available memory."""
+    from se3dyn.simulate import MAX_STEPS, _available_memory
+
+    if n > MAX_STEPS:
+        raise ModelError("kinematics", "times", f"at most {MAX_STEPS:.0e} output times",
+                         f"{n} times")
+    per_row = 8 * (16 * (s.M + s.m) + 5 * s.nq + s.nm + 5)  # (H, HJ, alpha, v, vd, lam, ...)
+    avail = _available_memory()
+    if avail is not None and n * per_row > avail:
+        raise ModelError("kinematics", "times", "results that fit in memory",
+                         f"{n} times of {per_row} bytes = {n * per_row / 2**30:.1f} GiB",
+                         f"{avail / 2**30:.1f} GiB available; ask for fewer output times")
+
+
 def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol: float = 1e-12,
                max_iter: int = 30) -> KinematicsResult:
     """Kinematic analysis of a driven mechanism and inverse dynamics.
@@ -1191,6 +1207,7 @@ def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol:
     if tt.size == 0 or not np.all(np.isfinite(tt)) or np.any(np.diff(tt) <= 0):
         raise ModelError("kinematics", "times", "a non-empty list of increasing finite times",
                          times)
+    _check_rows(s, tt.size)
     if not (isinstance(tol, int | float) and 0 < tol < 1):
         raise ModelError("kinematics", "tol", "a positive tolerance below 1", tol)
     if not (isinstance(max_iter, int) and max_iter >= 1):

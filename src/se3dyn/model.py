@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from se3dyn.errors import ModelError, close_matches
+from se3dyn.errors import ModelError, UnknownNameError, close_matches
 from se3dyn.joints import JOINT_SYNONYMS, JOINT_TYPES, is_abelian, unit_vector
 from se3dyn.timefunc import Component, TimeFunction, as_timefunc
 from se3dyn.visuals import VisualSpec, make_visual
@@ -60,6 +60,16 @@ class PD:
     kd: Any = 0.0
     target: Any = 0.0
     target_rate: Any = None
+
+    def __post_init__(self):
+        # the checks joint(control=...) makes that need no joint (its k checks the lengths)
+        for fld in ("kp", "kd"):
+            v = getattr(self, fld)
+            _kvec(v, int(np.size(v)) if isinstance(v, list | tuple | np.ndarray) else 1,
+                  "PD", fld, nonneg=True)
+        as_timefunc(self.target, "PD", "target")
+        if self.target_rate is not None:
+            as_timefunc(self.target_rate, "PD", "target_rate")
 
 
 @dataclass(frozen=True)
@@ -302,18 +312,19 @@ class Model:
         self.__dict__.update(state)
 
     def node(self, name: str) -> NodeSpec:
-        """The node called ``name`` (KeyError listing valid names otherwise)."""
+        """The node called ``name`` (:class:`~se3dyn.errors.UnknownNameError`, a KeyError,
+        listing valid names otherwise)."""
         for n in self.nodes:
             if n.name == name:
                 return n
-        raise KeyError(_unknown("node", name, [n.name for n in self.nodes]))
+        raise UnknownNameError(_unknown("node", name, [n.name for n in self.nodes]))
 
     def joint(self, name: str) -> JointSpec:
         """The joint called ``name``."""
         for j in self.joints:
             if j.name == name:
                 return j
-        raise KeyError(_unknown("joint", name, [j.name for j in self.joints]))
+        raise UnknownNameError(_unknown("joint", name, [j.name for j in self.joints]))
 
     @property
     def node_names(self) -> list[str]:
@@ -335,6 +346,11 @@ def _read_only(value) -> None:
 #: Largest magnitude accepted for a number of a model (positions, lengths, masses, stiffnesses,
 #: pitches, reference values, velocities): beyond it products and squares overflow.
 MAX_ABS = 1e15
+#: Largest ratio of a body's inertia about its node (``m |com - position|^2``) to its smallest
+#: principal moment about the centre of mass: beyond, the rotation about the centre of mass
+#: keeps fewer than 6 of the 16 digits of the mass matrix, and the rank analysis of ``check``
+#: (relative tolerance 1e-10) counts it as a motion without inertia.
+INERTIA_RANGE = 1e10
 #: Longest accepted name (nodes, joints, loads, springs, visuals, the model).
 MAX_NAME = 200
 
@@ -504,7 +520,8 @@ class ModelBuilder:
             convention of ``at``), when the node is not at it (e.g. at a joint or at the fixed
             point of a top); ``inertia`` is then about the centre of mass. The constant
             material mass matrix about the node and its gyroscopic terms generalise Eqs.
-            (47)-(53).
+            (47)-(53). At most ``sqrt(INERTIA_RANGE J_min / m)`` from the node
+            (:data:`INERTIA_RANGE`).
         """
         _check_name("node", name)
         item = f"node {name!r}"
@@ -542,6 +559,16 @@ class ModelBuilder:
             if m == 0:
                 raise ModelError(item, "com", "a centre of mass only on a node with mass", com,
                                  "give the node a mass and an inertia")
+            d2 = float(np.sum((c - x) ** 2))
+            jmin = float(np.linalg.eigvalsh(J)[0])
+            if m * d2 > INERTIA_RANGE * jmin:
+                reach = math.sqrt(INERTIA_RANGE * jmin / m)
+                raise ModelError(item, "com", f"a centre of mass within {reach:.3g} m of the "
+                                 f"node (its inertia about the node, m |c - x|^2 = "
+                                 f"{m * d2:.3g} kg m^2, at most {INERTIA_RANGE:.0e} times the "
+                                 f"smallest moment about the centre of mass, {jmin:.3g})", com,
+                                 "beyond, the rotation about the centre of mass is lost in the "
+                                 "round-off: place the node on the body")
         self._nodes[name] = NodeSpec(name, x, R0, m, J, bool(fixed), np.concatenate([vU, vO]),
                                      c)
 

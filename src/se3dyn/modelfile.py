@@ -1215,6 +1215,8 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
         When a time function is a Python callable (it cannot be written), naming the joint or
         load and the field; or when ``settings`` holds a key that is not a simulation field.
     """
+    if not isinstance(model, Model):
+        raise ModelError("save_model", "model", "a Model (ModelBuilder.build())", model)
     doc: dict[str, Any] = {"se3dyn": FORMAT_VERSION, "name": model.name,
                            "gravity": plain(model.gravity)}
     made = {f"{c}:cross" for c in model.composites}  # nodes their elements create

@@ -914,8 +914,9 @@ def _settings(t_end, step, t_start, output_every, tol, h_min, h_max, output_step
         raise ModelError("simulate", "t_end", f"a time after t_start={t_start}", t_end)
     if isinstance(output_every, numbers.Integral) and not isinstance(output_every, bool):
         output_every = int(output_every)
-    if not (isinstance(output_every, int) and output_every >= 1):
-        raise ModelError("simulate", "output_every", "a positive integer", output_every)
+    if not (isinstance(output_every, int) and 1 <= output_every <= MAX_STEPS):
+        raise ModelError("simulate", "output_every", f"a positive integer of at most "
+                         f"{MAX_STEPS:.0e} (the most steps a run takes)", output_every)
     span = t_end - t_start
     opt = {}
     for fld, val, default in (("tol", tol, None), ("h_min", h_min, 1e-12 * span),

@@ -281,10 +281,13 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         load factor reached.
     """
     s = _as_system(model_or_system, "static_equilibrium")
+    from se3dyn.simulate import MAX_STEPS
+
     for name, val, lo in (("load_steps", load_steps, 1), ("max_iter", max_iter, 1),
                           ("max_cuts", max_cuts, 0)):
-        if not (isinstance(val, int) and not isinstance(val, bool) and val >= lo):
-            raise ModelError("static_equilibrium", name, f"an integer >= {lo}", val)
+        if not (isinstance(val, int) and not isinstance(val, bool) and lo <= val <= MAX_STEPS):
+            raise ModelError("static_equilibrium", name, f"an integer from {lo} to "
+                             f"{MAX_STEPS:.0e} (the most steps of a run)", val)
     if not (isinstance(tol, int | float) and 0 < tol < 1):
         raise ModelError("static_equilibrium", "tol", "a positive tolerance below 1", tol)
     if not (isinstance(t, int | float) and math.isfinite(t)):

@@ -548,10 +548,10 @@ def _core():
     global _CORE
     if _CORE is None:
         from se3dyn import _engine
-        from se3dyn.threads import from_environment
+        from se3dyn.threads import initial_threads
 
         _engine.set_series(lie._C2, lie._C3, lie._C4, lie._C5, float(lie.SERIES_CUTOFF))
-        _engine.set_threads(from_environment())
+        _engine.set_threads(initial_threads())
         _CORE = _engine
     return _CORE
 

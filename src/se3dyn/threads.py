@@ -12,7 +12,9 @@ and fewer than 3000 unknowns never leave one thread (the parts would cost more t
 
 The number of threads is one setting of the process:
 
-* ``SE3DYN_THREADS`` in the environment, read when the engine is first loaded;
+* ``SE3DYN_THREADS`` in the environment (a whole number from 1 to :data:`MAX_THREADS`), read
+  when the engine is first loaded (``se3dyn run`` reads it first, before its results file is
+  made; ``--threads`` replaces it);
 * :func:`set_threads` (``se3dyn run --threads N`` on the command line);
 * by default, the cores this process may run on (``os.sched_getaffinity``).
 
@@ -24,7 +26,7 @@ from __future__ import annotations
 import numbers
 import os
 
-from se3dyn.errors import Se3dynError
+from se3dyn.errors import Se3dynError, _short_repr
 
 __all__ = ["set_threads", "get_threads", "default_threads"]
 
@@ -40,14 +42,35 @@ def default_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+#: The most threads the engine can use: the pool runs a loop of more parts than this serially
+#: (``_core/pool.hpp``: the parts of a loop travel in 8 bits, 255 meaning "stop").
+MAX_THREADS = 254
+
+
 def _check(n, where: str) -> int:
-    whole = isinstance(n, numbers.Integral) and not isinstance(n, bool)
-    if not (whole or isinstance(n, str) and n.strip().isdigit()):
-        raise Se3dynError(f"{where}: expected a whole number of threads >= 1, got {n!r}")
-    k = int(n)
-    if k < 1:
-        raise Se3dynError(f"{where}: expected a whole number of threads >= 1, got {n!r}")
+    """``n`` as a thread count (an integer, or a string of decimal digits as in the
+    environment and on the command line), or a :class:`Se3dynError` naming ``where``."""
+    k = None
+    if isinstance(n, numbers.Integral) and not isinstance(n, bool):
+        k = int(n)
+    elif isinstance(n, str) and n.strip().isascii() and n.strip().isdigit():
+        digits = n.strip().lstrip("0") or "0"
+        k = int(digits) if len(digits) <= 4 else MAX_THREADS + 1  # (never a 5000-digit int)
+    if k is None or not 1 <= k <= MAX_THREADS:
+        raise Se3dynError(f"{where}: expected a whole number of threads from 1 to "
+                          f"{MAX_THREADS}, got {_short_repr(n)}")
     return k
+
+
+#: A thread count set before the engine was loaded (:func:`set_threads`): the engine starts
+#: with it instead of reading ``SE3DYN_THREADS``.
+_requested: int | None = None
+
+
+def initial_threads() -> int:
+    """The thread count the engine starts with when it is loaded: that of a
+    :func:`set_threads` before, else :func:`from_environment`."""
+    return _requested if _requested is not None else from_environment()
 
 
 def from_environment() -> int:
@@ -63,14 +86,23 @@ def set_threads(n: int | None = None) -> int:
     Parameters
     ----------
     n : int or None
-        Threads, >= 1; None: ``SE3DYN_THREADS`` or the cores this process may run on.
+        Threads, 1 to :data:`MAX_THREADS`; None: ``SE3DYN_THREADS`` or the cores this process
+        may run on. Set before the engine is first loaded, it is used instead of
+        ``SE3DYN_THREADS`` (which is then not read).
+
+    Raises
+    ------
+    Se3dynError
+        ``n`` (or ``SE3DYN_THREADS``) not a whole number from 1 to :data:`MAX_THREADS`.
 
     Returns
     -------
     int
         The number now in use.
     """
+    global _requested
     k = from_environment() if n is None else _check(n, "set_threads(n)")
+    _requested = k
     from se3dyn.system import _core
 
     _core().set_threads(k)

@@ -269,6 +269,14 @@ class Callable(TimeFunction):
     dt: float = 1e-6
     kind = "callable"
 
+    def __post_init__(self):
+        item = "time function 'callable'"
+        if not callable(self.fn):
+            raise ModelError(item, "fn", "a callable fn(t)", self.fn)
+        _scalar(self, "dt", item)
+        if not (math.isfinite(self.dt) and self.dt > 0):
+            raise ModelError(item, "dt", "a positive finite step (s)", self.dt)
+
     def __call__(self, t):
         v = self.fn(t)
         return np.asarray(v, dtype=float) if np.ndim(v) else float(v)

@@ -7,6 +7,7 @@ import json
 import logging
 import math
 import os
+import re
 import secrets
 import sys
 import time
@@ -105,10 +106,24 @@ def prepare(model, vary, *, method: str = "grid", samples: int | None = None,
     """
     import se3dyn as sd
     from se3dyn.errors import ModelError
+    from se3dyn.model import Model
     from se3dyn.modelfile import format_model_data, loads_model
 
     if h5 not in H5_MODES:
         raise SweepSpecError("--h5", "h5", "one of " + ", ".join(H5_MODES), h5)
+    for name, value, ok, expected in (
+            ("model", model, isinstance(model, (str, bytes, os.PathLike, Mapping, Model)),
+             "a model file (path or YAML text), its data as a mapping, or a Model"),
+            ("vary", vary, isinstance(vary, (str, Mapping, list, tuple)),
+             "{path: spec} or 'PATH=SPEC' strings"),
+            ("metrics", metrics, isinstance(metrics, (str, Mapping, list, tuple)),
+             "{name: 'FUNC(EXPR)'} or 'NAME=FUNC(EXPR)' strings"),
+            ("overrides", overrides, overrides is None or isinstance(overrides, Mapping),
+             "a mapping of simulation settings"),
+            ("out", out, out is None or isinstance(out, (str, os.PathLike)),
+             "a folder (str or path) or None")):
+        if not ok:
+            raise SweepSpecError("sweep", name, expected, value)
     data, label = _load_base(model)
     _apply_overrides(data, overrides)
     # the variables, their paths (before any run starts)
@@ -239,27 +254,49 @@ def _cpu_count() -> int:
         return os.cpu_count() or 1
 
 
+def _check_scheduler(scheduler) -> None:
+    """A scheduler address is HOST:PORT or PROTOCOL://HOST:PORT (checked before the sweep's
+    folder is touched)."""
+    if scheduler is not None and (not isinstance(scheduler, str) or not re.fullmatch(
+            r"(?:[a-z][a-z0-9+.-]*://)?[^\s/:]+:\d{1,5}", scheduler)):
+        raise SweepSpecError("--scheduler", "address", "the address of a running dask "
+                             "scheduler, HOST:PORT or tcp://HOST:PORT", scheduler)
+
+
 def _client(scheduler: str | None, workers: int | None):
     """A dask client: to ``scheduler``, or to a new LocalCluster of ``workers`` processes with
-    one thread each. Returns (client, cluster or None, description)."""
+    one thread each, whose scratch space is a temporary folder of its own. Returns (client,
+    cluster or None, description, scratch folder to remove after the cluster or None)."""
+    import shutil
+    import tempfile
+
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
+        _check_scheduler(scheduler)
         try:
             client = Client(scheduler, timeout="20s")
-        except OSError as exc:
+        except (OSError, ValueError, TypeError) as exc:
             raise SweepSpecError("--scheduler", "address", "the address of a running dask "
                                  "scheduler (tcp://host:port)", scheduler,
                                  f"cannot connect: {exc}") from None
         n = len(client.scheduler_info().get("workers", {}))
-        return client, None, f"scheduler {scheduler} ({n} workers now)"
+        return client, None, f"scheduler {scheduler} ({n} workers now)", None
     n = workers if workers is not None else _cpu_count()
-    if not (isinstance(n, int) and n >= 1):
+    if not (isinstance(n, int) and not isinstance(n, bool) and n >= 1):
         raise SweepSpecError("--workers", "workers", "a positive number of worker processes", n)
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           dashboard_address=":0", host="127.0.0.1",
-                           silence_logs=logging.ERROR)
-    return Client(cluster), cluster, f"LocalCluster of {n} worker processes"
+    scratch = tempfile.mkdtemp(prefix="se3dyn-sweep-dask-")  # (not dask-scratch-space/ in TMP)
+    try:
+        import dask
+
+        with dask.config.set({"temporary-directory": scratch}):  # (the scheduler's too)
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", host="127.0.0.1",
+                                   silence_logs=logging.ERROR, local_directory=scratch)
+    except BaseException:
+        shutil.rmtree(scratch, ignore_errors=True)
+        raise
+    return Client(cluster), cluster, f"LocalCluster of {n} worker processes", scratch
 
 
 # ---------------------------------------------------------------------------------------------
@@ -348,6 +385,27 @@ def execute_plan(plan: SweepPlan, *, workers: int | None = None, scheduler: str 
                  log: Callable[[str], None] | None = None):
     """Run a plan made by :func:`prepare`; the options and the result are those of
     :func:`run_sweep`."""
+    for name, value in (("resume", resume), ("retry_failed", retry_failed),
+                        ("progress", progress), ("as_frame", as_frame)):
+        if not (isinstance(value, bool) or value is None and name in ("progress", "as_frame")):
+            raise SweepSpecError("sweep", name, "True or False" + (
+                " (or None: the default)" if name in ("progress", "as_frame") else ""), value)
+    if log is not None and not callable(log):
+        raise SweepSpecError("sweep", "log", "a function of one str, or None", log)
+    if client is not None and not all(hasattr(client, a) for a in ("submit",
+                                                                    "register_plugin")):
+        raise SweepSpecError("sweep", "client", "a distributed.Client, or None", client)
+    if resume and plan.out is None:
+        raise SweepSpecError("sweep", "resume", "an 'out' folder holding the sweep to "
+                             "complete", None)
+    _check_scheduler(scheduler)
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 1):
+        raise SweepSpecError("--workers", "workers", "a positive number of worker processes",
+                             workers)
+    if retry_failed and not resume:
+        raise SweepSpecError("sweep", "retry_failed", "resume=True as well (it runs the failed "
+                             "runs of a resumed sweep again)", retry_failed)
     say = log or (lambda _msg: None)
     out_p, ctx, total = plan.out, plan.ctx, len(plan.runs)
     rows: dict[int, dict] = {}
@@ -379,7 +437,7 @@ def execute_plan(plan: SweepPlan, *, workers: int | None = None, scheduler: str 
         say(f"  {already} of {total} runs already done; {len(todo)} to run")
     show = sys.stderr.isatty() if progress is None else bool(progress)
     prog = Progress(total, already, show)
-    cluster = own = None
+    cluster = own = scratch = None
     name = f"se3dyn-sweep-{uuid.uuid4().hex[:12]}"
     interrupted = False
     t0 = time.perf_counter()
@@ -387,7 +445,7 @@ def execute_plan(plan: SweepPlan, *, workers: int | None = None, scheduler: str 
         if todo:
             _need_distributed()
             if client is None:
-                client, cluster, desc = _client(scheduler, workers)
+                client, cluster, desc, scratch = _client(scheduler, workers)
                 own = client
                 say(f"  on a {desc}")
             from se3dyn.sweep.worker import SweepPlugin, run_task
@@ -432,6 +490,10 @@ def execute_plan(plan: SweepPlan, *, workers: int | None = None, scheduler: str 
             own.close()
         if cluster is not None:
             cluster.close()
+        if scratch is not None:
+            import shutil
+
+            shutil.rmtree(scratch, ignore_errors=True)
         if out_p is not None:
             _clean_tmp(out_p / "runs")
             table_rows = [rows[i] for i in sorted(rows)]
