@@ -973,6 +973,9 @@ def test_bad_thread_counts_in_the_environment_are_refused_in_one_line(tmp_path, 
                            "--threads", "2"])
     assert code == 0, err
     assert sd.get_threads() == 2
+    # (the bad value is not passed over in silence: one warning line names it)
+    warned = [ln for ln in err.splitlines() if "SE3DYN_THREADS" in ln]
+    assert len(warned) == 1 and "ignored: --threads 2 given" in warned[0], err
 
 
 def test_bad_thread_counts_in_the_environment_of_a_fresh_process(tmp_path):

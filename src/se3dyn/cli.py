@@ -274,6 +274,11 @@ def cmd_run(args) -> int:
     if args.threads is None:  # (a bad SE3DYN_THREADS: refused before the results file is made)
         from_environment()
     else:
+        try:  # --threads replaces SE3DYN_THREADS; a bad one is said, not passed over in silence
+            from_environment()
+        except sd.Se3dynError as exc:
+            print(f"se3dyn: warning: {exc}; ignored: --threads {args.threads} given",
+                  file=sys.stderr)
         sd.set_threads(args.threads)
     model, settings = _load(args.model)
     text = Path(args.model).read_text(encoding="utf-8")  # stored as metadata, as given
