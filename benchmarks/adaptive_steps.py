@@ -11,7 +11,7 @@ whose published reference is given to 1e-14):
 * the adaptive run (initial step min(1e-3, T / 1000), results on 200 output times by dense
   output);
 * its global error: the largest over the output times of the mass-weighted error of the node
-  frames (:meth:`se3dyn.stepcontrol.ErrorNorm.frames`: per body the RMS over its mass of the
+  frames (:meth:`se3dyn.dynamics.stepcontrol.ErrorNorm.frames`: per body the RMS over its mass of the
   position errors of its material points; the norm ``tol`` is given in) against a fixed-step
   run at h = T / 64000 (T / 256000 for the oscillator and A01, whose tightest runs need
   40,000 steps: at T / 64000 the reference's own error was 43 % of A01's at tol = 1e-5);
@@ -45,10 +45,10 @@ from pathlib import Path
 import numpy as np
 
 import se3dyn as sd
+from se3dyn.dynamics.stepcontrol import ErrorNorm
 from se3dyn.errors import Se3dynWarning
-from se3dyn.examples import slider_crank
-from se3dyn.modelfile import load_model
-from se3dyn.stepcontrol import ErrorNorm
+from se3dyn.io.modelfile import load_model
+from se3dyn.model.examples import slider_crank
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))

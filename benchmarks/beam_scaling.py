@@ -1,7 +1,7 @@
 """Cost per time step of a dynamic beam cantilever vs the number of elements N (issue 13).
 
 Model (``cantilever``): a steel cantilever, 2 m long, solid circular section of diameter 20 mm
-(``se3dyn.sections.circle(0.01, E=210e9, nu=0.3, density=7850)``), clamped at one end
+(``se3dyn.model.sections.circle(0.01, E=210e9, nu=0.3, density=7850)``), clamped at one end
 (fixed node), released horizontal under gravity; N geometrically exact SE(3) beam elements
 (``ModelBuilder.beam``, lumped mass). se3dyn's defaults: stabilized index-2 form, modified
 Newton, tolerances 1e-10 / 1e-11, fixed step h = 1e-3 s, rho_inf = 0.9.
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 import se3dyn as sd
-from se3dyn import sections
+from se3dyn.model import sections
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from chain_scaling import _status_mb  # noqa: E402  (one reader of /proc/self/status)

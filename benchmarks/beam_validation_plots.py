@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 import se3dyn as sd
-from se3dyn.statics import static_equilibrium
+from se3dyn.analysis.statics import static_equilibrium
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -135,9 +135,9 @@ def _status_mb(key: str) -> float:
 def _report_phases() -> None:
     """Print VmRSS and VmHWM to stderr after the phases of every ``simulate`` (workspace,
     steppers, initial state, first compiled chunk of steps), by wrapping those calls."""
-    import se3dyn.integrator as ig
-    import se3dyn.system as sy
-    sim = sys.modules["se3dyn.simulate"]
+    import se3dyn.dynamics.integrator as ig
+    import se3dyn.engine.system as sy
+    sim = sys.modules["se3dyn.dynamics.run"]
 
     def wrap(owner, name, label, once=False):
         orig = getattr(owner, name)
@@ -237,8 +237,8 @@ def linear_algebra_work(system, formulation: str, newton: str, its: float) -> di
     a run does, after one step): multiply-adds of a refactorisation (the LU and, split index 2,
     the xi block's LDL^T), entries of the factors (a solve does one multiply-add per entry),
     and per step ``refactorisation + its * entries`` with the measured iterations ``its``."""
-    from se3dyn.integrator import GeneralizedAlpha
-    from se3dyn.system import Workspace
+    from se3dyn.dynamics.integrator import GeneralizedAlpha
+    from se3dyn.engine.workspace import Workspace
 
     ws = Workspace(system)
     integ = GeneralizedAlpha(rho_inf=0.9, formulation=formulation, newton=newton)

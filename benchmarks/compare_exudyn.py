@@ -7,7 +7,7 @@ generalized-alpha schemes at rho_inf = 0.9 and a fixed step:
 
 * **se3dyn at its defaults**: ``sd.simulate(model, t_end, step, rho_inf=0.9)``: Lie-group
   generalized-alpha on SE(3), stabilized index-2 form, modified Newton, tol_residual 1e-10,
-  tol_constraint 1e-11, compiled engine (C++ extension ``se3dyn._engine``).
+  tol_constraint 1e-11, compiled engine (C++ extension ``se3dyn._core._engine``).
 * **EXUDYN at its defaults**: ``exu.SimulationSettings()`` as it comes (the script reads the
   defaults at run time and prints them: modified Newton, relative tolerance 1e-8, index-3
   constraints, spectral radius 0.9, adaptive step on Newton failure, ...). Set are only what a
@@ -154,7 +154,7 @@ def verdict(value: float, target: float) -> str:
 # ------------------------------------------------------------------------------------------------
 # se3dyn
 def se3_sc_model(form: str):
-    from se3dyn.examples import slider_crank, slider_crank_bodies
+    from se3dyn.model.examples import slider_crank, slider_crank_bodies
 
     return slider_crank() if form == "nodes" else slider_crank_bodies()
 
@@ -505,7 +505,7 @@ SE3_FIRST_JOB = """
 import json, time
 t0 = time.perf_counter()
 import se3dyn as sd
-from se3dyn.examples import {fn}
+from se3dyn.model.examples import {fn}
 t1 = time.perf_counter()
 model = {fn}()
 t2 = time.perf_counter()
@@ -623,9 +623,9 @@ def environment(repo) -> dict:
 
     import exudyn
     import scipy
-    import se3dyn._engine as eng
 
     import se3dyn
+    from se3dyn._core import _engine as eng
 
     def git(*args):
         try:

@@ -7,7 +7,7 @@ The cantilever of ``beam_scaling.py``: steel (E = 210 GPa, nu = 0.3, 7850 kg/m^3
 solid circular section of diameter 20 mm, clamped at one end, released horizontal under gravity
 (-z) at rest and stress-free, simulated for 1 s (about 3.6 periods of its first bending mode,
 tip deflection up to ~6 cm: a dynamic, mildly non-linear problem). Section values from
-``se3dyn.sections.circle`` (Cowper's shear factor), the same numbers in both codes.
+``se3dyn.model.sections.circle`` (Cowper's shear factor), the same numbers in both codes.
 
 * **se3dyn at its defaults**: ``sd.simulate(model, t_end, step, rho_inf=0.9)`` with N two-node
   SE(3) beam elements (Sonneville, Cardona & Bruls, CMAME 268 (2014) 451-474), lumped mass and
@@ -52,7 +52,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import statistics
 import subprocess
 import sys
@@ -75,7 +74,7 @@ G = (0.0, 0.0, -9.81)
 
 
 def section() -> dict:
-    from se3dyn import sections
+    from se3dyn.model import sections
 
     return sections.circle(bs.RADIUS, **bs.STEEL)
 
@@ -97,10 +96,17 @@ def se3_run(n: int, h: float) -> dict:
 
 def exu_build(n: int, sparse: bool = False):
     import exudyn as exu
-    from exudyn.itemInterface import (GenericJoint, LoadMassProportional, MarkerBodyMass,
-                                      MarkerBodyRigid, MarkerNodeRigid,
-                                      ObjectBeamGeometricallyExact, ObjectGround,
-                                      NodeRigidBodyEP, SensorNode)
+    from exudyn.itemInterface import (
+        GenericJoint,
+        LoadMassProportional,
+        MarkerBodyMass,
+        MarkerBodyRigid,
+        MarkerNodeRigid,
+        NodeRigidBodyEP,
+        ObjectBeamGeometricallyExact,
+        ObjectGround,
+        SensorNode,
+    )
 
     p = section()
     SC = exu.SystemContainer()

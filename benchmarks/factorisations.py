@@ -14,8 +14,8 @@ import time
 from pathlib import Path
 
 import se3dyn as sd
-import se3dyn.system as system
-from se3dyn.modelfile import load_model
+import se3dyn.engine.system as system
+from se3dyn.io.modelfile import load_model
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "cpp"))

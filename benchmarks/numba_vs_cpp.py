@@ -1,6 +1,6 @@
 """Technology measurement behind docs/design.md: the numba engine se3dyn had (commit 57431aa,
 ``se3dyn.fast`` + ``se3dyn.blocklu``, cached machine code) against the C++ engine built at
-install (``se3dyn._engine``), on the same models, in one run on this machine.
+install (``se3dyn._core._engine``), on the same models, in one run on this machine.
 
 What a user pays, per engine, each in fresh subprocesses:
 

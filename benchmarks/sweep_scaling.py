@@ -42,7 +42,7 @@ METRIC = "peak=max(abs(joint/1/multiplier/3))"
 
 def _direct(values, files: bool, folder: Path) -> float:
     import se3dyn as sd
-    from se3dyn.modelfile import format_model_data, loads_model, parse_model_data
+    from se3dyn.io.modelfile import format_model_data, loads_model, parse_model_data
     from se3dyn.sweep.execute import _write_h5
     from se3dyn.sweep.metrics import parse_metric
     from se3dyn.sweep.spec import apply_values
@@ -65,7 +65,7 @@ def _direct(values, files: bool, folder: Path) -> float:
 
 def _simulate_only(values) -> float:
     import se3dyn as sd
-    from se3dyn.modelfile import format_model_data, loads_model, parse_model_data
+    from se3dyn.io.modelfile import format_model_data, loads_model, parse_model_data
     from se3dyn.sweep.spec import apply_values
 
     base = parse_model_data(MODEL.read_bytes(), filename=str(MODEL))
@@ -103,7 +103,7 @@ def main(argv=None) -> int:
     from distributed import Client, LocalCluster
 
     import se3dyn as sd
-    from se3dyn.modelfile import load_model
+    from se3dyn.io.modelfile import load_model
     from se3dyn.sweep.execute import warm_up
 
     logging.getLogger("distributed").setLevel(logging.ERROR)

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 import se3dyn as sd
-from se3dyn.modelfile import load_model
+from se3dyn.io.modelfile import load_model
 
 HERE = Path(__file__).resolve().parent
 

@@ -36,8 +36,8 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
-from se3dyn.analysis import rank_analysis
-from se3dyn.modelfile import load_model, loads_model, save_model
+from se3dyn.engine.rank import rank_analysis
+from se3dyn.io.modelfile import load_model, loads_model, save_model
 
 FILE = Path(__file__).resolve().parents[1] / "examples" / "a03_andrews_squeezer.yaml"
 

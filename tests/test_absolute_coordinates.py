@@ -76,7 +76,7 @@ def test_initial_values_need_an_abelian_joint_and_round_trip_through_model_files
     mb.node("b", position=(0, 0, -1), mass=1.0, inertia=(0.1, 0.1, 0.1))
     with pytest.raises(ModelError, match="joint 's'.*initial"):
         mb.joint("s", "spherical", "g", "b", initial=(0.1, 0.2, 0.3))
-    from se3dyn.modelfile import loads_model, save_model
+    from se3dyn.io.modelfile import loads_model, save_model
 
     m = _pendulum(0.6, initial=0.6, reference=0.2)
     m2, _ = loads_model(save_model(m))

@@ -23,10 +23,11 @@ import pytest
 
 import se3dyn as sd
 from se3dyn import lie
-from se3dyn.analysis import rank_analysis
-from se3dyn.examples import slider_crank
-from se3dyn.integrator import step_inputs
-from se3dyn.system import compile_model, evaluate
+from se3dyn.engine.evaluate import evaluate
+from se3dyn.engine.inputs import step_inputs
+from se3dyn.engine.rank import rank_analysis
+from se3dyn.engine.system import compile_model
+from se3dyn.model.examples import slider_crank
 
 G = 9.81
 
@@ -141,7 +142,7 @@ def test_overconstrained_four_bar_names_three_redundant_equations_and_mobility_o
 def test_independence_shortcut_agrees_with_the_pivoted_qr():
     """redundant_equations skips the pivoted QR when one SVD proves every loop equation
     independent; it may only say so when the QR keeps them all (the QR decides otherwise)."""
-    from se3dyn.analysis import _independent_rows, _jacobian_rows, _pivoted_qr, loop_joints
+    from se3dyn.engine.rank import _independent_rows, _jacobian_rows, _pivoted_qr, loop_joints
 
     def qr_keeps_all(P, rtol):
         piv, d = _pivoted_qr(P.T)

@@ -1,6 +1,6 @@
 """Adaptive time stepping (``simulate(..., tol=...)``) and dense output.
 
-The step-size control (:mod:`se3dyn.stepcontrol`) holds every step's local error estimate
+The step-size control (:mod:`se3dyn.dynamics.stepcontrol`) holds every step's local error estimate
 ``(1/6 - beta - (alpha_m - alpha_f) / 2) h^2 (a_{n+1} - a_n)``, measured per body as the RMS
 over its mass of the errors of its material points, to the step's share
 ``tol (h_bar / span) (h_bar / h)^3`` of the tolerance, so that the local errors of a run of
@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
-from se3dyn.examples import slider_crank
-from se3dyn.modelfile import loads_model
-from se3dyn.stepcontrol import ErrorNorm
+from se3dyn.dynamics.stepcontrol import ErrorNorm
+from se3dyn.io.modelfile import loads_model
+from se3dyn.model.examples import slider_crank
 
 G = 9.81
 M, K, C, V0 = 1.0, 400.0, 4.0, 2.0  # w0 = 20 rad/s, damping ratio 0.1
@@ -61,7 +61,7 @@ def test_adaptive_run_meets_its_tolerance_with_fewer_steps_than_a_fixed_step(tol
     assert r.stats["steps"] < 0.7 * n_fixed, (r.stats["steps"], n_fixed)
     # the step grows as the oscillation decays: the local error coefficient ~ the amplitude
     # exp(-zeta w0 t), which falls by exp(-10) over the run, and the steps go as its -1/6th
-    # power (se3dyn.stepcontrol): exp(10 / 6) = 5.3 from the first to the last oscillations
+    # power (se3dyn.dynamics.stepcontrol): exp(10 / 6) = 5.3 from the first to the last oscillations
     z_w0 = C / (2 * M)
     assert r.stats["h_max_used"] > 0.7 * math.exp(z_w0 * T / 6) * r.stats["h_min_used"]
 
@@ -113,7 +113,7 @@ def test_undamped_pendulum_error_is_a_fixed_fraction_of_tol_with_fewer_steps(tol
     model file, rho_inf = 1: no numerical damping) over 10 s (4.2 periods) against the
     closed-form solution: the local errors neither grow nor decay along the motion, so the
     global error is the sum of the local errors, which the controller holds to tol."""
-    from se3dyn.modelfile import load_model
+    from se3dyn.io.modelfile import load_model
 
     model, settings = load_model(
         Path(__file__).parents[1] / "examples" / "a01_simple_pendulum.yaml")

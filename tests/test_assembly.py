@@ -27,8 +27,11 @@ import scipy.linalg
 
 import se3dyn as sd
 from se3dyn import lie
-from se3dyn.integrator import GeneralizedAlpha, step_inputs
-from se3dyn.system import LinearSolver, compile_model, evaluate
+from se3dyn.dynamics.integrator import GeneralizedAlpha
+from se3dyn.engine.evaluate import evaluate
+from se3dyn.engine.inputs import step_inputs
+from se3dyn.engine.linsolve import LinearSolver
+from se3dyn.engine.system import compile_model
 
 # Central differences with step EPS: truncation ~ EPS^2 |F'''| and round-off ~ u |F| / EPS
 # (u = 1.1e-16). With |F| <~ 1e4 and |F'''| <~ 1e6 on these models both are below ~1e-6; the

@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
-from se3dyn import lie, sections
+from se3dyn import lie
+from se3dyn.analysis.statics import static_equilibrium
 from se3dyn.elements.beam import section_forces
+from se3dyn.engine.system import compile_model
 from se3dyn.errors import ModelError
-from se3dyn.statics import static_equilibrium
-from se3dyn.system import compile_model
+from se3dyn.model import sections
 
 
 def _cantilever(n, L=1.0, EA=1e4, GA=1e4, GJ=50.0, EI=100.0, **kw):
@@ -369,8 +370,9 @@ def test_45_degree_bend_converges_with_second_order():
 
 
 def _cantilever_frequencies(n, L, sec):
-    from se3dyn.integrator import step_inputs
-    from se3dyn.system import LinearSolver, evaluate
+    from se3dyn.engine.evaluate import evaluate
+    from se3dyn.engine.inputs import step_inputs
+    from se3dyn.engine.linsolve import LinearSolver
 
     mb = sd.ModelBuilder()
     mb.node("root", fixed=True)
@@ -433,7 +435,7 @@ def test_section_outputs_over_a_run_match_the_energy_and_dissipation_channels():
 
 
 def test_beam_channels_give_the_section_outputs():
-    from se3dyn.channels import channel_unit, get_channel, list_channels
+    from se3dyn.results.channels import channel_unit, get_channel, list_channels
 
     sec = sections.circle(0.02, E=2e6, nu=0.3, density=1000.0)
     mb = sd.ModelBuilder()
@@ -722,7 +724,7 @@ def test_beams_round_trip_through_model_files():
     """save_model writes a beams: section (not the nodes a beam creates); loading it gives the
     same beams (straight and curved, joints on a beam node): the same motion, node by node."""
     from se3dyn.elements.beam import arc_frames
-    from se3dyn.modelfile import loads_model, save_model
+    from se3dyn.io.modelfile import loads_model, save_model
 
     mb = sd.ModelBuilder(gravity=(0, 0, -9.81))
     mb.node("root", fixed=True)
@@ -752,7 +754,7 @@ def test_beams_round_trip_through_model_files():
 
 
 def test_a_bad_beam_entry_in_a_model_file_names_the_beam_the_field_and_the_line():
-    from se3dyn.modelfile import ModelFileError, loads_model
+    from se3dyn.io.modelfile import ModelFileError, loads_model
 
     text = """se3dyn: 1
 nodes:

@@ -16,9 +16,11 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
-from se3dyn.integrator import step_inputs
-from se3dyn.statics import static_equilibrium
-from se3dyn.system import LinearSolver, compile_model, evaluate
+from se3dyn.analysis.statics import static_equilibrium
+from se3dyn.engine.evaluate import evaluate
+from se3dyn.engine.inputs import step_inputs
+from se3dyn.engine.linsolve import LinearSolver
+from se3dyn.engine.system import compile_model
 
 M, J = 2.0, np.array([0.10, 0.15, 0.20])
 KD = np.array([200.0, 300.0, 400.0, 5.0, 6.0, 7.0])  # kx, ky, kz (N/m), krx, kry, krz (N m/rad)
@@ -295,8 +297,8 @@ bushings:
 
 
 def test_model_file_bushings_give_the_builder_model_and_are_counted_by_check(tmp_path, capsys):
-    from se3dyn.cli import main
-    from se3dyn.modelfile import loads_model, save_model
+    from se3dyn.cli.main import main
+    from se3dyn.io.modelfile import loads_model, save_model
 
     model, _ = loads_model(MOUNT)
     left, right = model.bushings
@@ -387,7 +389,7 @@ def test_a_model_restarted_at_a_static_equilibrium_stays_at_rest():
     res = sd.simulate(model, t_end=0.5, step=1e-2, rho_inf=0.9)
     assert np.abs(res.H - st.H).max() < 1e-9
     # and the file form of the restarted model is the same model
-    from se3dyn.modelfile import loads_model, save_model
+    from se3dyn.io.modelfile import loads_model, save_model
 
     again, _ = loads_model(save_model(model))
     for f in ("at", "orientation", "deformation", "stiffness"):

@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
-from se3dyn.channels import channel_unit, escape_name, get_channel, list_channels, unescape_name
+from se3dyn.results.channels import (
+    channel_unit,
+    escape_name,
+    get_channel,
+    list_channels,
+    unescape_name,
+)
 
 
 def _model() -> sd.Model:
@@ -111,7 +117,7 @@ def test_units(crank):
 
 def test_channels_of_read_results_equal_in_memory(tmp_path):
     pytest.importorskip("h5py")
-    from se3dyn.h5 import ResultsWriter, read_results
+    from se3dyn.io.h5 import ResultsWriter, read_results
 
     s = sd.compile_model(_model())
     with ResultsWriter(tmp_path / "c.h5", s) as w:

@@ -144,7 +144,7 @@ def slider_results(tmp_path_factory):
 
 
 def test_run_writes_the_results_of_the_simulation(slider_results):
-    from se3dyn.h5 import read_results
+    from se3dyn.io.h5 import read_results
 
     path, stdout = slider_results
     assert "results:" in stdout and "Newton iterations" in stdout
@@ -159,7 +159,7 @@ def test_run_writes_the_results_of_the_simulation(slider_results):
 
 
 def test_failed_run_exits_1_and_keeps_the_steps_computed(tmp_path):
-    from se3dyn.h5 import read_results
+    from se3dyn.io.h5 import read_results
 
     # rho_inf = 1 leaves the index-3 multipliers undamped: Newton diverges at t = 1.81 s
     # (the default stabilized index-2 formulation runs through, see test_accuracy.py)
@@ -183,8 +183,8 @@ def test_plot_writes_a_png_and_rejects_unknown_channels(slider_results, tmp_path
 
 
 def test_export_writes_named_columns_equal_to_the_channels(slider_results, tmp_path):
-    from se3dyn.channels import get_channel
-    from se3dyn.h5 import read_results
+    from se3dyn.io.h5 import read_results
+    from se3dyn.results.channels import get_channel
 
     path, _ = slider_results
     csv = tmp_path / "out.csv"
@@ -236,11 +236,11 @@ def test_a_run_imports_no_module_it_does_not_use(tmp_path):
     # the `run` path of the command (as the console script calls it): scipy, matplotlib and the
     # opt-in layers stay out, the package's lazy names still resolve afterwards, and the
     # garbage collector, paused while the command loads, runs again
-    code = ("import gc, sys; sys.argv[0] = 'se3dyn'; from se3dyn.cli import main; "
+    code = ("import gc, sys; sys.argv[0] = 'se3dyn'; from se3dyn.cli.main import main; "
             "print(gc.isenabled()); "
             f"assert main(['run', {str(SLIDER)!r}, '--out', {str(tmp_path)!r}, '--quiet']) == 0; "
             "bad = ('scipy', 'matplotlib', 'dask', 'se3dyn.viewer', 'se3dyn.sweep', "
-            "'se3dyn.statics'); print(sorted(m for m in sys.modules if m.startswith(bad))); "
+            "'se3dyn.analysis.statics'); print(sorted(m for m in sys.modules if m.startswith(bad))); "
             "import se3dyn; print(se3dyn.static_equilibrium.__name__, se3dyn.kinematics.__name__,"
             " gc.isenabled())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -1,4 +1,4 @@
-"""Rigid joints condensed for the time loop (:mod:`se3dyn.condense`).
+"""Rigid joints condensed for the time loop (:mod:`se3dyn.dynamics.condense`).
 
 What is asserted:
 
@@ -25,8 +25,8 @@ import pytest
 
 import se3dyn as sd
 from se3dyn import lie
-from se3dyn.condense import condensation
-from se3dyn.system import compile_model
+from se3dyn.dynamics.condense import condensation
+from se3dyn.engine.system import compile_model
 
 G = 9.81
 
@@ -291,9 +291,9 @@ def test_a_step_that_fails_on_the_condensed_model_is_retried_with_the_rigid_join
     is simulated here by stopping the compiled loop of the reduced system half way."""
     import importlib
 
-    from se3dyn.system import system_of
+    from se3dyn.engine.system import system_of
 
-    simmod = importlib.import_module("se3dyn.simulate")
+    simmod = importlib.import_module("se3dyn.dynamics.run")
     real = simmod._run_compiled
 
     def stop_half_way(s, integ, st, times, k0, nsteps, *args):

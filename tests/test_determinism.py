@@ -141,7 +141,7 @@ GALLERY = sorted(p.name for p in (Path(__file__).parents[1] / "examples").glob("
 def test_the_gallery_models_agree_on_one_two_and_three_threads(name):
     """Every model file of examples/ at its own settings (stepping, tolerances), 50 steps,
     on 2, 1, 3 and 2 threads: the same numbers to the last bit."""
-    from se3dyn.modelfile import load_model
+    from se3dyn.io.modelfile import load_model
 
     model, settings = load_model(Path(__file__).parents[1] / "examples" / name)
     settings = dict(settings)

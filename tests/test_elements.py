@@ -18,8 +18,10 @@ import pytest
 
 from se3dyn import lie
 from se3dyn.elements import REGISTRY
-from se3dyn.integrator import step_inputs
-from se3dyn.system import LinearSolver, compile_model, evaluate
+from se3dyn.engine.evaluate import evaluate
+from se3dyn.engine.inputs import step_inputs
+from se3dyn.engine.linsolve import LinearSolver
+from se3dyn.engine.system import compile_model
 
 CASES = [(key, i) for key, mod in REGISTRY.items()
          for i in range(len(mod.examples(np.random.default_rng(0))))]

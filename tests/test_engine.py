@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
-from se3dyn.integrator import GeneralizedAlpha
+from se3dyn.dynamics.integrator import GeneralizedAlpha
 
 
 def test_state_is_immutable():
@@ -97,7 +97,7 @@ def test_restart_in_a_new_workspace_is_bit_exact(formulation, model):
     refactorisations reuse; the ordering comes from the model alone): stepping from it in a
     fresh workspace (as a new process would) gives the uninterrupted run's numbers bit for bit,
     and so does a workspace that meanwhile stepped from another state."""
-    from se3dyn.system import Workspace
+    from se3dyn.engine.workspace import Workspace
 
     m = sd.examples.slider_crank() if model == "slider_crank" else _chain(6)
     h = 1e-2 if model == "slider_crank" else 2e-3
@@ -123,7 +123,7 @@ def test_restart_in_a_new_workspace_is_bit_exact(formulation, model):
 def test_solver_memory_is_shared_not_copied():
     """The solver memory (the values of a whole iteration matrix) is one read-only array that
     the stepper and every State holding it share: no copy per State or per call."""
-    from se3dyn.system import Workspace
+    from se3dyn.engine.workspace import Workspace
 
     s = sd.compile_model(_chain(6))
     integ = GeneralizedAlpha()

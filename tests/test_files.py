@@ -25,9 +25,9 @@ import se3dyn as sd
 
 h5py = pytest.importorskip("h5py")
 
-from se3dyn.h5 import ResultsFileError, ResultsWriter, read_results, repair  # noqa: E402
-from se3dyn.modelfile import load_model  # noqa: E402
-from se3dyn.simulate import CHECKPOINT_EVERY, Checkpoint  # noqa: E402
+from se3dyn.dynamics.run import CHECKPOINT_EVERY, Checkpoint  # noqa: E402
+from se3dyn.io.h5 import ResultsFileError, ResultsWriter, read_results, repair  # noqa: E402
+from se3dyn.io.modelfile import load_model  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PENDULUM = ROOT / "examples" / "a01_simple_pendulum.yaml"
@@ -105,7 +105,7 @@ def assert_same_rows(a: dict, b: dict):
 # 3. memory
 _MEASURE = """
 import sys
-from se3dyn.cli import main
+from se3dyn.cli.main import main
 code = main(sys.argv[1:])
 hwm = [int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM")][0]
 print("VmHWM", hwm, "exit", code)
@@ -137,7 +137,7 @@ def test_streamed_run_memory_is_flat_over_a_million_steps(tmp_path):
 _IN_MEMORY = """
 import sys
 import se3dyn as sd
-from se3dyn.modelfile import loads_model
+from se3dyn.io.modelfile import loads_model
 def hwm():
     return [int(l.split()[1]) for l in open("/proc/self/status")
             if l.startswith("VmHWM")][0] * 1024
@@ -227,7 +227,7 @@ def test_a_run_continued_from_a_checkpoint_equals_the_uninterrupted_run(kw, monk
     # rows (with the newest checkpoint) are handed on at most every _EMIT_EVERY seconds in the
     # step-by-step runs, a checkpoint then replacing the one still waiting: emitting at every
     # chance makes the checkpoints seen independent of the machine's speed
-    monkeypatch.setattr(sys.modules["se3dyn.simulate"], "_EMIT_EVERY", 0.0)
+    monkeypatch.setattr(sys.modules["se3dyn.dynamics.run"], "_EMIT_EVERY", 0.0)
     m = sd.examples.slider_crank()
     full = sd.simulate(m, 3.0, 1e-3, **kw)
     cps = []

@@ -25,7 +25,7 @@ import pytest
 import yaml
 
 import se3dyn as sd
-from se3dyn.modelfile import load_model, loads_model
+from se3dyn.io.modelfile import load_model, loads_model
 
 ROOT = Path(__file__).resolve().parents[1]
 FLEX_YAML = ROOT / "examples" / "slider_crank_flexible.yaml"
@@ -81,9 +81,9 @@ def test_example_file_loads_checks_and_runs_with_its_settings(tmp_path):
 
     # beam channels of the results file (the file's model text is compiled for them) equal the
     # section forces of the same run in memory
-    from se3dyn.channels import get_channel, list_channels
     from se3dyn.elements.beam import section_forces
-    from se3dyn.h5 import read_results
+    from se3dyn.io.h5 import read_results
+    from se3dyn.results.channels import get_channel, list_channels
 
     fres = read_results(tmp_path / "slider_crank_flexible.h5")
     names = list_channels(fres)

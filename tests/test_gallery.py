@@ -35,9 +35,9 @@ from scipy.integrate import solve_ivp
 from scipy.special import ellipj, ellipk
 
 import se3dyn as sd
-from se3dyn.analysis import rank_analysis
-from se3dyn.modelfile import load_model
-from se3dyn.system import compile_model
+from se3dyn.engine.rank import rank_analysis
+from se3dyn.engine.system import compile_model
+from se3dyn.io.modelfile import load_model
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 G = 9.81  # all specifications: 9.81 N/kg

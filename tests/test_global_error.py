@@ -2,7 +2,7 @@
 
 A companion run takes the run's accepted steps two at a time; the scheme being second order,
 the run's global position error is the difference of the two runs over 2^2 - 1 = 3 where they
-meet (Richardson's global extrapolation, :class:`se3dyn.stepcontrol.GlobalEstimate`). Checked
+meet (Richardson's global extrapolation, :class:`se3dyn.dynamics.stepcontrol.GlobalEstimate`). Checked
 against closed-form solutions (a damped oscillator, the IFToMM A01 pendulum) and, on a
 mechanism that amplifies errors (the paper's slider-crank, global error above ``tol``),
 against a converged reference run whose own error is 1/800 of the run's.
@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
+from se3dyn.dynamics.run import Checkpoint
+from se3dyn.dynamics.stepcontrol import ErrorNorm
 from se3dyn.errors import ModelError, Se3dynWarning
-from se3dyn.examples import slider_crank
-from se3dyn.modelfile import load_model, loads_model
-from se3dyn.simulate import Checkpoint
-from se3dyn.stepcontrol import ErrorNorm
+from se3dyn.io.modelfile import load_model, loads_model
+from se3dyn.model.examples import slider_crank
 from test_adaptive import _exact, _oscillator_model, _pendulum_exact_p1
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -157,7 +157,7 @@ def test_bad_global_error_settings_are_named(kw, want):
 
 
 def test_command_line_and_model_file_report_the_estimate(tmp_path, capsys):
-    from se3dyn.cli import main
+    from se3dyn.cli.main import main
 
     text = (ROOT / "examples" / "slider_crank.yaml").read_text()
     assert "global_error" not in text
@@ -168,7 +168,7 @@ def test_command_line_and_model_file_report_the_estimate(tmp_path, capsys):
                      "--global-error"]) == 0  # (not --quiet: the summary is read)
     out = capsys.readouterr().out
     assert "global error estimate" in out and " tol) at t = " in out
-    from se3dyn.h5 import read_results
+    from se3dyn.io.h5 import read_results
 
     info = read_results(tmp_path / "slider_crank.h5").stats
     assert info["global_error"] > 0 and info["global_error_steps"] > 0
@@ -179,7 +179,7 @@ def test_bound_keeps_the_last_run_when_a_refinement_fails(monkeypatch):
     # the results and the estimate are the first run's, and a warning names the failure
     import sys
 
-    sim = sys.modules["se3dyn.simulate"]  # (the package's `simulate` is the function)
+    sim = sys.modules["se3dyn.dynamics.run"]  # (the package's `simulate` is the function)
     real = sim.simulate
 
     def failing(*args, _schedule=None, **kw):
@@ -226,8 +226,8 @@ def test_bound_on_the_published_squeezer_divides_its_error_by_the_refinement_squ
 
 
 def test_command_line_bound_writes_the_refined_run_and_refuses_to_resume_it(tmp_path, capsys):
-    from se3dyn.cli import main
-    from se3dyn.h5 import read_results
+    from se3dyn.cli.main import main
+    from se3dyn.io.h5 import read_results
 
     model = ROOT / "examples" / "slider_crank.yaml"
     assert main(["run", str(model), "--out", str(tmp_path), "--t-end", "1",
@@ -263,8 +263,8 @@ def test_model_file_global_error_takes_true_false_or_bound():
 
 def test_command_line_bound_run_that_fails_keeps_its_rows(tmp_path, capsys):
     # kept in memory while it runs: a failing run still writes the rows it computed
-    from se3dyn.cli import main
-    from se3dyn.h5 import read_results
+    from se3dyn.cli.main import main
+    from se3dyn.io.h5 import read_results
 
     text = (ROOT / "examples" / "slider_crank.yaml").read_text()
     sim = "simulation: {t_end: 5.0, step: 0.01, rho_inf: 0.9}"

@@ -15,8 +15,8 @@ import pytest
 h5py = pytest.importorskip("h5py")
 
 import se3dyn as sd  # noqa: E402
-from se3dyn.h5 import FORMAT_VERSION, ResultsFileError, ResultsWriter, read_results  # noqa: E402
-from se3dyn.modelfile import loads_model, save_model  # noqa: E402
+from se3dyn.io.h5 import FORMAT_VERSION, ResultsFileError, ResultsWriter, read_results  # noqa: E402
+from se3dyn.io.modelfile import loads_model, save_model  # noqa: E402
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 
@@ -122,7 +122,7 @@ def test_writer_context_manager_marks_failure(tmp_path):
 _CHILD = """
 import sys
 import se3dyn as sd
-from se3dyn.h5 import ResultsWriter
+from se3dyn.io.h5 import ResultsWriter
 s = sd.compile_model(sd.examples.slider_crank())
 w = ResultsWriter(sys.argv[1], s, flush_interval=0.2)
 sd.simulate(s, 3600.0, 1e-3, on_output=w.append, store=False)   # (killed long before)
@@ -213,6 +213,6 @@ def test_errors_are_se3dyn_and_value_errors(tmp_path):
 
 
 def test_core_package_does_not_import_h5():
-    code = "import sys, se3dyn; assert 'se3dyn.h5' not in sys.modules and 'h5py' not in sys.modules"
+    code = "import sys, se3dyn; assert 'se3dyn.io.h5' not in sys.modules and 'h5py' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True,
                    env={**os.environ, "PYTHONPATH": SRC})

@@ -27,9 +27,9 @@ import pytest
 import yaml
 
 import se3dyn as sd
-from se3dyn.cli import main
+from se3dyn.cli.main import main
 from se3dyn.errors import Se3dynError
-from se3dyn.modelfile import load_model, loads_model, save_model
+from se3dyn.io.modelfile import load_model, loads_model, save_model
 
 ROOT = Path(__file__).resolve().parents[1]
 SEED = 20261122
@@ -455,7 +455,7 @@ def test_huge_step_counts_are_refused_before_allocating(t_end, step):
 
 
 def test_stored_rows_beyond_memory_are_refused(monkeypatch):
-    simmod = importlib.import_module("se3dyn.simulate")
+    simmod = importlib.import_module("se3dyn.dynamics.run")
 
     monkeypatch.setattr(simmod, "_available_memory", lambda: 3e7)
     with pytest.raises(sd.ModelError, match="output_every or output_step"):
@@ -483,7 +483,7 @@ def test_command_refuses_huge_step_counts_in_one_line_and_leaves_no_file(tmp_pat
 def test_compiled_loop_in_blocks_equals_one_block(monkeypatch):
     """Times and inputs are tabulated in blocks: the same rows, bit for bit, and the same
     failure, whatever the block size and the initial capacity of the recorder."""
-    simmod = importlib.import_module("se3dyn.simulate")
+    simmod = importlib.import_module("se3dyn.dynamics.run")
 
     def run():
         m = _pendulum(torque=sd.Sine(0.3, 2.0), damping=0.01)
@@ -709,7 +709,7 @@ def test_signals_during_start_up_print_one_line_and_exit(tmp_path, sig, code, wo
 
 
 def test_storage_grows_as_the_run_goes_up_to_the_rows_expected(monkeypatch):
-    simmod = importlib.import_module("se3dyn.simulate")
+    simmod = importlib.import_module("se3dyn.dynamics.run")
     sizes = []
     real = simmod._Recorder.results
 
@@ -749,9 +749,9 @@ READERS = (("info", "RESULTS"), ("channels", "RESULTS"),
 READER_TIMEOUT = 600
 _READERS_CHILD = r"""
 import contextlib, fcntl, io, json, os, sys, time
-from se3dyn.cli import main
+from se3dyn.cli.main import main
 from se3dyn.errors import Se3dynError
-from se3dyn.h5 import read_results
+from se3dyn.io.h5 import read_results
 
 readers, model, live, files = json.loads(sys.argv[1])
 out = []
@@ -819,7 +819,7 @@ def _cut(src: Path, dst: Path, pct: float, flags: bool = False, nbytes: int | No
          ) -> Path:
     """``src`` cut to ``pct`` % of its bytes (or to ``nbytes``); ``flags``: its superblock
     marked open for writing, as a live writer's file is."""
-    from se3dyn.h5 import _lookup3
+    from se3dyn.io.h5 import _lookup3
 
     n = int(src.stat().st_size * pct / 100) if nbytes is None else nbytes
     data = bytearray(src.read_bytes()[:n])
@@ -901,8 +901,8 @@ def test_a_damaged_file_a_live_writer_holds_is_refused_in_bounded_time(base_h5, 
 _KILLED_CHILD = r"""
 import os, sys
 import se3dyn as sd
-from se3dyn.h5 import ResultsWriter
-from se3dyn.modelfile import load_model
+from se3dyn.io.h5 import ResultsWriter
+from se3dyn.io.modelfile import load_model
 
 w = ResultsWriter(sys.argv[1], sd.compile_model(load_model(sys.argv[2])[0]))
 w.flush()
@@ -1137,7 +1137,7 @@ def test_a_centre_of_mass_beyond_the_digits_of_the_inertia_is_refused(com, tmp_p
 def test_a_far_centre_of_mass_within_the_range_condenses_and_checks(tmp_path):
     """The largest offset accepted (1e4 m for m = 1, J = 0.01): the condensed run and the
     full one agree, and `check` finds no motion without mass."""
-    from se3dyn.analysis import massless_motions
+    from se3dyn.engine.rank import massless_motions
 
     for c in (1e4, 1e4 * (1 - 1e-12)):
         mb = sd.ModelBuilder(gravity=(0, 0, -9.81))
@@ -1290,8 +1290,8 @@ def _python_calls(tmp: Path):
     """Hostile calls of the public API outside the model builder, each (description, call):
     every one must raise a Se3dynError (a KeyError or ValueError too where it was one)."""
     from se3dyn import viewer
-    from se3dyn.channels import get_channel
-    from se3dyn.h5 import read_results
+    from se3dyn.io.h5 import read_results
+    from se3dyn.results.channels import get_channel
 
     model = _pendulum()
     res = sd.simulate(model, t_end=0.02, step=0.01)
@@ -1333,7 +1333,7 @@ def test_python_calls_raise_se3dyn_errors(tmp_path, monkeypatch):
     """read_results(None), save_model(None), write_html(None), kinematics with 10^7 output
     times, Model.node('ghost') and get_channel(res, 'nope') as bare KeyErrors; PD('x') and
     Callable(5) accepted; static_equilibrium(load_steps=10**9) ran on without end."""
-    simmod = importlib.import_module("se3dyn.simulate")
+    simmod = importlib.import_module("se3dyn.dynamics.run")
     monkeypatch.setattr(simmod, "_available_memory", lambda: 2.0**30)  # (1 GiB, as measured)
     calls = _python_calls(tmp_path)
     for what, call in calls:
@@ -1353,7 +1353,7 @@ def test_unknown_names_are_still_key_errors():
     model = _pendulum()
     with pytest.raises(KeyError, match="unknown node 'ghost'"):
         model.node("ghost")
-    from se3dyn.channels import get_channel
+    from se3dyn.results.channels import get_channel
 
     with pytest.raises(KeyError, match="unknown channel 'nope'"):
         get_channel(sd.simulate(model, t_end=0.02, step=0.01), "nope")

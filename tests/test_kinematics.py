@@ -26,10 +26,11 @@ import pytest
 
 import se3dyn as sd
 from se3dyn import lie
-from se3dyn.analysis import constraint_jacobian
+from se3dyn.analysis.assemble import AssemblyError, assemble
+from se3dyn.analysis.kinematics import kinematics, time_derivatives
+from se3dyn.engine.rank import constraint_jacobian
+from se3dyn.engine.system import compile_model
 from se3dyn.errors import ModelError
-from se3dyn.kinematics import AssemblyError, assemble, kinematics, time_derivatives
-from se3dyn.system import compile_model
 
 G = 9.81
 W = 2 * math.pi  # crank speed, rad/s

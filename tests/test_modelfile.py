@@ -1,4 +1,4 @@
-"""YAML model files (se3dyn.modelfile): equivalence with the Python models, round trips, the
+"""YAML model files (se3dyn.io.modelfile): equivalence with the Python models, round trips, the
 generated schema and reference, and clean errors for malformed files."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import se3dyn as sd
-from se3dyn.modelfile import (
+from se3dyn.io.modelfile import (
     ModelFileError,
     json_schema,
     load_model,

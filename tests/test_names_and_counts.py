@@ -10,7 +10,7 @@ import pytest
 
 import se3dyn as sd
 from se3dyn.errors import ModelError
-from se3dyn.modelfile import loads_model
+from se3dyn.io.modelfile import loads_model
 
 CLI = [sys.executable, "-m", "se3dyn.cli"]
 
@@ -96,8 +96,8 @@ simulation: {t_end: 0.2, step: 0.01}
 
 
 def test_types_lists_every_joint_type_and_element_section():
-    from se3dyn.joints import JOINT_TYPES
-    from se3dyn.modelfile import ELEMENT_SECTIONS
+    from se3dyn.io.modelfile import ELEMENT_SECTIONS
+    from se3dyn.model.joint_types import JOINT_TYPES
 
     p = subprocess.run([*CLI, "types"], capture_output=True, text=True)
     assert p.returncode == 0, p.stderr

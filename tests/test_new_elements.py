@@ -11,7 +11,7 @@ import pytest
 from scipy.optimize import brentq
 
 import se3dyn as sd
-from se3dyn.statics import static_equilibrium
+from se3dyn.analysis.statics import static_equilibrium
 
 G = 9.81
 
@@ -93,9 +93,9 @@ def _lz_drift(res) -> float:
     s = res.system
     i = s.node_names.index("top")
     d = s.node_dofadr[i]
-    from se3dyn.system import _engine
+    from se3dyn.engine.workspace import engine_of
 
-    _, lay = _engine(s)
+    _, lay = engine_of(s)
     Mb = dict(lay.tables["elements"])["body"]["M"][0]
     Lz = [(res.H[k, i, :3, :3] @ (Mb @ res.v[k, d:d + 6])[3:])[2] for k in range(len(res.t))]
     return float(np.ptp(Lz) / abs(Lz[0]))

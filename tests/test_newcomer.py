@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
+from se3dyn.analysis.assemble import assemble
 from se3dyn.errors import Se3dynWarning
-from se3dyn.kinematics import assemble
-from se3dyn.modelfile import loads_model
+from se3dyn.io.modelfile import loads_model
 from test_cli import run
 
-kin = importlib.import_module("se3dyn.kinematics")
+kin = importlib.import_module("se3dyn.engine.projection")
 
 W2 = 12.566  # crank speed, rad/s
 # pivots and joint points of the planar four-bar (m): ground A0-D0, crank A0-B, coupler B-C,
@@ -73,8 +73,8 @@ def _planar_velocities_ok(node_velocity, w2):
 
 
 def test_the_model_is_over_constrained_with_three_redundant_equations():
-    from se3dyn.analysis import rank_analysis
-    from se3dyn.system import compile_model
+    from se3dyn.engine.rank import rank_analysis
+    from se3dyn.engine.system import compile_model
 
     rep = rank_analysis(compile_model(four_bar()))
     assert len(rep.redundant) == 3 and rep.dof == 1
@@ -135,8 +135,11 @@ def test_sparse_and_dense_projections_agree():
     rank-revealing dense one) give the same velocities on the four-bar."""
     import scipy.sparse as sp
 
-    from se3dyn.analysis import redundant_equations
-    from se3dyn.system import LinearSolver, compile_model, evaluate, step_inputs
+    from se3dyn.engine.evaluate import evaluate
+    from se3dyn.engine.inputs import step_inputs
+    from se3dyn.engine.linsolve import LinearSolver
+    from se3dyn.engine.rank import redundant_equations
+    from se3dyn.engine.system import compile_model
 
     s = compile_model(four_bar())
     v0 = np.zeros(s.nq)
@@ -346,7 +349,7 @@ def test_check_prints_the_length_scale_so_millimetres_show(tmp_path):
 def test_readme_energy_numbers_are_what_run_prints():
     """The README's slider-crank energy balance (index 2 and index 3) against a run of
     examples/slider_crank.yaml at its settings."""
-    from se3dyn.modelfile import load_model
+    from se3dyn.io.modelfile import load_model
 
     text = " ".join((ROOT / "README.md").read_text().split())
     part = text.split("The energy balance error at h = 1e-2", 1)[1][:400]

@@ -15,7 +15,7 @@ What is asserted:
   (massless nodes included), so with the rigid joints kept (``condense=False``) its discrete
   solution depends on the parametrisation: there the two models differ by O(h^2), a small part
   of the discretisation error, and agree as h -> 0. By default the rigid joints are condensed
-  for the time loop (:mod:`se3dyn.condense`) and both forms agree to Newton tolerance in both
+  for the time loop (:mod:`se3dyn.dynamics.condense`) and both forms agree to Newton tolerance in both
   formulations.
   Checked on the slider-crank of Sec. 11 (``examples.slider_crank_bodies`` vs
   ``examples.slider_crank``), on an N-link spherical pendulum chain, on a universal joint.
@@ -42,9 +42,11 @@ from scipy.optimize import brentq
 
 import se3dyn as sd
 from se3dyn import lie
-from se3dyn.integrator import step_inputs
-from se3dyn.modelfile import ModelFileError, load_model, loads_model, save_model
-from se3dyn.system import LinearSolver, compile_model, evaluate, increment_correction, matrix_values
+from se3dyn.engine.evaluate import evaluate, increment_correction, matrix_values
+from se3dyn.engine.inputs import step_inputs
+from se3dyn.engine.linsolve import LinearSolver
+from se3dyn.engine.system import compile_model
+from se3dyn.io.modelfile import ModelFileError, load_model, loads_model, save_model
 from test_assembly import A_SE2, _coefficients, _fd_tolerance
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -586,7 +588,7 @@ def test_bad_attachment_point_in_a_model_file(value, what):
 
 def test_results_file_keeps_the_attachment_points(tmp_path):
     pytest.importorskip("h5py")
-    from se3dyn.h5 import ResultsWriter, read_results
+    from se3dyn.io.h5 import ResultsWriter, read_results
 
     model = sd.examples.slider_crank_bodies()
     path = tmp_path / "bodies.h5"

@@ -24,7 +24,7 @@ from scipy.special import ellipk
 
 import se3dyn as sd
 from se3dyn import lie
-from se3dyn.system import compile_model
+from se3dyn.engine.system import compile_model
 
 G = 9.81
 

@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
-from se3dyn import system
-from se3dyn.integrator import GeneralizedAlpha, SolverMemory
-from se3dyn.modelfile import load_model
+from se3dyn.engine import workspace as system  # (SPLIT_INDEX2)
+from se3dyn.dynamics.integrator import GeneralizedAlpha
+from se3dyn.engine.memory import SolverMemory
+from se3dyn.io.modelfile import load_model
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -103,7 +104,7 @@ def test_a_restart_continues_in_the_mode_of_its_run():
     """The slider-crank at 10 ms goes over to the full matrix after some steps. The mode is
     part of the solver memory, so restarts from states before and after the change, in fresh
     workspaces, give the uninterrupted run's numbers bit for bit."""
-    from se3dyn.system import Workspace
+    from se3dyn.engine.workspace import Workspace
 
     s = sd.compile_model(sd.examples.slider_crank())
     integ = GeneralizedAlpha()
@@ -126,7 +127,7 @@ def test_a_restart_continues_in_the_mode_of_its_run():
 def test_a_memory_without_its_mode_is_the_full_matrix(monkeypatch):
     """States written before the split iteration carry the full matrix's values without the
     mode entry: they continue with the full matrix, bit for bit as with the entry."""
-    from se3dyn.system import Workspace
+    from se3dyn.engine.workspace import Workspace
 
     s = sd.compile_model(_spinning_chain(6))
     integ = GeneralizedAlpha()
@@ -160,7 +161,7 @@ def test_a_stepper_whose_generic_factorisation_overflows_holds_the_models_memory
     run is then factorised anew, as by every new stepper of the model), so a run does not try
     that factorisation a second time; runs in a new workspace and in one that ran before give
     the same numbers. A stepper for the initial accelerations (one solve) keeps no memory."""
-    from se3dyn.system import Workspace
+    from se3dyn.engine.workspace import Workspace
 
     s = sd.compile_model(chain_scaling.chain(6000))
     ws = Workspace(s)

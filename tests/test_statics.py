@@ -1,4 +1,4 @@
-"""Static equilibrium (se3dyn.statics): analytic equilibria, moment balance, virtual work, errors.
+"""Static equilibrium (se3dyn.analysis.statics): analytic equilibria, moment balance, virtual work, errors.
 
 Newton converges to ``|r| <= 1e-10`` relative to the largest force and ``|Phi| <= 1e-10`` (scaled
 by the characteristic length), so equilibrium angles, spring torques and reactions are compared
@@ -16,9 +16,9 @@ import pytest
 from scipy.optimize import brentq, minimize_scalar
 
 import se3dyn as sd
+from se3dyn.analysis.kinematics import kinematics
+from se3dyn.analysis.statics import static_equilibrium
 from se3dyn.errors import ModelError, SimulationError
-from se3dyn.kinematics import kinematics
-from se3dyn.statics import static_equilibrium
 
 G = 9.81
 

@@ -1,4 +1,4 @@
-"""The error norm of adaptive steps (:mod:`se3dyn.stepcontrol`): the root mean square over a
+"""The error norm of adaptive steps (:mod:`se3dyn.dynamics.stepcontrol`): the root mean square over a
 body's mass of the position errors of its material points, checked against the points of a
 uniform box (two-point Gauss rule per axis, exact for the quadratic integrand), and the step
 controller's rules."""
@@ -14,7 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import se3dyn as sd
-from se3dyn import lie, stepcontrol
+from se3dyn import lie
+from se3dyn.dynamics import stepcontrol
 
 finite = st.floats(-1.0, 1.0, allow_nan=False)
 vec3 = st.tuples(finite, finite, finite).map(np.array)

@@ -1,4 +1,4 @@
-"""Threads of the element kernels (se3dyn.threads, se3dyn/_core/pool.hpp).
+"""Threads of the element kernels (se3dyn.engine.threads, se3dyn/_core/pool.hpp).
 
 The engine evaluates the elements of a type in chunks of 32, coloured so that no two chunks
 of one colour add to the same frame, and sums every entry in the order of colours and chunks
@@ -21,7 +21,7 @@ import pytest
 
 import se3dyn as sd
 from se3dyn.elements import REGISTRY
-from se3dyn.system import _engine
+from se3dyn.engine.workspace import engine_of
 
 CHANNELS = ("H", "v", "vd", "lam", "kinetic", "potential", "spring", "dissipation",
             "work_actuators", "work_loads")
@@ -88,7 +88,7 @@ def mixed():
 
 def _colours(s):
     """{element type: (elements, chunks, colours)} of the system's engine"""
-    eng, lay = _engine(s)
+    eng, lay = engine_of(s)
     keys = [key for key, _ in lay.tables["elements"]]
     # (the engine may add an empty joint batch after the tables' types)
     return dict(zip(keys, [tuple(c) for c in eng.colours()], strict=False))
@@ -160,7 +160,7 @@ def test_bad_thread_counts_are_refused_with_the_value(bad):
 
 
 def test_environment_variable(monkeypatch):
-    from se3dyn import threads
+    from se3dyn.engine import threads
 
     monkeypatch.setenv("SE3DYN_THREADS", "3")
     assert threads.from_environment() == 3
@@ -192,8 +192,8 @@ def test_a_long_chain_factorises_in_two_parts_alike_on_any_thread_count():
     refactorisation and solves take the two halves at once (sparse_lu.hpp), as do the xi
     block's LDL^T factorisation and solves (sparse_ldlt.hpp); the numbers must not depend on
     the thread count either, and the parts must hold the chain's halves."""
-    from se3dyn.integrator import GeneralizedAlpha
-    from se3dyn.system import Workspace
+    from se3dyn.dynamics.integrator import GeneralizedAlpha
+    from se3dyn.engine.workspace import Workspace
 
     s = sd.compile_model(_chain(600))
     ws = Workspace(s)
@@ -216,7 +216,7 @@ def test_a_long_chain_factorises_in_two_parts_alike_on_any_thread_count():
 def test_the_command_line_takes_threads_and_gives_the_same_file(tmp_path):
     """``se3dyn run --threads N``: the same results file for 1 and 2 threads; a bad count is
     refused with the value, no traceback."""
-    from se3dyn.h5 import read_results
+    from se3dyn.io.h5 import read_results
     from test_cli import run
 
     model = tmp_path / "chain.yaml"

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import se3dyn as sd
-from se3dyn import timefunc as tf
 from se3dyn.errors import SimulationError
+from se3dyn.model import timefunc as tf
 
 finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
 value = st.one_of(finite, st.lists(finite, min_size=2, max_size=3))

@@ -24,8 +24,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import se3dyn as sd
-from se3dyn.modelfile import load_model
-from se3dyn.viewer import build_scene, equivalent_box, export_gltf, html_page
+from se3dyn.io.modelfile import load_model
+from se3dyn.model.visuals import COLORS
+from se3dyn.viewer import export_gltf, html_page
 from se3dyn.viewer.encode import (
     ANGLE_BOUND,
     Blob,
@@ -35,8 +36,8 @@ from se3dyn.viewer.encode import (
     quaternions,
     unpack,
 )
-from se3dyn.viewer.shapes import ViewerError, part_pose
-from se3dyn.visuals import COLORS
+from se3dyn.viewer.errors import ViewerError
+from se3dyn.viewer.shapes import build_scene, equivalent_box, part_pose
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -344,7 +345,7 @@ def test_page_embeds_the_results_and_nothing_external(crank):
         np.testing.assert_allclose(m, (p.matrix @ np.diag([*p.scale, 1.0]))[:3], rtol=1e-6,
                                    atol=1e-7)
     # embedded channels are the results' channels
-    from se3dyn.channels import get_channel
+    from se3dyn.results.channels import get_channel
 
     ch = blob_of(tags, "channels")
     names = meta["channels"]["names"]
@@ -385,7 +386,7 @@ def test_channel_and_trace_choices_and_their_errors(crank):
 
 
 def test_page_of_a_results_file_uses_the_stored_model(tmp_path, crank):
-    from se3dyn.h5 import ResultsWriter, read_results
+    from se3dyn.io.h5 import ResultsWriter, read_results
 
     model, _ = crank
     path = tmp_path / "r.h5"
@@ -553,7 +554,7 @@ def _cli(*args, cwd=None):
 
 @pytest.fixture(scope="module")
 def results_file(tmp_path_factory, crank):
-    from se3dyn.h5 import ResultsWriter
+    from se3dyn.io.h5 import ResultsWriter
 
     model, _ = crank
     path = tmp_path_factory.mktemp("view") / "crank.h5"
@@ -590,7 +591,7 @@ def test_cli_bad_input_is_one_line_and_exit_2(results_file, tmp_path, args, mess
 
 
 def test_view_without_output_opens_the_browser(results_file, monkeypatch):
-    from se3dyn import cli
+    from se3dyn.cli.main import main as cli
 
     opened = []
     monkeypatch.setattr("webbrowser.open", lambda url, *a, **k: opened.append(url) or True)
@@ -606,14 +607,14 @@ def test_view_without_output_opens_the_browser(results_file, monkeypatch):
 
 def test_results_show_is_an_inline_frame(crank):
     _, res = crank
-    v = res.show(height=400)
+    v = sd.show(res, height=400)
     html = v._repr_html_()
     assert html.startswith("<iframe srcdoc=") and "height:400px" in html
     assert "&lt;script" in html and "<script" not in html  # the page is escaped into srcdoc
 
 
 def test_the_core_never_imports_the_viewer():
-    code = ("import sys, se3dyn, se3dyn.modelfile, se3dyn.h5, se3dyn.cli; "
+    code = ("import sys, se3dyn, se3dyn.io.modelfile, se3dyn.io.h5, se3dyn.cli.main; "
             "m = sorted(k for k in sys.modules if k.startswith(('se3dyn.viewer', 'trimesh', "
             "'pygltflib'))); print(m); assert not m")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
@@ -676,7 +677,7 @@ def test_beam_tube_has_the_section_and_follows_the_nodes(flexible):
 
 
 def test_beam_section_is_the_ellipse_of_the_section_moments():
-    from se3dyn.sections import rectangle
+    from se3dyn.model.sections import rectangle
     from se3dyn.viewer.shapes import beam_section
 
     sec = rectangle(0.02, 0.06, E=70e9, nu=0.3, density=2700.0)  # width along 2, height along 3

@@ -6,7 +6,7 @@ but its own file and the blob: URLs it makes; ``#t=SECONDS`` opens it paused at 
 pictures at two times differ where a body moved and agree pixel for pixel where nodes are fixed
 (positions projected with the page's own camera); the frames decoded by the page's JavaScript
 equal the results within the quantisation bounds; moving the scrubber moves time and changes the
-picture; the notebook frame (``Results.show()``) renders too.
+picture; the notebook frame (``sd.show(result)``) renders too.
 """
 
 from __future__ import annotations
@@ -251,7 +251,7 @@ def test_hover_names_a_body_and_a_click_toggles_its_trace(browser, pendulum_page
 def test_notebook_frame_renders(browser, pendulum_page, tmp_path):
     res, _ = pendulum_page
     page = tmp_path / "notebook.html"
-    page.write_text("<!doctype html><html><body>" + res.show(height=500)._repr_html_()
+    page.write_text("<!doctype html><html><body>" + sd.show(res, height=500)._repr_html_()
                     + "</body></html>", encoding="utf-8")
     browser.open(page.as_uri(), ready="(() => { const f = document.querySelector('iframe'); "
                  "return f && f.contentDocument && "
@@ -309,7 +309,7 @@ def test_chain_of_1000_links_loads_and_plays(browser, tmp_path):
 
 @pytest.fixture(scope="module")
 def flexible_page(tmp_path_factory):
-    from se3dyn.modelfile import load_model
+    from se3dyn.io.modelfile import load_model
 
     model, _ = load_model(Path(__file__).resolve().parents[1] / "examples"
                           / "slider_crank_flexible.yaml")

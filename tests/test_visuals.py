@@ -13,8 +13,8 @@ import pytest
 
 import se3dyn as sd
 from se3dyn.errors import ModelError
-from se3dyn.modelfile import ModelFileError, json_schema, load_model, save_model
-from se3dyn.visuals import COLORS, axis_rotation
+from se3dyn.io.modelfile import ModelFileError, json_schema, load_model, save_model
+from se3dyn.model.visuals import COLORS, axis_rotation
 
 
 def pendulum(with_visuals: bool) -> sd.Model:
@@ -52,7 +52,7 @@ def test_visuals_round_trip_through_a_model_file(tmp_path):
 
 
 def test_visuals_travel_in_results_files(tmp_path):
-    from se3dyn.h5 import ResultsWriter, read_results
+    from se3dyn.io.h5 import ResultsWriter, read_results
     from se3dyn.viewer.shapes import resolve_model
 
     m = pendulum(True)

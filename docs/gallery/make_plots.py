@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 
 import se3dyn as sd  # noqa: E402
 from se3dyn.errors import NewtonError  # noqa: E402
-from se3dyn.modelfile import load_model  # noqa: E402
+from se3dyn.io.modelfile import load_model  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 OUT = Path(__file__).resolve().parent

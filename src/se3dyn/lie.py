@@ -138,7 +138,7 @@ _C5 = _c5_series()
 # The series-based maps (exp, log, tangent operators and their coefficient functions) are
 # computed by the compiled kernel se3dyn/_core/lie.hpp, which the element kernels of the engine
 # use too: one implementation. It receives the series above (they exist once, here).
-from se3dyn import _engine as _core  # noqa: E402
+from se3dyn._core import _engine as _core  # noqa: E402
 
 _core.set_series(_C2, _C3, _C4, _C5, float(SERIES_CUTOFF))
 

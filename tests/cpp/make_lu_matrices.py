@@ -38,10 +38,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import chain_scaling  # noqa: E402  (the chain models, defined once there)
 
 import se3dyn as sd  # noqa: E402
-from se3dyn import lie  # noqa: E402
-from se3dyn.examples import slider_crank  # noqa: E402
-from se3dyn.integrator import GeneralizedAlpha, step_inputs  # noqa: E402
-from se3dyn.system import LinearSolver, evaluate, matrix_values  # noqa: E402
+from se3dyn import lie
+from se3dyn.dynamics.integrator import GeneralizedAlpha
+from se3dyn.engine.evaluate import evaluate, matrix_values  # noqa: E402
+from se3dyn.engine.inputs import step_inputs  # noqa: E402
+from se3dyn.engine.linsolve import LinearSolver
+from se3dyn.model.examples import slider_crank  # noqa: E402
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-// The compressed-column pattern of an iteration matrix made of dense blocks (se3dyn.assembly:
+// The compressed-column pattern of an iteration matrix made of dense blocks (se3dyn.engine.layout:
 // one row per block, never one per value), and the value of every entry of it.
 //
 // Values are stored block after block, each block row-major at its offset. Blocks do not

@@ -371,7 +371,7 @@ struct Engine {
     X.vq = v;
     X.lam = lam;
     X.u = u;
-    X.gravity = u;  // u[0:3] is gravity (se3dyn.system._Inputs)
+    X.gravity = u;  // u[0:3] is gravity (se3dyn.engine.inputs._Inputs)
     X.r = o.r;
     X.phi = o.phi;
     X.psi = o.psi;

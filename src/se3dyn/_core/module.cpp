@@ -1,5 +1,5 @@
 // Python bindings of the compiled engine (nanobind): the element tables arrive once from
-// se3dyn.assembly as a dict of numpy arrays; evaluations and steps work on numpy arrays in place.
+// se3dyn.engine.layout as a dict of numpy arrays; evaluations and steps work on numpy arrays in place.
 #include <nanobind/nanobind.h>
 #include <nanobind/stl/optional.h>
 #include <nanobind/ndarray.h>
@@ -275,7 +275,7 @@ NB_MODULE(_engine, m) {
 
   m.def("block_csc", [](int N, IArr blocks, long nvals, I32Arr colptr, I32Arr rowind,
                         IArr src) {
-    // the compressed-column pattern of a matrix of non-overlapping dense blocks (se3dyn.assembly
+    // the compressed-column pattern of a matrix of non-overlapping dense blocks (se3dyn.engine.layout
     // Layout.csc): colptr (N+1,), rowind (nvals,), src (nvals,) CSC position -> value
     if (blocks.size() % 5) throw std::invalid_argument("blocks: (nb, 5)");
     if (colptr.size() != size_t(N) + 1 || rowind.size() != size_t(nvals) ||
@@ -289,7 +289,7 @@ NB_MODULE(_engine, m) {
       .def("__init__",
            [](Stepper* S, Engine& E, bool index2, int N, IArr blocks, IArr group, IArr drop,
               bool split, bool reference) {
-             // the pattern from the blocks of se3dyn.assembly (block_pattern.hpp): no pattern
+             // the pattern from the blocks of se3dyn.engine.layout (block_pattern.hpp): no pattern
              // arrays per value cross the binding
              new (S) Stepper();
              const long nv = index2 ? E.nvals2 : E.nvals;

@@ -124,7 +124,7 @@ class Pool {
   // read the word late, when the caller has already gone on to the next loop, and must then
   // neither run nor count itself in that next loop from a stale part count (with 3 threads a
   // worker skipping a 2-part loop could otherwise run a part of the next loop twice).
-  // (se3dyn.threads.MAX_THREADS = kQuit - 1 = 254 follows these bits)
+  // (se3dyn.engine.threads.MAX_THREADS = kQuit - 1 = 254 follows these bits)
   static constexpr std::uint64_t kPartBits = 8, kQuit = (1u << kPartBits) - 1;
   void publish(std::uint64_t parts) {
     {

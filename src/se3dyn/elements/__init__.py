@@ -5,8 +5,8 @@ A module provides
 
 * ``KEY``: the type key;
 * ``tables(s, lay) -> dict``: its struct-of-arrays batch for the kernel (from the compiled
-  :class:`~se3dyn.system.System` ``s``), declaring its dof map to the assembler ``lay``
-  (:class:`se3dyn.assembly.Layout`): the blocks of the iteration matrix it writes
+  :class:`~se3dyn.engine.system.System` ``s``), declaring its dof map to the assembler ``lay``
+  (:class:`se3dyn.engine.layout.Layout`): the blocks of the iteration matrix it writes
   (``lay.block``), the blocks that carry velocity-level terms (``lay.velocity_block``) and, for
   constraint elements, the frames the constraints act on (``lay.constraint``);
 * ``examples(rng) -> list[Model]``: small models exercising every option of the type, on which

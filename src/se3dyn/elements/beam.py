@@ -19,7 +19,7 @@ delta h_r`` (``T`` the tangent operator of Eqs. (21)-(22) of the multibody paper
     g_B = Ad(X_B^-1)^T T^-T(d) f,    g_A = -Ad(X_A^-1)^T Ad(H_r^-1)^T T^-T(d) f.
 
 Mass: lumped, half of each element's mass and rotary inertia on each of its nodes (added to
-the nodes' rigid-body inertia by :func:`se3dyn.system.compile_model`; the body element then
+the nodes' rigid-body inertia by :func:`se3dyn.engine.system.compile_model`; the body element then
 gives the exact inertia forces, Eq. (51), and their tangent, Eq. (53)).
 
 Kernel ``se3dyn/_core/elements/beam.hpp`` (exact linearisation in configuration and velocity).
@@ -159,10 +159,10 @@ def examples(rng):
     and pre-twisted beam (frames along a helix) from a fixed node to a node whose own frame is
     not the section frame, with damping proportional to the stiffness; a damped beam on a hinge
     with a body on a spherical joint at an inner node (beam and joints together, index 2)."""
-    import se3dyn as sd
+    from se3dyn.model.builder import ModelBuilder
 
     out = []
-    mb = sd.ModelBuilder()
+    mb = ModelBuilder()
     mb.node("a", position=(0.0, 0.0, 0.0), mass=0.3, inertia=(0.01, 0.012, 0.014),
             velocity=tuple(rng.normal(size=3)), angular_velocity=tuple(rng.normal(size=3)))
     mb.node("b", position=(1.2, 0.3, -0.2), mass=0.2, inertia=(0.01, 0.01, 0.01))
@@ -171,7 +171,7 @@ def examples(rng):
             damping=tuple(rng.uniform(0.05, 0.3, 6)), axis2=(0.1, 1.0, 0.3))
     out.append(mb.build())
 
-    mb = sd.ModelBuilder()
+    mb = ModelBuilder()
     n = 3
     s_ = np.linspace(0.0, 1.0, n + 1)
     frames = []
@@ -195,7 +195,7 @@ def examples(rng):
 
     # a damped beam hanging from a hinge, a spherical joint on one of its inner nodes: the
     # velocity-level blocks of the beam enter the index-2 products with the joints
-    mb = sd.ModelBuilder()
+    mb = ModelBuilder()
     mb.node("g", fixed=True)
     mb.node("a", position=(0.0, 0.0, 0.0))
     mb.node("b", position=(0.0, 0.2, -1.0))
@@ -210,8 +210,8 @@ def examples(rng):
 
 
 def model_file(mf):
-    """The ``beams:`` section of model files (:class:`se3dyn.modelfile.ElementSection`); ``mf``
-    is :mod:`se3dyn.modelfile` (its field types). A saved beam is written with ``elements`` and
+    """The ``beams:`` section of model files (:class:`se3dyn.io.modelfile.ElementSection`); ``mf``
+    is :mod:`se3dyn.io.modelfile` (its field types). A saved beam is written with ``elements`` and
     ``axis2`` when these rebuild its reference frames exactly, else with its ``frames``; its
     intermediate nodes are not written (the beam creates them)."""
     F = mf.Field
@@ -249,10 +249,10 @@ def model_file(mf):
 
     def straight_kw(model, b):
         """elements and axis2 when they rebuild b's reference frames exactly, else None."""
-        import se3dyn as sd
+        from se3dyn.model.builder import ModelBuilder
 
         ends = [model.node(b.nodes[0]), model.node(b.nodes[-1])]
-        mb = sd.ModelBuilder()
+        mb = ModelBuilder()
         for nd in ends:
             mb.node(nd.name, position=nd.position, orientation=nd.orientation, fixed=True)
         kw = dict(elements=b.elements, axis2=b.reference[0, :3, 1])

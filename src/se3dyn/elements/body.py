@@ -37,9 +37,9 @@ def tables(s, lay) -> dict:
 
 def examples(rng):
     """A free body with its node off the centre of mass, spinning and moving, under gravity."""
-    import se3dyn as sd
+    from se3dyn.model.builder import ModelBuilder
 
-    mb = sd.ModelBuilder(gravity=tuple(rng.normal(size=3)))
+    mb = ModelBuilder(gravity=tuple(rng.normal(size=3)))
     J = rng.uniform(0.5, 1.0, 3)
     mb.node("b", position=tuple(rng.normal(size=3)), mass=float(rng.uniform(1, 3)),
             inertia=tuple(J), principal_axes=lie.exp_so3(rng.normal(size=3)),

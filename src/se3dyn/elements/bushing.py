@@ -87,9 +87,9 @@ def examples(rng):
     """Bushings with full symmetric positive-definite K and D between two moving bodies (at a
     point away from both nodes, one node turned), diagonal values to the ground, and K alone
     with turned axes and an initial deformation."""
-    import se3dyn as sd
+    from se3dyn.model.builder import ModelBuilder
 
-    mb = sd.ModelBuilder()
+    mb = ModelBuilder()
     mb.node("g", fixed=True)
     mb.node("a", position=(0.5, 0.0, 0.0), mass=1.0, inertia=(1, 1.2, 1.4),
             velocity=tuple(rng.normal(size=3)), angular_velocity=tuple(rng.normal(size=3)))
@@ -106,8 +106,8 @@ def examples(rng):
 
 
 def model_file(mf):
-    """The ``bushings:`` section of model files (:class:`se3dyn.modelfile.ElementSection`);
-    ``mf`` is :mod:`se3dyn.modelfile` (its field types)."""
+    """The ``bushings:`` section of model files (:class:`se3dyn.io.modelfile.ElementSection`);
+    ``mf`` is :mod:`se3dyn.io.modelfile` (its field types)."""
     F = mf.Field
     kd = mf.OneOf((mf.Num(minimum=0), mf.Vec(6), mf.Mat(6, 6, 6)))
     fields = (

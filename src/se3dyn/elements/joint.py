@@ -55,7 +55,7 @@ def _unit(rng):
 
 def examples(rng):
     """Every joint type, with and without an attachment point, between two moving bodies."""
-    import se3dyn as sd
+    from se3dyn.model.builder import ModelBuilder
 
     out = []
     for typ, kw in (("rigid", {}), ("hinge", dict(axis=_unit(rng))),
@@ -64,7 +64,7 @@ def examples(rng):
                     ("planar", dict(normal=_unit(rng))),
                     ("screw", dict(axis=_unit(rng), pitch=0.1))):
         for at in (None, tuple(_unit(rng))):
-            mb = sd.ModelBuilder()
+            mb = ModelBuilder()
             mb.node("a", position=tuple(_unit(rng)), mass=1.0, inertia=(1, 1.2, 1.4))
             mb.node("b", position=tuple(_unit(rng)), mass=2.0, inertia=(1, 1.1, 1.3),
                     orientation=lie.exp_so3(_unit(rng)))
@@ -74,14 +74,14 @@ def examples(rng):
 
 
 # ---------------------------------------------------------------------------------------------
-# model file: the `joints:` section (with its `control:` mapping), see se3dyn.modelfile
+# model file: the `joints:` section (with its `control:` mapping), see se3dyn.io.modelfile
 def model_file(mf):
-    """The ``joints:`` section of model files (:class:`se3dyn.modelfile.ElementSection`).
+    """The ``joints:`` section of model files (:class:`se3dyn.io.modelfile.ElementSection`).
 
-    ``mf`` is :mod:`se3dyn.modelfile` (its field types), passed by it: the element library
+    ``mf`` is :mod:`se3dyn.io.modelfile` (its field types), passed by it: the element library
     never imports the YAML layer.
     """
-    from se3dyn.joints import JOINT_SYNONYMS, JOINT_TYPES
+    from se3dyn.model.joint_types import JOINT_SYNONYMS, JOINT_TYPES
 
     keys = tuple(sorted([*JOINT_TYPES, "universal"])) + tuple(JOINT_SYNONYMS)
     v3 = mf.Vec(3)
@@ -131,7 +131,7 @@ def model_file(mf):
     )
 
     def add(mb, name, kw):
-        from se3dyn.model import PD
+        from se3dyn.model.specs import PD
 
         if "control" in kw:
             kw["control"] = PD(**kw["control"].values)
@@ -182,7 +182,7 @@ def _joint_out(mf, j) -> dict:
 
 
 def _universal_out(mf, name: str, parts: tuple[str, ...], model) -> dict:
-    from se3dyn.timefunc import Component
+    from se3dyn.model.timefunc import Component
 
     item = f"joint {name!r}"
     py, tf_out = mf.plain, mf.time_function_data

@@ -76,28 +76,30 @@ def examples(rng):
     spring (Eq. (62) on the log coordinates) acts through T_A(alpha)^-T: anisotropic stiffness
     and a nonzero reference, so that the derivative of T_A^-T at fixed force is exercised (an
     isotropic spring without reference cannot tell it from K alpha: T(theta)^T theta = theta)."""
-    import se3dyn as sd
+    from se3dyn.model.builder import ModelBuilder
+    from se3dyn.model.specs import PD
+    from se3dyn.model.timefunc import Ramp, Sine
 
     out = []
     for typ in ("hinge", "cylindrical"):
-        mb = sd.ModelBuilder()
+        mb = ModelBuilder()
         mb.node("g", fixed=True)
         mb.node("b", position=(0.3, 0.1, 0.0), mass=1.5, inertia=(1, 1.2, 1.4))
         k = 1 if typ == "hinge" else 2
         mb.joint("j", typ, "g", "b", axis=_unit(rng),
                  stiffness=tuple(rng.uniform(1, 3, k)), reference=tuple(rng.normal(size=k)),
                  damping=tuple(rng.uniform(0.1, 1, k)),
-                 actuator=sd.Sine(tuple(rng.normal(size=k)), 1.3),
-                 control=sd.PD(kp=tuple(rng.uniform(1, 2, k)), kd=tuple(rng.uniform(0, 1, k)),
-                               target=sd.Ramp(tuple(rng.normal(size=k)), 0.1, 2.0)))
+                 actuator=Sine(tuple(rng.normal(size=k)), 1.3),
+                 control=PD(kp=tuple(rng.uniform(1, 2, k)), kd=tuple(rng.uniform(0, 1, k)),
+                               target=Ramp(tuple(rng.normal(size=k)), 0.1, 2.0)))
         out.append(mb.build())
     for typ in ("spherical", "planar"):
-        mb = sd.ModelBuilder()
+        mb = ModelBuilder()
         mb.node("g", fixed=True)
         mb.node("b", position=(0.3, 0.1, 0.0), mass=1.5, inertia=(1, 1.2, 1.4))
         kw = dict(axes=_orthonormal_axes(rng)) if typ == "spherical" else dict(normal=_unit(rng))
         mb.joint("j", typ, "g", "b", stiffness=tuple(rng.uniform(1, 3, 3)),
                  reference=tuple(rng.normal(size=3)), damping=tuple(rng.uniform(0.1, 1, 3)),
-                 actuator=sd.Sine(tuple(rng.normal(size=3)), 1.3), **kw)
+                 actuator=Sine(tuple(rng.normal(size=3)), 1.3), **kw)
         out.append(mb.build())
     return out

@@ -25,21 +25,22 @@ def tables(s, lay) -> dict:
 
 def examples(rng):
     """Forces and torques in both frames, at the node and at a point of the body."""
-    import se3dyn as sd
+    from se3dyn.model.builder import ModelBuilder
+    from se3dyn.model.timefunc import Sine
 
-    mb = sd.ModelBuilder()
+    mb = ModelBuilder()
     mb.node("b", position=(0.2, 0.0, 0.1), mass=1.0, inertia=(1, 1.2, 1.4))
     for i, (ff, tf, at) in enumerate((("inertial", "body", None),
                                       ("body", "inertial", tuple(rng.normal(size=3))),
                                       ("inertial", "inertial", tuple(rng.normal(size=3))))):
-        mb.load(f"l{i}", "b", force=sd.Sine(tuple(rng.normal(size=3)), 0.7),
+        mb.load(f"l{i}", "b", force=Sine(tuple(rng.normal(size=3)), 0.7),
                 torque=tuple(rng.normal(size=3)), at=at, force_frame=ff, torque_frame=tf)
     return [mb.build()]
 
 
 def model_file(mf):
-    """The ``loads:`` section of model files (:class:`se3dyn.modelfile.ElementSection`);
-    ``mf`` is :mod:`se3dyn.modelfile` (its field types)."""
+    """The ``loads:`` section of model files (:class:`se3dyn.io.modelfile.ElementSection`);
+    ``mf`` is :mod:`se3dyn.io.modelfile` (its field types)."""
     F = mf.Field
     frames = mf.Str(("inertial", "body"))
     fields = (

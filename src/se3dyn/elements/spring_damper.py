@@ -30,9 +30,9 @@ def tables(s, lay) -> dict:
 
 def examples(rng):
     """Springs between two free bodies at offset points, and to the ground, with damping."""
-    import se3dyn as sd
+    from se3dyn.model.builder import ModelBuilder
 
-    mb = sd.ModelBuilder()
+    mb = ModelBuilder()
     mb.node("g", fixed=True)
     mb.node("a", position=(0.5, 0.0, 0.0), mass=1.0, inertia=(1, 1.2, 1.4),
             velocity=tuple(rng.normal(size=3)), angular_velocity=tuple(rng.normal(size=3)))
@@ -44,8 +44,8 @@ def examples(rng):
 
 
 def model_file(mf):
-    """The ``springs:`` section of model files (:class:`se3dyn.modelfile.ElementSection`);
-    ``mf`` is :mod:`se3dyn.modelfile` (its field types)."""
+    """The ``springs:`` section of model files (:class:`se3dyn.io.modelfile.ElementSection`);
+    ``mf`` is :mod:`se3dyn.io.modelfile` (its field types)."""
     F = mf.Field
     v3 = mf.Vec(3)
     fields = (

@@ -1,7 +1,7 @@
 """``se3dyn sweep``: the command-line side of :func:`se3dyn.sweep.run_sweep`.
 
 :func:`add_arguments` declares the sweep's own options (the run-time overrides ``--t-end``,
-``--step``, ... are declared by :mod:`se3dyn.cli`, shared with ``se3dyn run``); :func:`main`
+``--step``, ... are declared by :mod:`se3dyn.cli.main`, shared with ``se3dyn run``); :func:`main`
 runs it. Exit codes: 0 every run ok, 1 some runs failed (the summary is complete), 2 bad input
 (one line, before any run starts), 130 interrupted (the summary holds the finished runs;
 ``--resume`` completes it).
@@ -68,14 +68,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace, overrides: dict) -> int:
     """Run ``se3dyn sweep`` for parsed ``args``; returns the exit code (bad input raises
     :class:`~se3dyn.errors.ModelError` or ImportError, turned into exit 2 by the caller)."""
-    import se3dyn as sd
+    from se3dyn._version import __version__
     from se3dyn.sweep.runner import SweepInterrupted, execute_plan, prepare
 
     plan = prepare(args.model, args.vary, method=args.method, samples=args.samples,
                    seed=args.seed, metrics=args.metric, overrides=overrides, out=args.out,
                    h5=args.h5)
     paths = ", ".join(v.path for v in plan.variables)
-    print(f"se3dyn {sd.__version__} sweep: {args.model}, {len(plan.runs)} runs "
+    print(f"se3dyn {__version__} sweep: {args.model}, {len(plan.runs)} runs "
           f"({args.method} over {paths}) -> {plan.out}")
     try:
         rows = execute_plan(plan, workers=args.workers, scheduler=args.scheduler,

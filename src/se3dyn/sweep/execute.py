@@ -1,12 +1,12 @@
 """One run of a sweep, as a worker executes it (no dask here: usable and testable alone).
 
 :func:`execute_run` sets the varied values in the model-file data, loads the model with the
-model-file rules (:func:`se3dyn.modelfile.loads_model`), simulates it with the fully compiled
+model-file rules (:func:`se3dyn.io.modelfile.loads_model`), simulates it with the fully compiled
 fixed-step loop, evaluates the metrics, writes the results file and returns the summary row.
 Every failure of the run (invalid value, Newton failure, anything else) becomes a row with
 ``status = "failed"`` and a one-line message: a run never raises.
 
-Results files are written with :class:`se3dyn.h5.ResultsWriter` (the writer of ``se3dyn run``)
+Results files are written with :class:`se3dyn.io.h5.ResultsWriter` (the writer of ``se3dyn run``)
 under a temporary name in the target folder and renamed with :func:`os.replace` once closed, so a
 file under its final name is always complete.
 """
@@ -23,10 +23,12 @@ import uuid
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from se3dyn.sweep.metrics import Metric
 from se3dyn.sweep.spec import apply_values
+
+if TYPE_CHECKING:
+    from se3dyn.sweep.metrics import Metric
 
 __all__ = ["RunContext", "execute_run", "result_name", "TMP_SUFFIX", "warm_up"]
 
@@ -47,7 +49,7 @@ class RunContext:
     ----------
     data : dict
         The model-file data with the run-time overrides applied (see
-        :func:`se3dyn.modelfile.parse_model_data`).
+        :func:`se3dyn.io.modelfile.parse_model_data`).
     label : str
         Name of the model in messages (the file name).
     metrics : list of Metric
@@ -69,7 +71,7 @@ class RunContext:
 
 
 class _Row:
-    """The state attributes :meth:`se3dyn.h5.ResultsWriter.append` reads, from a stored row."""
+    """The state attributes :meth:`se3dyn.io.h5.ResultsWriter.append` reads, from a stored row."""
 
     __slots__ = ("t", "H", "v", "vd", "alpha", "lam")
 
@@ -88,7 +90,7 @@ def _one_line(text: str) -> str:
 
 def _write_h5(path: Path, system, res, text: str, cfg: dict, stats: dict) -> None:
     """Write ``res`` to ``path`` through a temporary file renamed when complete."""
-    from se3dyn.h5 import ENERGIES, ResultsWriter
+    from se3dyn.io.h5 import ENERGIES, ResultsWriter
 
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}{TMP_SUFFIX}")
     try:
@@ -111,7 +113,7 @@ def _write_h5(path: Path, system, res, text: str, cfg: dict, stats: dict) -> Non
 
 def _validated_settings(sim: dict, label: str) -> dict:
     """The simulation settings as ``loads_model`` returns them (validated by its rules)."""
-    from se3dyn.modelfile import format_model_data, loads_model
+    from se3dyn.io.modelfile import format_model_data, loads_model
 
     doc = {"se3dyn": 1, "nodes": {"n": {"fixed": True}}, "simulation": sim}
     return loads_model(format_model_data(doc), filename=label)[1]
@@ -140,9 +142,10 @@ def execute_run(ctx: RunContext, run: int, values: dict, cache: OrderedDict | No
         (host:pid) and ``results`` (the file name, or "" when none was written); in mode
         "client" also ``_h5`` (the file's bytes).
     """
-    import se3dyn as sd
+    from se3dyn.dynamics.run import simulate
+    from se3dyn.engine.system import compile_model
     from se3dyn.errors import ModelError, SimulationError
-    from se3dyn.modelfile import format_model_data, loads_model
+    from se3dyn.io.modelfile import format_model_data, loads_model
 
     t0 = time.perf_counter()
     row: dict[str, Any] = {"run": int(run), **values, "status": "ok", "message": "",
@@ -165,13 +168,13 @@ def execute_run(ctx: RunContext, run: int, values: dict, cache: OrderedDict | No
             cfg = _validated_settings(data.get("simulation") or {}, label)
         else:
             model, cfg = loads_model(text, filename=label)
-            system = sd.compile_model(model)
+            system = compile_model(model)
             if cache is not None:
                 cache[key] = system
                 while len(cache) > 4:
                     cache.popitem(last=False)
         try:
-            res = sd.simulate(system, **cfg)
+            res = simulate(system, **cfg)
         except SimulationError as exc:
             res, failure = exc.result, _one_line(exc)
     except ModelError as exc:
@@ -223,14 +226,16 @@ def warm_up() -> float:
     """Import se3dyn and load its compiled kernels in this process, with one thread for the
     element kernels (the sweep runs one process per core); returns the seconds taken."""
     t0 = time.perf_counter()
-    import se3dyn as sd
-    import se3dyn.h5  # noqa: F401  (h5py)
+    import se3dyn.io.h5  # noqa: F401  (h5py)
+    from se3dyn.dynamics.run import simulate
+    from se3dyn.engine.threads import set_threads
+    from se3dyn.model.builder import ModelBuilder
 
-    sd.set_threads(1)  # (the sweep keeps every core busy with runs)
+    set_threads(1)  # (the sweep keeps every core busy with runs)
 
-    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81), name="warm-up")
+    mb = ModelBuilder(gravity=(0.0, 0.0, -9.81), name="warm-up")
     mb.node("ground", fixed=True)
     mb.node("bob", position=(0.5, 0.0, 0.0), mass=1.0, inertia=(1e-3, 1e-3, 1e-3))
     mb.joint("hinge", "hinge", "ground", "bob", axis=(0.0, 1.0, 0.0), at=(0.0, 0.0, 0.0))
-    sd.simulate(mb.build(), t_end=0.02, step=0.01)
+    simulate(mb.build(), t_end=0.02, step=0.01)
     return time.perf_counter() - t0

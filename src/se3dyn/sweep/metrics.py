@@ -1,7 +1,7 @@
 """Scalar metrics of a run: ``NAME=FUNC(EXPR)``.
 
 FUNC is one of ``max``, ``min``, ``final``, ``mean``, ``rms``; EXPR is a channel name
-(:mod:`se3dyn.channels`, e.g. ``joint/1/multiplier/3``), optionally wrapped in ``abs(...)``::
+(:mod:`se3dyn.results.channels`, e.g. ``joint/1/multiplier/3``), optionally wrapped in ``abs(...)``::
 
     peak=max(abs(joint/1/multiplier/3))
     e_end=final(energy/total)
@@ -49,8 +49,8 @@ class Metric:
         return f"{self.name}={self.func}({inner})"
 
     def evaluate(self, res) -> float:
-        """The metric of a :class:`~se3dyn.results.Results` (NaN when it has no rows)."""
-        from se3dyn.channels import get_channel
+        """The metric of a :class:`~se3dyn.results.results.Results` (NaN when it has no rows)."""
+        from se3dyn.results.channels import get_channel
 
         x = np.asarray(get_channel(res, self.channel), dtype=float)
         if self.absolute:
@@ -112,7 +112,7 @@ def check_channels(metrics: list[Metric], system) -> None:
     SweepSpecError
         An unknown channel, with close valid names.
     """
-    from se3dyn.channels import get_channel
+    from se3dyn.results.channels import get_channel
 
     res = _empty_results(system)
     for m in metrics:
@@ -126,7 +126,7 @@ def check_channels(metrics: list[Metric], system) -> None:
 
 def _empty_results(system):
     """One row of zeros on ``system``'s layout: enough to resolve channel names."""
-    from se3dyn.results import Results
+    from se3dyn.results.results import Results
 
     z = np.zeros(1)
     H = np.tile(np.eye(4), (1, system.M, 1, 1))

@@ -55,8 +55,8 @@ class SweepPlan:
 # ---------------------------------------------------------------------------------------------
 def _load_base(model) -> tuple[dict, str]:
     """Model-file data and a label from a path, YAML text, a mapping or a Model."""
-    from se3dyn.model import Model
-    from se3dyn.modelfile import format_model_data, parse_model_data, save_model
+    from se3dyn.io.modelfile import format_model_data, parse_model_data, save_model
+    from se3dyn.model.specs import Model
 
     if isinstance(model, Model):
         return parse_model_data(save_model(model), filename=model.name), model.name
@@ -76,7 +76,7 @@ def _load_base(model) -> tuple[dict, str]:
 
 
 def _apply_overrides(data: dict, overrides: Mapping | None) -> None:
-    from se3dyn.modelfile import FIELDS
+    from se3dyn.io.modelfile import FIELDS
 
     if not overrides:
         return
@@ -101,13 +101,14 @@ def prepare(model, vary, *, method: str = "grid", samples: int | None = None,
 
     Raises
     ------
-    SweepSpecError, se3dyn.modelfile.ModelFileError
+    SweepSpecError, se3dyn.io.modelfile.ModelFileError
         Bad path (listing the valid keys), spec, metric, option or model file.
     """
-    import se3dyn as sd
+    from se3dyn._version import __version__
+    from se3dyn.engine.system import compile_model
     from se3dyn.errors import ModelError
-    from se3dyn.model import Model
-    from se3dyn.modelfile import format_model_data, loads_model
+    from se3dyn.io.modelfile import format_model_data, loads_model
+    from se3dyn.model.specs import Model
 
     if h5 not in H5_MODES:
         raise SweepSpecError("--h5", "h5", "one of " + ", ".join(H5_MODES), h5)
@@ -156,7 +157,7 @@ def prepare(model, vary, *, method: str = "grid", samples: int | None = None,
             raise SweepSpecError(label, f"simulation.{key}", f"a value in the file's "
                                  f"simulation settings or --{key.replace('_', '-')}", None)
     try:
-        system = sd.compile_model(base_model)
+        system = compile_model(base_model)
     except ModelError as exc:
         raise SweepSpecError(label, "model", "a model that compiles", str(exc)) from None
     check_channels(mets, system)
@@ -168,7 +169,7 @@ def prepare(model, vary, *, method: str = "grid", samples: int | None = None,
     if out_path is None:
         h5 = "none"
     definition = {
-        "format": "se3dyn-sweep", "version": 1, "se3dyn": sd.__version__, "model": label,
+        "format": "se3dyn-sweep", "version": 1, "se3dyn": __version__, "model": label,
         "model_sha256": hashlib.sha256(text.encode()).hexdigest(),
         "vary": [[v.path, v.spec.text] for v in variables], "method": method,
         "samples": samples, "seed": seed, "metrics": [m.text for m in mets], "runs": len(runs),
@@ -224,7 +225,7 @@ def _finished(row: dict | None, out: Path, ctx: RunContext, retry_failed: bool) 
 
 def _clean_tmp(runs_dir: Path) -> None:
     """Remove the temporary files of runs that were killed while writing (and the lock files
-    their writers left, ``.lock`` after the name: se3dyn.h5.ResultsWriter)."""
+    their writers left, ``.lock`` after the name: se3dyn.io.h5.ResultsWriter)."""
     if runs_dir.is_dir():
         for p in [*runs_dir.glob(f".*{TMP_SUFFIX}"), *runs_dir.glob(f".*{TMP_SUFFIX}.lock")]:
             try:

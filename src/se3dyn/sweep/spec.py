@@ -194,7 +194,7 @@ def _spec_from_values(values, item: str) -> ValueSpec:
 # ---------------------------------------------------------------------------------------------
 # paths into the model-file data
 def _field_type(section: str, key: str):
-    from se3dyn.modelfile import FIELDS
+    from se3dyn.io.modelfile import FIELDS
 
     for f in FIELDS.get(section, ()):
         if f.name == key:
@@ -204,7 +204,7 @@ def _field_type(section: str, key: str):
 
 def _level_section(ftype) -> tuple[str, str] | None:
     """(kind, section) of the mapping a field type holds: ("named", sec), ("section", sec)."""
-    from se3dyn.modelfile import Named, Section
+    from se3dyn.io.modelfile import Named, Section
 
     if isinstance(ftype, Named):
         return ("named", ftype.section)
@@ -224,11 +224,11 @@ def _keys_text(keys: list[str], wanted: str) -> tuple[str, str]:
 def _walk(data: dict, path: str, item: str, create: bool):
     """Follow ``path`` in ``data``; returns ``(container, key)`` of the addressed field.
 
-    Levels are typed by the model-file format (:data:`se3dyn.modelfile.FIELDS`): a field that
+    Levels are typed by the model-file format (:data:`se3dyn.io.modelfile.FIELDS`): a field that
     the format defines but the file leaves out can be addressed (the last part of the path, or
     an absent section such as ``simulation``, created when ``create``).
     """
-    from se3dyn.modelfile import FIELDS
+    from se3dyn.io.modelfile import FIELDS
 
     if not isinstance(path, str) or not path.strip() or any(not p for p in path.split(".")):
         raise SweepSpecError(item, "path", "keys and indices joined by dots, e.g. "

@@ -1,6 +1,6 @@
 """See the motion: a self-contained 3D viewer page and animated glTF export of results.
 
-An opt-in layer on top of :class:`~se3dyn.results.Results` (the core never imports it):
+An opt-in layer on top of :class:`~se3dyn.results.results.Results` (the core never imports it):
 
 * :func:`write_html` / :func:`html_page`: one HTML file with three.js inlined (nothing is fetched
   when it opens): play/pause, time scrubber, speed, loop, orbit/pan/zoom, node frames, traces of
@@ -19,7 +19,8 @@ Mesh files need ``trimesh`` and glTF export ``pygltflib`` (``pip install 'se3dyn
 
 from __future__ import annotations
 
-from se3dyn.viewer.shapes import Part, Scene, ViewerError, build_scene, equivalent_box
+from se3dyn.viewer.errors import ViewerError
+from se3dyn.viewer.shapes import Part, Scene, build_scene, equivalent_box
 
 __all__ = ["write_html", "html_page", "show", "export_gltf", "build_scene", "Scene", "Part",
            "ViewerError", "equivalent_box", "Viewer"]

@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from se3dyn.viewer.encode import quaternions
-from se3dyn.viewer.shapes import Scene, ViewerError, build_scene, rgb
+from se3dyn.viewer.errors import ViewerError
+from se3dyn.viewer.shapes import Scene, build_scene, rgb
 
 __all__ = ["export_gltf", "unit_solid"]
 
@@ -210,7 +211,7 @@ def export_gltf(res, path, *, model=None, model_path=None, mesh_dirs=(), scene: 
     except ImportError as e:
         raise ViewerError(f"glTF export needs pygltflib and trimesh ({e.name} is missing): pip "
                           "install 'se3dyn[view]'") from None
-    import se3dyn
+    from se3dyn._version import __version__
 
     if scene is None:
         scene = build_scene(res, model, model_path=model_path, mesh_dirs=mesh_dirs)
@@ -219,7 +220,7 @@ def export_gltf(res, path, *, model=None, model_path=None, mesh_dirs=(), scene: 
         raise ViewerError("results: field 't': expected at least one stored time, got none")
     H = np.asarray(res.H, dtype=float)
     M = len(scene.node_names)
-    g = G.GLTF2(asset=G.Asset(version="2.0", generator=f"se3dyn {se3dyn.__version__}"))
+    g = G.GLTF2(asset=G.Asset(version="2.0", generator=f"se3dyn {__version__}"))
     g.scenes, g.nodes, g.meshes, g.materials = [], [], [], []
     g.accessors, g.bufferViews, g.animations, g.skins = [], [], [], []
     buf = _Buffer(g)

@@ -37,7 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from se3dyn.viewer.encode import encode_frames, pack
-from se3dyn.viewer.shapes import ROLES, Scene, ViewerError, build_scene, rgb
+from se3dyn.viewer.errors import ViewerError
+from se3dyn.viewer.shapes import ROLES, Scene, build_scene, rgb
 
 __all__ = ["html_page", "write_html", "page_data", "THREE_VERSION", "STATIC"]
 
@@ -81,9 +82,9 @@ def _json(obj) -> str:
 
 
 def _units(res, names: list[str]) -> list[str]:
-    """Units of channels (as :func:`se3dyn.channels.channel_unit`), the joint units computed
+    """Units of channels (as :func:`se3dyn.results.channels.channel_unit`), the joint units computed
     once for all joint channels."""
-    from se3dyn.channels import channel_unit, joint_units, unescape_name
+    from se3dyn.results.channels import channel_unit, joint_units, unescape_name
 
     s = res.system
     per_dof = joint_units(s)
@@ -109,7 +110,7 @@ def _matcher(patterns):
 
 
 def _channels(res, patterns, budget: int) -> tuple[list[str], list[str], np.ndarray, str]:
-    from se3dyn.channels import get_channel, list_channels
+    from se3dyn.results.channels import get_channel, list_channels
 
     every = list_channels(res)
     is_derived = _matcher(_DERIVED)
@@ -162,7 +163,7 @@ def _channels(res, patterns, budget: int) -> tuple[list[str], list[str], np.ndar
 
 
 def _default_plot(res, scene: Scene, names: list[str], data: np.ndarray) -> str | None:
-    from se3dyn.channels import escape_name
+    from se3dyn.results.channels import escape_name
 
     for k, c in enumerate(names):
         if c.startswith("joint/") and "/alpha/" in c and np.ptp(data[k]) > 0:
@@ -178,7 +179,7 @@ def _default_plot(res, scene: Scene, names: list[str], data: np.ndarray) -> str 
 def page_data(res, scene: Scene, *, channels=None, plot=None,
               channel_budget: int = CHANNEL_BUDGET, title=None) -> tuple[dict, list]:
     """The page's JSON metadata and its data blocks (:class:`~se3dyn.viewer.encode.Blob`)."""
-    import se3dyn
+    from se3dyn._version import __version__
 
     t = np.asarray(res.t, dtype=float)
     n, M = len(t), len(scene.node_names)
@@ -250,7 +251,7 @@ def page_data(res, scene: Scene, *, channels=None, plot=None,
     meta = {
         "format": 1,
         "title": title or (scene.model_name + (f" \u2014 {Path(path).name}" if path else "")),
-        "se3dyn": se3dyn.__version__,
+        "se3dyn": __version__,
         "t": t.tolist(),
         "nodes": list(scene.node_names),
         "fixed": [bool(x) for x in scene.node_fixed],
@@ -281,9 +282,9 @@ def html_page(res, *, model=None, model_path=None, channels=None, plot=None, tra
     blocks = "\n".join(f'<script type="application/octet-stream" {b.attrs()}>{b.text}</script>'
                        for b in blobs)
     page = _static_text("page.html")
-    import se3dyn
+    from se3dyn._version import __version__
 
-    for token, value in (("@@SE3DYN_VERSION@@", html.escape(se3dyn.__version__)),
+    for token, value in (("@@SE3DYN_VERSION@@", html.escape(__version__)),
                          ("@@THREE_VERSION@@", THREE_VERSION),
                          ("@@TITLE@@", html.escape(meta["title"])),
                          ("@@META@@", _json(meta)), ("@@BLOBS@@", blocks),
@@ -298,7 +299,7 @@ def write_html(res, path, **kwargs) -> Path:
     Parameters
     ----------
     res : Results
-        In memory, or read with :func:`se3dyn.h5.read_results`.
+        In memory, or read with :func:`se3dyn.io.h5.read_results`.
     path : path
         The HTML file to write.
     model : Model, optional

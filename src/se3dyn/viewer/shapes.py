@@ -253,7 +253,7 @@ def beam_section(stiffness: np.ndarray) -> tuple[float, float]:
     Parameters
     ----------
     stiffness : ndarray, shape (6, 6)
-        Section stiffness (translation first), :attr:`se3dyn.model.BeamSpec.stiffness`.
+        Section stiffness (translation first), :attr:`se3dyn.model.specs.BeamSpec.stiffness`.
 
     Returns
     -------
@@ -360,7 +360,7 @@ def _frame(R: np.ndarray | None = None, p: np.ndarray | None = None) -> np.ndarr
 
 def _axis_frame(p: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """Pose whose z axis is ``axis`` (unit) and origin ``p``."""
-    from se3dyn.visuals import axis_rotation
+    from se3dyn.model.visuals import axis_rotation
 
     return _frame(axis_rotation(axis), p)
 
@@ -371,7 +371,7 @@ def _hexrgb(color: str) -> tuple[int, int, int]:
 
 # ---------------------------------------------------------------------------------------------
 def resolve_model(res, model=None, model_path: str | os.PathLike | None = None):
-    """The :class:`~se3dyn.model.Model` to draw ``res`` with, or None.
+    """The :class:`~se3dyn.model.specs.Model` to draw ``res`` with, or None.
 
     Order: ``model`` given; a model file ``model_path``; the model of an in-memory result
     (``res.system.model``); the model text stored in a results file (``res.stats["model"]``).
@@ -382,7 +382,7 @@ def resolve_model(res, model=None, model_path: str | os.PathLike | None = None):
     explicit = model is not None or model_path is not None
     if model is None and model_path is not None:
         from se3dyn.errors import ModelError
-        from se3dyn.modelfile import load_model
+        from se3dyn.io.modelfile import load_model
 
         try:
             model, _ = load_model(Path(model_path))
@@ -394,7 +394,7 @@ def resolve_model(res, model=None, model_path: str | os.PathLike | None = None):
         text = (res.stats or {}).get("model") or ""
         if text.strip():
             from se3dyn.errors import ModelError
-            from se3dyn.modelfile import loads_model
+            from se3dyn.io.modelfile import loads_model
 
             try:
                 model, _ = loads_model(text, filename="<model stored in the results file>")
@@ -420,7 +420,7 @@ def build_scene(res, model=None, *, model_path=None, mesh_dirs=(), traces=None) 
     Parameters
     ----------
     res : Results
-        In memory or read from a file (:func:`se3dyn.h5.read_results`).
+        In memory or read from a file (:func:`se3dyn.io.h5.read_results`).
     model : Model, optional
         The model to draw (default: see :func:`resolve_model`).
     model_path : path, optional

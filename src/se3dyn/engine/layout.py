@@ -1,5 +1,5 @@
 """One assembler for every element type: the numbering of frames, the fixed block pattern built
-from the elements' dof maps, and the tables of the compiled engine (:mod:`se3dyn._engine`).
+from the elements' dof maps, and the tables of the compiled engine (:mod:`se3dyn._core._engine`).
 
 Every configuration variable is a *frame* (Eq. (12)): frames ``0..M-1`` are the nodes, frames
 ``M..M+m-1`` the joint transformations. Frame f has ``k_f`` unknowns (6 for a free node, 0 for
@@ -69,7 +69,7 @@ class Layout:
     Attributes
     ----------
     tables : dict
-        What :class:`se3dyn._engine.Engine` is built from: frame arrays, ``elements`` (list of
+        What :class:`se3dyn._core._engine.Engine` is built from: frame arrays, ``elements`` (list of
         (type key, arrays)), ``velprod``/``xiprod`` and the log-coordinate tables.
     nvals, nvals2 : int
         Number of values of the index-3 matrix and of the stabilized index-2 matrix.
@@ -392,7 +392,7 @@ class Layout:
         ``indices`` (nnz,) (int32, rows increasing in every column) and ``perm`` (nvals,): the
         position of every value in it (blocks do not overlap: nnz = nvals), by the compiled
         ``block_csc`` (``_core/block_pattern.hpp``, which the stepper uses too)."""
-        from se3dyn.system import _core
+        from se3dyn.engine.compiled import compiled
 
         s = self.s
         N = s.nq + (2 * s.nm if index2 else s.nm)
@@ -400,7 +400,7 @@ class Layout:
         indptr = np.empty(N + 1, np.int32)
         indices = np.empty(nv, np.int32)
         src = np.empty(nv, np.int64)  # the value of every entry
-        _core().block_csc(N, self.block_table(index2), nv, indptr, indices, src)
+        compiled().block_csc(N, self.block_table(index2), nv, indptr, indices, src)
         perm = np.empty(nv, np.int64)
         perm[src] = np.arange(nv, dtype=np.int64)
         return indptr, indices, perm

@@ -44,7 +44,7 @@ def _err(msg: str) -> None:
 # ---------------------------------------------------------------------------------------------
 def _load(path: str):
     from se3dyn.errors import ModelError
-    from se3dyn.modelfile import load_model
+    from se3dyn.io.modelfile import load_model
 
     if not Path(path).is_file():
         raise _Usage(f"{path}: no such model file")
@@ -56,14 +56,14 @@ def _load(path: str):
 
 def _loaded() -> None:
     """The modules of the command are loaded: the garbage collector, paused while they loaded
-    (the ``se3dyn`` command only, ``se3dyn._command_startup``), resumes, their objects frozen
+    (the ``se3dyn`` command only, :mod:`se3dyn.cli.startup`), resumes, their objects frozen
     first (``gc.freeze``: they live as long as the process, no collection walks them again)."""
-    import se3dyn
+    from se3dyn.cli import startup
 
-    if se3dyn._GC_PAUSED:
+    if startup.GC_PAUSED:
         import gc
 
-        se3dyn._GC_PAUSED = False
+        startup.GC_PAUSED = False
         gc.freeze()
         gc.enable()
 
@@ -83,19 +83,19 @@ def cmd_check(args) -> int:
 
 
 def _check_one(path: str, rank_max: int) -> None:
-    import se3dyn as sd
-    from se3dyn.analysis import rank_analysis
+    from se3dyn.engine.rank import rank_analysis
+    from se3dyn.engine.system import compile_model
     from se3dyn.errors import ModelError
 
     model, settings = _load(path)
     try:
-        s = sd.compile_model(model)
+        s = compile_model(model)
     except ModelError as exc:
         raise _Usage(f"{path}: {exc}") from None
     n_free = int(np.sum(~s.node_fixed))
     bodies = int(np.sum(s.node_mass > 0))
     print(f"{path}: ok")
-    from se3dyn.analysis import off_axis_joints
+    from se3dyn.model.checks import off_axis_joints
 
     for line in off_axis_joints(model):
         print(f"  WARNING: {line}")
@@ -108,7 +108,7 @@ def _check_one(path: str, rank_max: int) -> None:
     print(f"  length scale (SI units: m, kg, s): the nodes span {np.linalg.norm(box):.4g} m "
           f"(box {' x '.join(f'{b:.3g}' for b in box)} m)"
           + (f", masses {m.min():.3g} to {m.max():.3g} kg" if m.size else ""))
-    from se3dyn.modelfile import ELEMENT_SECTIONS
+    from se3dyn.io.modelfile import ELEMENT_SECTIONS
 
     others = [f"{len(getattr(model, es.key))} {es.key}" for es in ELEMENT_SECTIONS
               if es.key not in ("joints", "loads", "beams") and getattr(model, es.key, ())]
@@ -143,7 +143,7 @@ def _check_one(path: str, rank_max: int) -> None:
                                 subsequent_indent="    "))
         else:
             print("  no redundant constraints")
-        from se3dyn.analysis import massless_message, massless_motions
+        from se3dyn.engine.rank import massless_message, massless_motions
 
         free = massless_motions(s)
         if free:
@@ -165,9 +165,9 @@ def _check_start(path: str, s, settings: dict) -> None:
     """What `run` would refuse at t = 0: the settings, the initial accelerations (a singular
     iteration matrix) and, with initial_velocities 'strict', inconsistent velocities; and
     the initial velocities that would be projected."""
+    from se3dyn.dynamics.integrator import GeneralizedAlpha, initial_velocity_changes
+    from se3dyn.dynamics.run import check_settings
     from se3dyn.errors import ModelError, SimulationError
-    from se3dyn.integrator import GeneralizedAlpha, initial_velocity_changes
-    from se3dyn.simulate import check_settings
 
     if "t_end" in settings and "step" in settings:
         try:
@@ -263,10 +263,12 @@ def cmd_run(args) -> int:
     """Simulate a model file, stream the results to an HDF5 file, print a summary."""
     import warnings
 
-    import se3dyn as sd
-    from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
-    from se3dyn.h5 import ResultsFileError, ResultsWriter
-    from se3dyn.threads import from_environment
+    from se3dyn._version import __version__
+    from se3dyn.dynamics.run import simulate
+    from se3dyn.engine.system import compile_model
+    from se3dyn.engine.threads import from_environment, set_threads
+    from se3dyn.errors import ModelError, Se3dynError, Se3dynWarning, SimulationError
+    from se3dyn.io.h5 import ResultsFileError, ResultsWriter
 
     # --quiet: no summary; what was changed (initial velocities) or looks wrong goes to stderr
     say = print if not args.quiet else (lambda *a, **k: None)
@@ -276,14 +278,14 @@ def cmd_run(args) -> int:
     else:
         try:  # --threads replaces SE3DYN_THREADS; a bad one is said, not passed over in silence
             from_environment()
-        except sd.Se3dynError as exc:
+        except Se3dynError as exc:
             print(f"se3dyn: warning: {exc}; ignored: --threads {args.threads} given",
                   file=sys.stderr)
-        sd.set_threads(args.threads)
+        set_threads(args.threads)
     model, settings = _load(args.model)
     text = Path(args.model).read_text(encoding="utf-8")  # stored as metadata, as given
     try:
-        s = sd.compile_model(model)
+        s = compile_model(model)
     except ModelError as exc:
         raise _Usage(f"{args.model}: {exc}") from None
     if args.resume is not None:
@@ -319,9 +321,9 @@ def cmd_run(args) -> int:
     quiet = args.quiet or not sys.stderr.isatty()
     t_from = cp.state.t if cp is not None else float(cfg.get("t_start", 0.0))
     prog = _Progress(t_from, float(cfg["t_end"]), not quiet, cp.steps if cp is not None else 0)
-    say(f"se3dyn {sd.__version__}: {args.model} -> {path}"
+    say(f"se3dyn {__version__}: {args.model} -> {path}"
           + (f" (resumed at t = {cp.state.t:g} s)" if cp is not None else ""))
-    from se3dyn.analysis import off_axis_joints
+    from se3dyn.model.checks import off_axis_joints
 
     for line in off_axis_joints(model):
         print(f"se3dyn: warning: {line}", file=sys.stderr)
@@ -347,10 +349,10 @@ def cmd_run(args) -> int:
                 with warnings.catch_warnings():  # (the summary below reports them)
                     warnings.simplefilter("ignore", Se3dynWarning)
                     if bound:  # a run may be repeated: its rows are written when it is done
-                        res = sd.simulate(s, progress=progress, initial_state=cp, **cfg)
+                        res = simulate(s, progress=progress, initial_state=cp, **cfg)
                         writer.add_rows(res, None)
                     else:
-                        res = sd.simulate(s, progress=progress, on_rows=writer.add_rows,
+                        res = simulate(s, progress=progress, on_rows=writer.add_rows,
                                           store=False, initial_state=cp, **cfg)
             finally:
                 _DEFER[0] = False
@@ -422,7 +424,7 @@ def _resume(args, s, text: str):
     import json
     import os
 
-    from se3dyn.h5 import ResultsFileError, ResultsWriter, _check_format, _layout, _open, repair
+    from se3dyn.io.h5 import ResultsFileError, ResultsWriter, _check_format, _layout, _open, repair
 
     path = Path(args.resume)
     other = [k for k in _OVERRIDES if k != "t_end" and getattr(args, k) is not None]
@@ -490,7 +492,7 @@ def cmd_sweep(args) -> int:
 
 # ---------------------------------------------------------------------------------------------
 def _read(path: str):
-    from se3dyn.h5 import read_results
+    from se3dyn.io.h5 import read_results
 
     if not Path(path).is_file():
         raise _Usage(f"{path}: no such results file")
@@ -515,7 +517,7 @@ def _channels(res, names: list[str]) -> list[tuple[str, np.ndarray]]:
     (e.g. ``node/6/displacement/[xyz]``)."""
     import fnmatch
 
-    from se3dyn.channels import get_channel, list_channels
+    from se3dyn.results.channels import get_channel, list_channels
 
     expanded: list[str] = []
     for name in names:
@@ -537,7 +539,7 @@ def _channels(res, names: list[str]) -> list[tuple[str, np.ndarray]]:
 
 def cmd_channels(args) -> int:
     """List the channels of a results file."""
-    from se3dyn.channels import list_channels
+    from se3dyn.results.channels import list_channels
 
     res = _read(args.results)
     for name in list_channels(res):
@@ -548,7 +550,7 @@ def cmd_channels(args) -> int:
 def cmd_info(args) -> int:
     """What a results file holds: its status (complete, failed, interrupted, cut short), the
     model, the settings and the statistics of the run."""
-    from se3dyn.h5 import _writer_alive
+    from se3dyn.io.h5 import _writer_alive
 
     res = _read(args.results)
     st = res.stats
@@ -591,7 +593,7 @@ def cmd_info(args) -> int:
     if have:
         print("  statistics: " + ", ".join(have))
     if len(res.t) > 1:
-        from se3dyn.simulate import energy_jump, energy_rows
+        from se3dyn.dynamics.run import energy_jump, energy_rows
 
         st = dict(st, energy_jump=energy_jump(res.t, energy_rows(res)))
     for line in run_report(st):
@@ -603,8 +605,8 @@ def cmd_info(args) -> int:
 
 def cmd_types(args) -> int:
     """The joint types and element types with their model-file fields."""
-    from se3dyn.joints import JOINT_SYNONYMS, JOINT_TYPES
-    from se3dyn.modelfile import ELEMENT_SECTIONS
+    from se3dyn.io.modelfile import ELEMENT_SECTIONS
+    from se3dyn.model.joint_types import JOINT_SYNONYMS, JOINT_TYPES
 
     print("joint types (joints: type):")
     for key in sorted([*JOINT_TYPES, "universal"]):
@@ -627,7 +629,7 @@ def cmd_types(args) -> int:
 def cmd_plot(args) -> int:
     """Plot channels of a results file against time into a PNG (or PDF/SVG): one panel per
     unit, curves that stay visible when they coincide, the legend beside the data."""
-    from se3dyn.channels import channel_unit
+    from se3dyn.results.channels import channel_unit
 
     res = _read(args.results)
     data = _channels(res, args.channels)
@@ -698,7 +700,7 @@ def _figure_path(output: str | None, default: Path) -> Path:
 def cmd_export(args) -> int:
     """Export channels of a results file to CSV (header: time and channel names with their
     units, ``name [unit]``), or the animation to glTF (se3dyn.viewer)."""
-    from se3dyn.channels import list_channels
+    from se3dyn.results.channels import list_channels
 
     res = _read(args.results)
     if args.gltf is not None:
@@ -707,7 +709,7 @@ def cmd_export(args) -> int:
         path = _viewer("export_gltf", res, args.gltf)
         print(f"wrote {path}: {len(res.t)} times, t = {res.t[0]:g} ... {res.t[-1]:g} s")
         return 0
-    from se3dyn.channels import channel_unit
+    from se3dyn.results.channels import channel_unit
 
     names = args.channels or [n for n in list_channels(res) if n != "time"]  # time: column 1
     data = _channels(res, names)
@@ -779,9 +781,9 @@ def _positive(kind):
 
 
 def _threads(text):
-    """The value of --threads (se3dyn.threads' own check)."""
+    """The value of --threads (se3dyn.engine.threads' own check)."""
+    from se3dyn.engine.threads import _check
     from se3dyn.errors import Se3dynError
-    from se3dyn.threads import _check
 
     try:
         return _check(text, "--threads")
@@ -795,8 +797,8 @@ _OVERRIDES = ("t_end", "step", "rho_inf", "formulation", "tol", "output_step",
 
 def _energy_jump_in(path, stats: dict) -> dict:
     """``{"energy_jump": ...}`` from the energies stored in a results file when the energy
-    balance warning fires (:func:`se3dyn.simulate.energy_jump`), else nothing."""
-    from se3dyn.simulate import SCALARS, energy_jump, energy_warning
+    balance warning fires (:func:`se3dyn.dynamics.run.energy_jump`), else nothing."""
+    from se3dyn.dynamics.run import SCALARS, energy_jump, energy_warning
 
     if "energy_jump" in stats or not energy_warning(stats.get("energy_balance_error", 0.0),
                                                     stats.get("energy_scale", 0.0)):
@@ -854,7 +856,7 @@ def run_report(stats: dict) -> list[str]:
         out.append(f"global error estimated until t = {stats['global_error_until']:.9g} s "
                    f"only (its companion run stopped: {stats.get('global_error_failure', '')})")
     if "energy_balance_error" in stats:
-        from se3dyn.simulate import energy_cause, energy_warning
+        from se3dyn.dynamics.run import energy_cause, energy_warning
 
         err, scale = stats["energy_balance_error"], stats["energy_scale"]
         rel = f"{100 * err / scale:.3g} % of" if scale > 0 else "with no"
@@ -1000,7 +1002,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     arguments are declared (every subcommand is still listed with its help, all that
     ``se3dyn --help`` and a misspelt command need): declaring them all cost ``se3dyn run``
     some 5 ms of its start-up."""
-    from se3dyn import __version__
+    from se3dyn._version import __version__
 
     p = _Parser(prog="se3dyn", description="Multibody dynamics on SE(3).")
     p.add_argument("--version", action="version", version=f"se3dyn {__version__}")

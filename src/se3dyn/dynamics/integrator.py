@@ -19,42 +19,24 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from se3dyn import lie
+from se3dyn.dynamics.state import State, StepInfo
+from se3dyn.engine.evaluate import evaluate
+from se3dyn.engine.inputs import step_inputs
+from se3dyn.engine.linsolve import LinearSolver
 from se3dyn.errors import ModelError, NewtonError, SimulationError
-from se3dyn.system import LinearSolver, System, evaluate, input_table, step_inputs
 
-__all__ = ["State", "SolverMemory", "StepInfo", "GeneralizedAlpha", "step_inputs",
-           "input_table", "energies", "interpolate", "initial_velocity_changes"]
+if TYPE_CHECKING:
+    from se3dyn.engine.system import System
+
 
 #: modified Newton: refactorise when more than KMAX further iterations are predicted (a
 #: factorisation costs about five iterations on the benchmark models; 5-12 perform alike)
 KMAX = 8.0
-
-
-@dataclass(frozen=True, eq=False)
-class SolverMemory:
-    """What the linear solver of the Newton iterations carries from a step to the next, so that
-    a restart from a :class:`State`, in this process or another, continues bit for bit
-    (``se3dyn/_core/newton.hpp``).
-
-    Attributes
-    ----------
-    ref : ndarray (nv,)
-        Values of the iteration matrix (in the engine's value order; dropped equations as
-        identity rows and columns) of the last full sparse LU factorisation, whose pivot
-        sequence the refactorisations of the following steps reuse; for the index-2 form one
-        more entry, the mode of the iteration (0: the split matrix, 1: the full one; see
-        ``se3dyn/_core/newton.hpp``). Read-only: the stepper and the States holding it share
-        one array.
-    """
-
-    ref: np.ndarray
-
-    def __post_init__(self):
-        self.ref.flags.writeable = False
 
 
 #: Largest number of unknowns for which a singular start is diagnosed (a dense SVD, as check's).
@@ -63,10 +45,10 @@ DIAGNOSE_MAX = 3000
 
 def _singular_start_cause(s: System) -> str:
     """Why the initial acceleration matrix is singular: the motions with no mass found by
-    :func:`se3dyn.analysis.massless_motions` (the diagnosis of ``se3dyn check``), else the
+    :func:`se3dyn.engine.rank.massless_motions` (the diagnosis of ``se3dyn check``), else the
     typical causes."""
     if s.nq <= DIAGNOSE_MAX:
-        from se3dyn.analysis import massless_message, massless_motions
+        from se3dyn.engine.rank import massless_message, massless_motions
 
         try:
             free = massless_motions(s)
@@ -119,7 +101,7 @@ def initial_velocity_changes(s: System, st: State) -> list[dict]:
 
 def _ws(s: System, ws=None):
     """The workspace ``ws`` or the system's default one."""
-    from se3dyn.system import workspace
+    from se3dyn.engine.workspace import workspace
 
     return ws or workspace(s)
 
@@ -127,76 +109,8 @@ def _ws(s: System, ws=None):
 def _stepper(s: System, index2: bool, dropped: np.ndarray, ws=None, keep: bool = True,
              split: bool = True):
     """The compiled Newton stepper of a workspace (the system's default one); ``split``
-    (modified Newton): see :meth:`se3dyn.system.Workspace.stepper`."""
+    (modified Newton): see :meth:`se3dyn.engine.workspace.Workspace.stepper`."""
     return _ws(s, ws).stepper(index2, dropped, keep, split)
-
-
-@dataclass(frozen=True)
-class State:
-    """Exactly what integration needs, so a restart from a State is bit-exact; immutable (a
-    frozen dataclass whose arrays are read-only: ``dataclasses.replace`` makes a new one).
-
-    Attributes
-    ----------
-    t : float
-    H : ndarray (M, 4, 4)      node frames
-    HJ : ndarray (m, 4, 4)     joint transformations
-    v, vd, a : ndarray (nq,)   velocities, accelerations, generalized-alpha variable a (Eq. (43))
-    lam : ndarray (nm,)        multipliers
-    alpha : ndarray (nq,)      relative coordinates on joint unknowns (Eq. (60)); 0 on nodes
-    work_act, work_ext, dissipated : float
-        Accumulated actuator work (incl. PD laws), work of external loads, damper dissipation.
-    power : ndarray (3,)       (actuator, external, dissipation) powers at t (trapezoidal rule)
-    dropped : ndarray (nr,)    redundant constraint equations left out (multiplier indices);
-                               their multipliers stay zero (see :func:`GeneralizedAlpha.init`)
-    h_last : float             size of the step that produced this state (0 initially)
-    solver : SolverMemory or None
-        The linear solver's memory after the step that produced this state; None: the model's
-        own (the pivot sequence of its generic matrix, which a new workspace starts with)
-    """
-
-    t: float
-    H: np.ndarray
-    HJ: np.ndarray
-    v: np.ndarray
-    vd: np.ndarray
-    a: np.ndarray
-    lam: np.ndarray
-    alpha: np.ndarray
-    work_act: float = 0.0
-    work_ext: float = 0.0
-    dissipated: float = 0.0
-    power: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
-    dropped: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
-    h_last: float = 0.0
-    solver: SolverMemory | None = None
-
-    def __post_init__(self):
-        for f in dataclasses.fields(self):
-            x = getattr(self, f.name)
-            if isinstance(x, np.ndarray):
-                x.flags.writeable = False
-
-    def copy(self) -> State:
-        """A State with writeable copies of the arrays (not shared with this one)."""
-        return dataclasses.replace(self, **{f.name: np.copy(getattr(self, f.name))
-                                            for f in dataclasses.fields(self)
-                                            if isinstance(getattr(self, f.name), np.ndarray)})
-
-
-@dataclass(frozen=True)
-class StepInfo:
-    """Outcome of one step: Newton iterations, final scaled residual and constraint norms, the
-    energies of the new state (see :func:`energies`), the converged increment ``n`` (nq,) of
-    Eq. (41) and the local error estimate ``error`` (nq,) of the positions (see
-    :meth:`GeneralizedAlpha.step`)."""
-
-    iterations: int
-    residual: float
-    constraint: float
-    energies: dict | None = None
-    increment: np.ndarray | None = None
-    error: np.ndarray | None = None
 
 
 def energies(s: System, st: State, inputs: dict, ws=None) -> dict:
@@ -244,7 +158,7 @@ class GeneralizedAlpha:
         stay bounded for ``rho_inf = 1``. ``"index3"``: the paper's Eqs. (38)-(46) as written.
     redundant : {"drop", "error"}
         What to do with redundant constraint equations found at the initial configuration
-        (:func:`se3dyn.analysis.redundant_equations`): leave them out with zero multipliers
+        (:func:`se3dyn.engine.rank.redundant_equations`): leave them out with zero multipliers
         (default) or raise :class:`ModelError` naming them.
     engine : {"auto", "compiled", "numpy"}
         Kept for compatibility: every evaluation and Newton iteration runs in the compiled
@@ -335,11 +249,11 @@ class GeneralizedAlpha:
         constraints, consistent accelerations and multipliers at t0 (Eqs. (36)-(37)).
 
         Redundant constraint equations are found first by rank analysis of the loop joints
-        (:func:`se3dyn.analysis.redundant_equations`) and left out (``State.dropped``), so
+        (:func:`se3dyn.engine.rank.redundant_equations`) and left out (``State.dropped``), so
         overconstrained mechanisms simulate with well-defined multipliers: those of the left-out
         equations are zero, the others unique. ``solver`` is accepted for compatibility and
         not used (the initial solve needs the index-3 layout)."""
-        from se3dyn.analysis import equation_name, redundant_equations
+        from se3dyn.engine.rank import equation_name, redundant_equations
 
         nq, nm = s.nq, s.nm
         dropped = redundant_equations(s) if nm else np.zeros(0, np.int64)
@@ -393,11 +307,11 @@ class GeneralizedAlpha:
     def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,
                           v0: np.ndarray) -> np.ndarray:
         """Velocities satisfying the velocity constraints ``Phi_q v = 0`` with the given speeds
-        kept (:func:`se3dyn.kinematics.project_velocities`; the redundant equations
+        kept (:func:`se3dyn.engine.projection.project_velocities`; the redundant equations
         ``solver.drop`` left out); the changes are reported by the caller per node."""
         import scipy.sparse as sp
 
-        from se3dyn.kinematics import project_velocities
+        from se3dyn.engine.projection import project_velocities
 
         A = solver.matrix(values)
         A = sp.csr_matrix(A) if sp.issparse(A) else A
@@ -416,7 +330,7 @@ class GeneralizedAlpha:
         ``dv = gamma' dm``, ``dvd = beta' dm``. Rows: dynamics / beta' (Eq. (39)), constraints
         (Eq. (40)) and, for index 2, velocity constraints / gamma'; all O(1) whatever h.
         ``solver`` is accepted for compatibility and not used; ``ws`` is the
-        :class:`~se3dyn.system.Workspace` of the run (the system's default one otherwise).
+        :class:`~se3dyn.engine.workspace.Workspace` of the run (the system's default one otherwise).
         """
         am, af, g, b = self.params
         t1 = st.t + h

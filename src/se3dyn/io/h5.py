@@ -4,7 +4,7 @@ The layout is described field by field in ``docs/results-file.md``. This module 
 the core package never imports it (``import se3dyn`` works without h5py).
 
 >>> import se3dyn as sd
->>> from se3dyn.h5 import ResultsWriter, read_results
+>>> from se3dyn.io.h5 import ResultsWriter, read_results
 >>> model = sd.examples.slider_crank()
 >>> with ResultsWriter("out.h5", sd.compile_model(model)) as w:     # doctest: +SKIP
 ...     res = sd.simulate(model, 5.0, 1e-2, on_rows=w.add_rows, store=False)
@@ -24,7 +24,9 @@ last flush (``complete`` is then False), flagged as still open for writing. :fun
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
+import functools
 import json
 import os
 import time
@@ -35,10 +37,10 @@ from typing import Any
 import h5py
 import numpy as np
 
-from se3dyn.channels import joint_units
+from se3dyn.engine.system import LayoutCounts, compile_model
 from se3dyn.errors import Se3dynError, _short_repr
-from se3dyn.results import Results
-from se3dyn.system import LayoutCounts
+from se3dyn.results.channels import joint_units
+from se3dyn.results.results import Results
 
 __all__ = ["ResultsWriter", "read_results", "repair", "ResultsLayout", "ResultsFileError",
            "FORMAT", "FORMAT_VERSION", "ENERGIES", "SOLVER"]
@@ -47,7 +49,7 @@ __all__ = ["ResultsWriter", "read_results", "repair", "ResultsLayout", "ResultsF
 FORMAT = "se3dyn-results"
 #: Value of the root attribute ``format_version`` written by this version; newer ones are refused.
 FORMAT_VERSION = 1
-#: Datasets of the ``/energy`` group (J), in the order of ``se3dyn.simulate.SCALARS``.
+#: Datasets of the ``/energy`` group (J), in the order of ``se3dyn.dynamics.run.SCALARS``.
 ENERGIES = ("kinetic", "potential", "spring", "work_actuators", "work_loads", "dissipation")
 #: Datasets of the ``/solver`` group.
 SOLVER = ("iterations", "residual", "constraint")
@@ -65,11 +67,11 @@ class ResultsFileError(Se3dynError, ValueError):
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class ResultsLayout(LayoutCounts):
-    """The layout attributes of a :class:`~se3dyn.system.System` that :class:`Results` needs,
+    """The layout attributes of a :class:`~se3dyn.engine.system.System` that :class:`Results` needs,
     read from ``/layout`` (no model compilation).
 
     ``joint_units`` holds, per joint unknown (nk,), ``"rad"`` for a rotation coordinate and
-    ``"m"`` for a translation (used by :func:`se3dyn.channels.channel_unit`).
+    ``"m"`` for a translation (used by :func:`se3dyn.results.channels.channel_unit`).
     """
 
     node_names: tuple[str, ...]
@@ -85,10 +87,30 @@ class ResultsLayout(LayoutCounts):
     composites: dict = field(default_factory=dict)
     nq: int = 0
     nm: int = 0
+    model_text: str = ""  # the model file stored with the results (``stats["model"]``)
 
     @property
     def nk(self) -> int:
         return int(np.sum(self.joint_k))
+
+    @functools.cached_property
+    def beam_system(self):
+        """The compiled system of the stored model when it has beams and its nodes and unknowns
+        match this layout, else None (compiled once; the beam channels of
+        :mod:`se3dyn.results.channels` are the element's
+        :func:`~se3dyn.elements.beam.section_forces` of the stored motion)."""
+        if "beams:" not in self.model_text:
+            return None
+        from se3dyn.io.modelfile import loads_model
+
+        try:
+            cand = compile_model(loads_model(self.model_text)[0])
+        except Exception:  # noqa: BLE001 - a model text that does not load: no beam channels
+            return None
+        if (tuple(cand.node_names) == tuple(self.node_names) and int(cand.nq) == int(self.nq)
+                and len(getattr(cand, "beams", ()))):
+            return cand
+        return None
 
 
 def _joint_columns(system) -> tuple[np.ndarray, np.ndarray]:
@@ -116,7 +138,7 @@ class ResultsWriter:
     system : System or Model
         The compiled system (a Model is compiled here) that is simulated.
     model_text : str, optional
-        The YAML model text to store; by default ``se3dyn.modelfile.save_model(system.model)``,
+        The YAML model text to store; by default ``se3dyn.io.modelfile.save_model(system.model)``,
         or ``""`` when the model holds Python callables and cannot be saved.
     settings : dict, optional
         Simulation settings, stored as JSON in the root attribute ``settings``.
@@ -137,8 +159,8 @@ class ResultsWriter:
     def __init__(self, path: str | os.PathLike, system, *, model_text: str | None = None,
                  settings: dict | None = None, flush_interval: float = 1.0,
                  overwrite: bool = True, _resume: bool = False):
-        from se3dyn.model import Model
-        from se3dyn.system import compile_model
+        from se3dyn.engine.system import compile_model
+        from se3dyn.model.specs import Model
 
         if isinstance(system, Model):
             system = compile_model(system)
@@ -191,7 +213,7 @@ class ResultsWriter:
                 model = getattr(s, "model", None)
                 if model is not None:
                     from se3dyn.errors import ModelError
-                    from se3dyn.modelfile import save_model
+                    from se3dyn.io.modelfile import save_model
                     try:
                         model_text = save_model(model)
                     except ModelError:
@@ -215,7 +237,7 @@ class ResultsWriter:
                flush_interval: float = 1.0) -> ResultsWriter:
         """Reopen a results file (complete, failed or left by a killed run) to continue its
         run: the file is locked and repaired if needed, the rows after its last checkpoint are
-        dropped, and ``writer.checkpoint`` is the :class:`~se3dyn.simulate.Checkpoint` to give
+        dropped, and ``writer.checkpoint`` is the :class:`~se3dyn.dynamics.run.Checkpoint` to give
         ``simulate(..., initial_state=writer.checkpoint, on_rows=writer.add_rows)`` (whose first
         row, the checkpoint's own, is not written again).
 
@@ -228,7 +250,7 @@ class ResultsWriter:
         return cls(path, system, flush_interval=flush_interval, _resume=True)
 
     def _reopen(self, s) -> h5py.File:
-        from se3dyn.simulate import Checkpoint
+        from se3dyn.dynamics.run import Checkpoint
 
         path = self.path
         if not os.path.isfile(path):
@@ -287,11 +309,11 @@ class ResultsWriter:
 
     # -----------------------------------------------------------------------------------------
     def _create(self, f, s, k, cols, model_text, settings):
-        import se3dyn
+        from se3dyn._version import __version__
 
         f.attrs["format"] = FORMAT
         f.attrs["format_version"] = FORMAT_VERSION
-        f.attrs["se3dyn_version"] = se3dyn.__version__
+        f.attrs["se3dyn_version"] = __version__
         f.attrs["created"] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
         f.attrs["model"] = model_text
         f.attrs["settings"] = json.dumps(settings or {}, default=str, sort_keys=True)
@@ -477,10 +499,10 @@ class ResultsWriter:
 
     def energy_balance(self, chunk: int = 1 << 16) -> tuple[float, float]:
         """(largest energy balance drift, energy in play) over every row of the file, from
-        its first row (:func:`se3dyn.simulate.energy_balance_check`): a resumed run is
+        its first row (:func:`se3dyn.dynamics.run.energy_balance_check`): a resumed run is
         measured as the one run it continues, not from the row it resumed at. The buffered
         rows are written first; the file is read ``chunk`` rows at a time."""
-        from se3dyn.simulate import _balance_and_scale
+        from se3dyn.dynamics.run import _balance_and_scale
 
         self.flush()
         n = self.rows
@@ -587,7 +609,7 @@ def _read_checkpoint(f: h5py.File, s):
     newton_iterations, rejected, h_next), sequence), or None. A slot half written when the
     writer was killed fails its CRC, and one whose rows did not reach the disk is passed
     over: the other one is used."""
-    from se3dyn.integrator import State
+    from se3dyn.dynamics.state import State
 
     present = min(f[name].shape[0] for name in _SERIES)
     slots = f["restart/state"][()]
@@ -631,7 +653,7 @@ def _read_checkpoint(f: h5py.File, s):
     lam, alpha = take(nm), take(nq)
     extra = {}
     if memory is not None:
-        from se3dyn.integrator import SolverMemory
+        from se3dyn.engine.memory import SolverMemory
 
         extra["solver"] = SolverMemory(ref=memory)
     st = State(t=float(t), H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
@@ -910,7 +932,7 @@ def _str(x) -> str:
 
 
 def read_results(path: str | os.PathLike) -> Results:
-    """Load a results file into a :class:`~se3dyn.results.Results`.
+    """Load a results file into a :class:`~se3dyn.results.results.Results`.
 
     Its ``system`` is a :class:`ResultsLayout` built from ``/layout``; every accessor works as on
     the in-memory results. ``stats`` holds the ``/stats`` attributes plus ``complete`` (False for
@@ -1098,6 +1120,7 @@ def _read(f: h5py.File, path: str) -> Results:
     stats["created"] = _str(f.attrs.get("created", ""))
     stats["path"] = path
     e = {name: d[f"energy/{name}"] for name in ENERGIES}
+    lay = dataclasses.replace(lay, model_text=stats["model"])
     return Results(system=lay, t=d["time"], H=H, v=v, vd=vd, lam=d["joints/multipliers"],
                    alpha=alpha, iterations=d["solver/iterations"].astype(int),
                    residual=d["solver/residual"], constraint=d["solver/constraint"],

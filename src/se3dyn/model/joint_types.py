@@ -2,7 +2,7 @@
 
 A joint type is registered once, under a type key, with the parameters it takes and a function that
 returns its matrix A (columns ``(e_U, e_Omega)``, axes in the inertial frame of the initial
-configuration, Sec. 5.2). The generic kernel in :mod:`se3dyn.assembly` does everything else
+configuration, Sec. 5.2). The generic kernel in :mod:`se3dyn.engine.layout` does everything else
 (Eqs. (55)-(59)); nothing else needs editing to add a joint.
 
 Built-in types: ``rigid`` (k=0), ``hinge``, ``prismatic``, ``screw`` (k=1), ``cylindrical`` (k=2),

@@ -54,7 +54,7 @@ import math
 import numpy as np
 
 from se3dyn import lie
-from se3dyn.model import Model
+from se3dyn.model.specs import Model
 
 __all__ = ["Condensation", "condensation"]
 
@@ -153,8 +153,8 @@ class Condensation:
         """The reduced state of a state of the full system (exact copies of the roots'
         values), or None when a dropped (redundant) equation belongs to a condensed joint or
         the state's solver memory is that of a run that kept the rigid joints."""
-        from se3dyn.integrator import State
-        from se3dyn.system import layout_of
+        from se3dyn.dynamics.state import State
+        from se3dyn.engine.workspace import layout_of
 
         if st.solver is not None:  # a state of a run that kept its rigid joints: continued so
             lay = layout_of(self.reduced)
@@ -203,9 +203,9 @@ class Condensation:
     def expand(self, st, ws=None, inputs=None):
         """The full system's state of a reduced state, the rigid joints' multipliers included
         (evaluated by the workspace ``ws`` of the full system, a new one if None; ``inputs``:
-        :func:`se3dyn.system.step_inputs` of the full system at ``st.t``)."""
-        from se3dyn.integrator import State
-        from se3dyn.system import step_inputs
+        :func:`se3dyn.engine.inputs.step_inputs` of the full system at ``st.t``)."""
+        from se3dyn.dynamics.state import State
+        from se3dyn.engine.inputs import step_inputs
 
         f = self.full
         H, v, vd, alpha, lam, a = (x[0] for x in self.expand_rows(
@@ -236,12 +236,13 @@ class Condensation:
 
     def fill_multipliers(self, res) -> None:
         """Complete the multipliers of results of the full system (the deferred columns of
-        :attr:`se3dyn.results.Results.lam`), in blocks of rows."""
+        :attr:`se3dyn.results.results.Results.lam`), in blocks of rows."""
         self.fill_rows(res.t, res.H, res.alpha, res.v, res.vd, res.__dict__["_lam"])
 
     def fill_rows(self, t, H, alpha, v, vd, lam, ws=None) -> None:
         """The same for rows of the full system given as arrays (``lam`` (n, nm) in place)."""
-        from se3dyn.system import Workspace, input_table
+        from se3dyn.engine.inputs import input_table
+        from se3dyn.engine.workspace import Workspace
 
         ws = ws or Workspace(self.full)
         for lo in range(0, len(t), 4096):
@@ -258,10 +259,10 @@ class Condensation:
         default one, so that runs and results in several threads do not share work arrays)."""
         if not len(self.rigid) or not len(H):
             return
-        from se3dyn.system import Workspace, _engine
+        from se3dyn.engine.workspace import Workspace, engine_of
 
         f = self.full
-        eng, _ = _engine(f, ws or Workspace(f))
+        eng, _ = engine_of(f, ws or Workspace(f))
         n = len(H)
         F = np.ascontiguousarray(np.concatenate([H, HJ], axis=1), float)
         mult = f.joint_multadr[self.rigid][:, None] + np.arange(6)
@@ -296,7 +297,10 @@ def condensation(s, enabled: bool = True) -> Condensation | None:
 
 
 def _build(s) -> Condensation | None:
-    from se3dyn.system import Workspace, combine_inertia, compile_model, evaluate, step_inputs
+    from se3dyn.engine.evaluate import evaluate
+    from se3dyn.engine.inputs import step_inputs
+    from se3dyn.engine.system import combine_inertia, compile_model
+    from se3dyn.engine.workspace import Workspace
 
     model = s.model
     nidx = {name: i for i, name in enumerate(s.node_names)}

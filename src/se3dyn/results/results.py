@@ -6,11 +6,14 @@ Writing files and plotting are separate layers; this module only holds arrays.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from se3dyn.errors import ModelError, UnknownNameError, close_matches
-from se3dyn.system import System  # noqa: F401  (type of the usual layout)
+
+if TYPE_CHECKING:
+    from se3dyn.engine.system import System
 
 __all__ = ["Results"]
 
@@ -190,17 +193,18 @@ class Results:
     def __len__(self) -> int:
         return len(self.t)
 
-    def show(self, height: int = 520, **kwargs):
-        """The 3D viewer of this result inline in a Jupyter notebook (an iframe); keyword
-        arguments of :func:`se3dyn.viewer.write_html`. Save the page with ``.save(path)``."""
-        from se3dyn.viewer import show  # an opt-in layer: imported only here
-
-        return show(self, height=height, **kwargs)
+    def show(self, *args, **kwargs):
+        """Moved: ``sd.show(result)`` (:func:`se3dyn.viewer.show`) shows the 3D viewer inline in
+        a Jupyter notebook. Results sit below the viewer in the layers (docs/design.md), so
+        they do not open it themselves."""
+        raise AttributeError("Results.show() is now se3dyn.show(result) (import se3dyn as sd; "
+                             "sd.show(result, height=520)): the viewer is a layer above the "
+                             "results")
 
 
 def _get_lam(self) -> np.ndarray:
     fill = self.__dict__.get("_lam_fill")
-    if fill is not None:  # computed when first asked for (se3dyn.condense)
+    if fill is not None:  # computed when first asked for (se3dyn.dynamics.condense)
         self.__dict__["_lam_fill"] = None
         fill(self)
     return self.__dict__["_lam"]
@@ -212,7 +216,7 @@ def _set_lam(self, value) -> None:
 
 
 #: ``lam`` (n, nm): a stored array, or one with columns computed on first access (the
-#: multipliers of rigid joints condensed for the time loop, :mod:`se3dyn.condense`):
+#: multipliers of rigid joints condensed for the time loop, :mod:`se3dyn.dynamics.condense`):
 #: ``results.defer_multipliers(fill)`` registers ``fill(results)``, which completes
 #: ``results.__dict__["_lam"]`` in place.
 Results.lam = property(_get_lam, _set_lam, doc="multipliers (n, nm)")

@@ -8,9 +8,13 @@ attachment points (``at=``), without the auxiliary nodes and rigid joints of the
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-from se3dyn.model import Model, ModelBuilder
-from se3dyn.timefunc import Step
+from se3dyn.model.builder import ModelBuilder
+from se3dyn.model.timefunc import Step
+
+if TYPE_CHECKING:
+    from se3dyn.model.specs import Model
 
 __all__ = ["slider_crank", "slider_crank_bodies", "SLIDER_CRANK_SETTINGS"]
 

@@ -1,4 +1,4 @@
-"""Stable channel names over a :class:`~se3dyn.results.Results` (in memory or read from a file).
+"""Stable channel names over a :class:`~se3dyn.results.results.Results` (in memory or read from a file).
 
 A channel is one scalar time history, shape (n,), named by a path (see ``docs/results-file.md``)::
 
@@ -26,11 +26,14 @@ side by side as :meth:`Results.joint_coordinates` gives them.
 from __future__ import annotations
 
 import re
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from se3dyn.errors import UnknownNameError, close_matches
-from se3dyn.results import Results
+
+if TYPE_CHECKING:
+    from se3dyn.results.results import Results
 
 __all__ = ["list_channels", "get_channel", "channel_unit", "escape_name", "unescape_name",
            "joint_units"]
@@ -74,31 +77,12 @@ def _beam_system(res: Results):
     """The compiled system that holds the beams of ``res``, or None when it has none.
 
     In-memory results carry their compiled system. Results read from a file carry only its
-    layout (:class:`se3dyn.h5.ResultsLayout`); the file stores the model as YAML text
-    (``stats["model"]``), which is compiled here once (cached on ``res``) when it has beams and
-    its nodes and unknowns match the file's layout (the beam channels are the element's
-    :func:`~se3dyn.elements.beam.section_forces` of the stored motion)."""
+    layout (:class:`se3dyn.io.h5.ResultsLayout`), which compiles the model stored in the file
+    when it has beams (its ``beam_system``: the io layer reads model files, not this one)."""
     s = res.system
     if getattr(s, "beams", None) is not None:
         return s if len(s.beams) else None
-    cached = res.__dict__.get("_beam_system_cache", False)
-    if cached is not False:
-        return cached
-    system = None
-    text = (res.stats or {}).get("model", "") if isinstance(res.stats, dict) else ""
-    if text and "beams:" in text:
-        try:
-            from se3dyn.modelfile import loads_model
-            from se3dyn.system import compile_model
-
-            cand = compile_model(loads_model(text)[0])
-            if (tuple(cand.node_names) == tuple(s.node_names) and int(cand.nq) == int(s.nq)
-                    and len(getattr(cand, "beams", ()))):
-                system = cand
-        except Exception:  # noqa: BLE001 - a model text that does not load: no beam channels
-            system = None
-    object.__setattr__(res, "_beam_system_cache", system)
-    return system
+    return getattr(s, "beam_system", None)
 
 
 def list_channels(res: Results) -> list[str]:

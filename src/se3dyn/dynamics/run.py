@@ -7,17 +7,23 @@ import math
 import numbers
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from se3dyn import stepcontrol
-from se3dyn.analysis import equation_name
-from se3dyn.condense import condensation
+from se3dyn.dynamics import stepcontrol
+from se3dyn.dynamics.condense import condensation
+from se3dyn.dynamics.integrator import GeneralizedAlpha, energies, interpolate
+from se3dyn.dynamics.state import State
+from se3dyn.engine.inputs import step_inputs
+from se3dyn.engine.rank import equation_name
+from se3dyn.engine.system import System, system_of
+from se3dyn.engine.workspace import Workspace
 from se3dyn.errors import ModelError, NewtonError, SimulationError
-from se3dyn.integrator import GeneralizedAlpha, State, energies, interpolate, step_inputs
-from se3dyn.model import Model
-from se3dyn.results import Results
-from se3dyn.system import System, Workspace, system_of
+from se3dyn.results.results import Results
+
+if TYPE_CHECKING:
+    from se3dyn.model.specs import Model
 
 __all__ = ["simulate", "check_settings", "energy_balance_check", "energy_jump",
            "energy_warning", "energy_cause", "energy_rows", "SCALARS"]
@@ -321,12 +327,12 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     rho_inf : float
         Spectral radius at infinite frequency (Eq. (44)).
     tol_residual, tol_constraint, max_iter :
-        Newton settings, see :class:`~se3dyn.integrator.GeneralizedAlpha`.
+        Newton settings, see :class:`~se3dyn.dynamics.integrator.GeneralizedAlpha`.
     output_every : int
         Store every k-th step (the initial and the final state are always stored).
     formulation : {"index2", "index3"}
         Stabilized index-2 (default; second order in positions, velocities and multipliers)
-        or the paper's index-3 form, see :class:`~se3dyn.integrator.GeneralizedAlpha`.
+        or the paper's index-3 form, see :class:`~se3dyn.dynamics.integrator.GeneralizedAlpha`.
         Under modified Newton the index-2 steps iterate with a split matrix (an index-3-sized
         factorisation and a small one; the same converged steps) until it contracts too
         slowly, then with the full matrix for the rest of the run
@@ -335,7 +341,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         Redundant constraint equations are left out with zero multipliers (default; their
         names are in ``stats["redundant"]``) or reported as an error.
     tol : float, optional
-        Adaptive time stepping (:mod:`se3dyn.stepcontrol`): the local position errors (m)
+        Adaptive time stepping (:mod:`se3dyn.dynamics.stepcontrol`): the local position errors (m)
         add up to ``tol`` over a run of even difficulty. A step's local error estimate
         ``(1/6 - beta - (alpha_m - alpha_f) / 2) h^2 (a_{n+1} - a_n)`` is measured per body as
         the root mean square, over its mass, of the errors of its material points (rotation
@@ -367,15 +373,15 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         :class:`~se3dyn.errors.SimulationError` naming the time and the cause.
     output_step : float, optional
         Store the results on the grid ``t_start + k output_step`` (and ``t_end``) by dense
-        output (:func:`~se3dyn.integrator.interpolate`), whatever the internal steps; without
+        output (:func:`~se3dyn.dynamics.integrator.interpolate`), whatever the internal steps; without
         it every (``output_every``-th) step is stored.
     engine : {"auto", "compiled", "numpy"}
         Compiled kernels (:mod:`se3dyn.fast`) or the numpy implementation, see
-        :class:`~se3dyn.integrator.GeneralizedAlpha`. With a fixed step and no ``progress``,
+        :class:`~se3dyn.dynamics.integrator.GeneralizedAlpha`. With a fixed step and no ``progress``,
         ``on_output`` or ``output_step``, the whole time loop runs compiled.
     newton : {"modified", "full"}
         Reuse of the factorised iteration matrix by the compiled engine, see
-        :class:`~se3dyn.integrator.GeneralizedAlpha`.
+        :class:`~se3dyn.dynamics.integrator.GeneralizedAlpha`.
     initial_velocities : {"project", "strict"}
         Initial velocities the joints do not allow are projected (default): every change is
         in ``stats["initial_velocity_changes"]`` (per node: the change of velocity and angular
@@ -387,7 +393,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         Called after every step.
     on_output : callable(state, scalars), optional
         Called with every stored row as it is computed (the initial state included): the
-        :class:`~se3dyn.integrator.State` and a dict of the scalar columns ``SCALARS``
+        :class:`~se3dyn.dynamics.state.State` and a dict of the scalar columns ``SCALARS``
         (energies, works, Newton iterations, residual, constraint violation). Used to stream
         results to a file while the simulation runs.
     on_rows : callable(rows, checkpoint), optional
@@ -395,7 +401,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         first): ``rows`` is a :class:`Results` of the new rows (its own arrays), ``checkpoint``
         a :class:`Checkpoint` from which the run continues bit for bit, or None when none was
         reached since the last call. Blocks come about every 0.1-0.2 s of wall time. The
-        streaming interface of :class:`se3dyn.h5.ResultsWriter` (``writer.add_rows``).
+        streaming interface of :class:`se3dyn.io.h5.ResultsWriter` (``writer.add_rows``).
     store : bool
         Keep every stored row in the returned results (default). False for streamed runs:
         rows are only passed on to ``on_output`` / ``on_rows`` and memory stays flat however
@@ -427,13 +433,13 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         computed when first asked for). ``stats["condensed"]`` names the condensed joints,
         ``stats["matrix_size"]`` is the size of the matrix solved. A step that fails on the
         reduced model is retried with the rigid joints kept, and the run goes on so
-        (``stats["condensed_until"]``: the time of the switch). See :mod:`se3dyn.condense`
+        (``stats["condensed_until"]``: the time of the switch). See :mod:`se3dyn.dynamics.condense`
         for what is kept as a joint.
     global_error : bool or "bound"
         With ``tol``: ``True`` estimates the global position error of the run (m, in the norm
         of ``tol``) by a companion run that takes the run's accepted steps two at a time
         (Richardson: the error is the difference of the two runs over three where both
-        meet; :class:`~se3dyn.stepcontrol.GlobalEstimate`), at the cost of about half the
+        meet; :class:`~se3dyn.dynamics.stepcontrol.GlobalEstimate`), at the cost of about half the
         run's steps again. ``stats["global_error"]`` is the largest estimate,
         ``stats["global_error_at"]`` its time, ``stats["global_error_history"]`` the (k, 2)
         times and estimates; where the companion's Newton iterations fail, the estimate stops
@@ -531,7 +537,7 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
     v_report = _velocity_report(s, st, e["kinetic"], ws) if initial_state is None else {}
     model_system, redundant_names = s, [equation_name(s, r) for r in st.dropped]
     ws_full = ws  # the model's own system: its state at t0, the condensed rows expanded
-    # rigid joints condensed for the time loop (se3dyn.condense): the steps run on the
+    # rigid joints condensed for the time loop (se3dyn.dynamics.condense): the steps run on the
     # reduced system, the stored rows are the model's own
     cond = condensation(s) if condense else None
     if cond is not None:
@@ -836,7 +842,7 @@ def _global_error_setting(val, adaptive: bool) -> bool:
 
 def _companion(integ: GeneralizedAlpha, s: System):
     """The step of the companion run of a global error estimate: from a state to a time, in a
-    workspace of its own (:class:`~se3dyn.stepcontrol.GlobalEstimate`)."""
+    workspace of its own (:class:`~se3dyn.dynamics.stepcontrol.GlobalEstimate`)."""
     ws = Workspace(s)
 
     def step(st: State, t: float) -> State:
@@ -970,8 +976,8 @@ def _velocity_report(s: System, st: State, kinetic: float, ws) -> dict:
     """Stats entries on the initial velocities init changed (and a warning when they matter)."""
     import warnings
 
+    from se3dyn.dynamics.integrator import initial_velocity_changes
     from se3dyn.errors import Se3dynWarning
-    from se3dyn.integrator import initial_velocity_changes
 
     changes = initial_velocity_changes(s, st)
     if not changes:
@@ -1141,8 +1147,8 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int,
     table). Progress is reported and stored rows are passed on between chunks of steps that
     last about 0.1 s each (and fill at most the recorder's buffer in a streamed run); a chunk
     ending at a multiple ``cpe`` of steps at its regular time ends with a :class:`Checkpoint`."""
-    from se3dyn.integrator import KMAX, _stepper
-    from se3dyn.system import input_table
+    from se3dyn.dynamics.integrator import KMAX, _stepper
+    from se3dyn.engine.inputs import input_table
 
     block = output_every * max(1, _BLOCK // output_every)
     stp = _stepper(s, integ.index2, st.dropped, ws, split=integ.newton == "modified")

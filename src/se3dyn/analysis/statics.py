@@ -13,7 +13,7 @@ increments ``n`` of the free nodes and of the joint coordinates, ``H = H_0 exp(n
     [[K_T T + geometric stiffness, Phi_q^T], [Phi_q T, 0]]
 
 (Eq. (46) without the inertia and damping terms, the load tangent of Eq. (67), the joint
-stiffness of Eq. (63)), evaluated by :func:`se3dyn.system.matrix_values` with coefficients
+stiffness of Eq. (63)), evaluated by :func:`se3dyn.engine.evaluate.matrix_values` with coefficients
 ``(0, 0, 1)``. After each converged load step the frames are re-based (``T = I``).
 
 Load stepping: gravity, nodal loads and actuator efforts are multiplied by a load factor that goes
@@ -27,26 +27,29 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from se3dyn._lazy import LazyModule
-from se3dyn.errors import ModelError, SimulationError
-from se3dyn.kinematics import (
+from se3dyn.analysis.assemble import _model_at
+from se3dyn.analysis.common import _Accessors, _as_system, _Blocks
+from se3dyn.engine.evaluate import evaluate
+from se3dyn.engine.inputs import step_inputs
+from se3dyn.engine.scaling import (
     _RCOND,
-    _Accessors,
-    _as_system,
-    _Blocks,
     _char_length,
     _describe,
-    _model_at,
     _null_space,
     _row_scale,
     _svd,
     _unknown_scale,
 )
-from se3dyn.model import Model
-from se3dyn.system import System, evaluate, step_inputs
+from se3dyn.errors import ModelError, SimulationError
+
+if TYPE_CHECKING:
+    from se3dyn.engine.system import System
+    from se3dyn.model.specs import Model
 
 sla = LazyModule("scipy.linalg")
 
@@ -134,7 +137,7 @@ class _StepFailure(Exception):
 
 def _scaled_inputs(full: dict, lf: float) -> dict:
     """Inputs at the load factor lf: gravity, loads and actuators scaled, PD targets kept,
-    target rates zero (slots of :class:`se3dyn.system._Inputs`)."""
+    target rates zero (slots of :class:`se3dyn.engine.inputs._Inputs`)."""
     kind = full["kind"]
     scale = np.where(kind == 3, 1.0, np.where(kind == 4, 0.0, lf))
     return dict(u=scale * full["u"])
@@ -281,7 +284,7 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         load factor reached.
     """
     s = _as_system(model_or_system, "static_equilibrium")
-    from se3dyn.simulate import MAX_STEPS
+    from se3dyn.dynamics.run import MAX_STEPS
 
     for name, val, lo in (("load_steps", load_steps, 1), ("max_iter", max_iter, 1),
                           ("max_cuts", max_cuts, 0)):

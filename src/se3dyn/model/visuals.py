@@ -1,7 +1,7 @@
 """Visual shapes of nodes: what a picture of the model draws, kept apart from the physics.
 
 A :class:`VisualSpec` attaches a shape to a node (``ModelBuilder.visual``, the ``visuals:``
-section of a model file). It never enters the equations: :func:`se3dyn.system.compile_model`
+section of a model file). It never enters the equations: :func:`se3dyn.engine.system.compile_model`
 ignores it and only the viewer (:mod:`se3dyn.viewer`) reads it. Without visuals the viewer draws
 a default picture from the masses, inertias and joints (see :mod:`se3dyn.viewer.shapes`).
 

@@ -103,14 +103,24 @@ def set_threads(n: int | None = None) -> int:
     global _requested
     k = from_environment() if n is None else _check(n, "set_threads(n)")
     _requested = k
-    from se3dyn.system import _core
-
-    _core().set_threads(k)
+    pool().set_threads(k)
     return k
 
 
 def get_threads() -> int:
     """The number of threads the compiled engine uses."""
-    from se3dyn.system import _core
+    return int(pool().threads())
 
-    return int(_core().threads())
+
+_started = False
+
+
+def pool():
+    """The compiled module (its thread pool), started with :func:`initial_threads` once."""
+    global _started
+    from se3dyn._core import _engine
+
+    if not _started:
+        _started = True
+        _engine.set_threads(initial_threads())
+    return _engine

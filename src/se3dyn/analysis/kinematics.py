@@ -1,0 +1,483 @@
+"""Assembly of initial configurations and kinematic analysis with inverse dynamics.
+
+Both work directly on the unknowns of the dynamic formulation (Sec. 3.3, Eq. (14)): the
+increments ``n`` of the free nodes (6 each) and of the joint relative coordinates (k each), with
+the configuration updated on the group, ``H <- H exp(n)`` (Eq. (38)), and the frames re-based after
+every correction so that the tangent operator is ``T(0) = I`` (Eqs. (25)-(27)). The constraints
+are the vectorial map of Eq. (55), ``Phi_I = vect(H_B^-1 H_A H_J)`` (``vect((H_B X_B)^-1 H_A X_A
+H_J)`` for joints with attachment offsets), and the constraint Jacobian
+``B`` is its exact linearisation (Eq. (58) when ``Phi = 0``), obtained from
+:func:`se3dyn.engine.evaluate.matrix_values` with coefficients ``(0, 0, 0)``.
+
+* :func:`assemble` projects an inconsistent initial configuration onto ``Phi = 0`` by Gauss-Newton
+  with minimum-norm corrections, then the velocities onto the velocity constraints ``B v = 0``.
+* :func:`kinematics` prescribes the relative coordinates of abelian joints as functions of time
+  (driving constraints ``alpha_D - f(t) = 0``, with alpha of Eq. (60)) on a mechanism left with
+  no mobility, and solves positions, velocities, accelerations and, by inverse dynamics
+  (Eq. (36)), the multipliers: joint reactions and driver efforts.
+
+Scaling. Rank decisions and minimum-norm corrections use dimensionless unknowns and rows:
+translations (node components ``U``, joint coordinates along translations, constraint rows 0-2)
+are divided by the characteristic length ``L`` of the model (largest distance of a node from the
+centroid of all nodes), rotations are left in radians.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from se3dyn._lazy import LazyModule
+from se3dyn.analysis.common import (
+    _Accessors,
+    _as_system,
+    _Blocks,
+    _joint_ids,
+    _joint_item,
+    _unknown_name,
+    _zero_inputs,
+)
+from se3dyn.engine.evaluate import evaluate
+from se3dyn.engine.inputs import step_inputs
+from se3dyn.engine.scaling import (
+    _RCOND,
+    _char_length,
+    _describe,
+    _null_space,
+    _row_scale,
+    _svd,
+    _unknown_scale,
+)
+from se3dyn.errors import ModelError, SimulationError
+from se3dyn.model.timefunc import (
+    Callable,
+    Component,
+    Constant,
+    Ramp,
+    Sine,
+    Step,
+    Table,
+    TimeFunction,
+    as_timefunc,
+)
+from se3dyn.results.results import node_accelerations
+
+if TYPE_CHECKING:
+    from se3dyn.engine.system import System
+    from se3dyn.model.specs import Model
+
+sla = LazyModule("scipy.linalg")
+
+
+# =============================================================================================
+# time functions: first and second derivatives
+# =============================================================================================
+def time_derivatives(f: TimeFunction, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Value, first and second time derivative of a time function at t.
+
+    Exact for :class:`Constant`, :class:`Step` (away from the jump), :class:`Ramp` and
+    :class:`Table` (piecewise linear: second derivative 0 away from the kinks) and :class:`Sine`.
+    For a :class:`Callable` ``fn`` the derivatives are fourth-order central differences of ``fn``
+    with steps ``h1 = 1e-3 max(1, |t|)`` for the rate (truncation ``h1^4 |f^(5)| / 30``,
+    round-off ``~ 1.5 u |f| / h1``: ~1e-13 relative for functions varying on a time scale of 1)
+    and ``h2 = 2e-3 max(1, |t|)`` for the second derivative (truncation ``h2^4 |f^(6)| / 90``,
+    round-off ``~ 5 u |f| / h2^2``, ~1e-10 relative). Other TimeFunction subclasses: their
+    ``rate`` and the same fourth-order difference of ``rate`` for the second derivative.
+
+    Returns
+    -------
+    (value, rate, acceleration) : ndarrays, shape of ``f(t)`` (at least 1-D)
+    """
+    val = np.atleast_1d(np.asarray(f(t), dtype=float))
+    if isinstance(f, Constant | Step | Ramp | Table):
+        return val, np.atleast_1d(np.asarray(f.rate(t), dtype=float)), np.zeros_like(val)
+    if isinstance(f, Sine):
+        w = 2 * math.pi * f.frequency
+        amp = np.asarray(f.amplitude, dtype=float)
+        rate = np.atleast_1d(amp * w * math.cos(w * t + f.phase))
+        acc = np.atleast_1d(-amp * w * w * math.sin(w * t + f.phase))
+        return val, rate * np.ones_like(val), acc * np.ones_like(val)
+    if isinstance(f, Component):
+        _, r, a = time_derivatives(f.base, t)
+        i = f.index if r.size > 1 else 0
+        return val, r[i:i + 1], a[i:i + 1]
+    scale = max(1.0, abs(t))
+    if isinstance(f, Callable):
+        fn = f.fn
+        h1 = 1e-3 * scale
+        p = [np.asarray(fn(t + c * h1), dtype=float) for c in (-2, -1, 1, 2)]
+        rate = (p[0] - 8 * p[1] + 8 * p[2] - p[3]) / (12 * h1)
+        h2 = 2e-3 * scale
+        q = [np.asarray(fn(t + c * h2), dtype=float) for c in (-2, -1, 0, 1, 2)]
+        acc = (-q[0] + 16 * q[1] - 30 * q[2] + 16 * q[3] - q[4]) / (12 * h2 * h2)
+        return val, np.atleast_1d(rate) * np.ones_like(val), np.atleast_1d(acc) * \
+            np.ones_like(val)
+    h1 = 1e-3 * scale
+    rate = np.atleast_1d(np.asarray(f.rate(t), dtype=float))
+    p = [np.asarray(f.rate(t + c * h1), dtype=float) for c in (-2, -1, 1, 2)]
+    acc = (p[0] - 8 * p[1] + 8 * p[2] - p[3]) / (12 * h1)
+    return val, rate * np.ones_like(val), np.atleast_1d(acc) * np.ones_like(val)
+
+
+# =============================================================================================
+# kinematic analysis and inverse dynamics
+# =============================================================================================
+@dataclass(eq=False)
+class KinematicsResult(_Accessors):
+    """Outcome of :func:`kinematics` (one row per time).
+
+    Attributes
+    ----------
+    system : System
+    t : ndarray (n,)
+    H : ndarray (n, M, 4, 4)       node frames
+    HJ : ndarray (n, m, 4, 4)      joint transformations
+    alpha : ndarray (n, nq)        joint coordinates (Eq. (60)), 0 on node unknowns
+    v, vd : ndarray (n, nq)        velocities and accelerations (material frame, Eq. (4))
+    lam : ndarray (n, nm)          joint multipliers from inverse dynamics (reaction wrenches)
+    efforts : dict                 driver name -> ndarray (n, k): the force/torque an actuator in
+                                   that joint must exert (actuator sign of Eq. (66): power
+                                   ``effort . alpha_dot``)
+    kinetic, potential, spring : ndarray (n,)   energies (Eq. (47), gravity, elastic: Eq. (62)
+                                   and the elastic elements, e.g. spring-dampers, bushings)
+    iterations : ndarray (n,) int  Newton iterations for the positions
+    """
+
+    system: System
+    t: np.ndarray
+    H: np.ndarray
+    HJ: np.ndarray
+    alpha: np.ndarray
+    v: np.ndarray
+    vd: np.ndarray
+    lam: np.ndarray
+    efforts: dict
+    kinetic: np.ndarray
+    potential: np.ndarray
+    spring: np.ndarray
+    iterations: np.ndarray
+
+    @property
+    def _H(self):
+        return self.H
+
+    @property
+    def _alpha(self):
+        return self.alpha
+
+    @property
+    def _lam(self):
+        return self.lam
+
+    def node_velocity(self, name: str, frame: str = "material") -> np.ndarray:
+        """Velocity ``(U, Omega)`` of a node, shape (n, 6); ``frame="inertial"`` gives
+        ``(R v_U, R v_Omega)`` (the time derivative of the position, the spatial angular
+        velocity)."""
+        return self._node_dof(name, self.v, frame)
+
+    def node_acceleration(self, name: str, frame: str = "material") -> np.ndarray:
+        """Acceleration of a node, shape (n, 6): material ``(dU/dt, dOmega/dt)``, or
+        ``frame="inertial"`` the acceleration of its origin and its angular acceleration in the
+        inertial frame (:func:`se3dyn.results.results.node_accelerations`)."""
+        return self._out(node_accelerations(self.system, self._H, self.v, self.vd,
+                                            self._node(name), frame))
+
+    def joint_velocities(self, name: str) -> np.ndarray:
+        """Relative velocities of a joint (Eq. (61)), shape (n, k)."""
+        return self._joint_cols(name, self.v)
+
+    def joint_accelerations(self, name: str) -> np.ndarray:
+        """Relative accelerations of a joint, shape (n, k)."""
+        return self._joint_cols(name, self.vd)
+
+    def driver_effort(self, name: str) -> np.ndarray:
+        """Force/torque of a driver, shape (n, k)."""
+        if name not in self.efforts:
+            raise KeyError(_unknown_name("driver", name, list(self.efforts)))
+        return self.efforts[name]
+
+    @property
+    def driver_power(self) -> np.ndarray:
+        """Total power of the drivers ``sum effort . alpha_dot``, shape (n,)."""
+        p = np.zeros(len(self.t))
+        for name, e in self.efforts.items():
+            p += np.sum(e * self.joint_velocities(name), axis=1)
+        return p
+
+    @property
+    def total_energy(self) -> np.ndarray:
+        """Kinetic + gravity potential + spring energy, shape (n,)."""
+        return self.kinetic + self.potential + self.spring
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+def _drivers(s: System, drivers) -> list[tuple[str, np.ndarray, list[TimeFunction]]]:
+    """Validate drivers: [(name, dof indices (k,), [TimeFunction per joint part])]."""
+    if not isinstance(drivers, Mapping) or not drivers:
+        raise ModelError("kinematics", "drivers", "a non-empty mapping joint name -> time "
+                         "function of its relative coordinate(s)", drivers)
+    out = []
+    used = np.zeros(s.nq, dtype=bool)
+    for name, spec in drivers.items():
+        ids = _joint_ids(s, name, "driver", "joint")
+        item = _joint_item(s, name)
+        k = int(sum(s.joint_k[j] for j in ids))
+        if k == 0:
+            raise ModelError(item, "drivers", "a joint with relative coordinates to drive", name,
+                             "a rigid joint has none")
+        for j in ids:
+            if not s.joint_abelian[j]:
+                raise ModelError(item, "drivers", "an abelian joint (hinge, prismatic, "
+                                 "cylindrical, screw, universal) whose relative coordinates "
+                                 "exist (Eq. (60))", s.joint_type[j],
+                                 "the coordinates of a non-abelian joint (spherical, planar) "
+                                 "are not additive; drive its motion by other joints")
+        tf = as_timefunc(spec, item, "drivers", k)
+        dofs = np.concatenate([s.joint_dofadr[j] + np.arange(s.joint_k[j]) for j in ids])
+        if used[dofs].any():
+            raise ModelError(item, "drivers", "each joint driven once", name)
+        used[dofs] = True
+        out.append((name, dofs, tf))
+    return out
+
+
+def _driver_values(drv, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    vals, rates, accs = [], [], []
+    for name, dofs, tf in drv:
+        k = len(dofs)
+        try:
+            f, r, a = time_derivatives(tf, t)
+            f, r, a = (np.broadcast_to(x, (k,)) for x in (f, r, a))
+        except Exception as exc:  # user callables may raise anything
+            raise SimulationError(f"t={t:.9g}: driver {name!r} could not be evaluated to {k} "
+                                  f"component(s): {type(exc).__name__}: {exc}") from None
+        if not (np.all(np.isfinite(f)) and np.all(np.isfinite(r)) and np.all(np.isfinite(a))):
+            raise SimulationError(f"t={t:.9g}: driver {name!r} returned a non-finite value")
+        vals.append(f)
+        rates.append(r)
+        accs.append(a)
+    return np.concatenate(vals), np.concatenate(rates), np.concatenate(accs)
+
+
+def _check_rows(s: System, n: int) -> None:
+    """Refuse, before anything is computed, more output times than a run may store
+    (``simulate.MAX_STEPS``) or rows that would not fit in the available memory."""
+    from se3dyn.dynamics.run import MAX_STEPS, _available_memory
+
+    if n > MAX_STEPS:
+        raise ModelError("kinematics", "times", f"at most {MAX_STEPS:.0e} output times",
+                         f"{n} times")
+    per_row = 8 * (16 * (s.M + s.m) + 5 * s.nq + s.nm + 5)  # (H, HJ, alpha, v, vd, lam, ...)
+    avail = _available_memory()
+    if avail is not None and n * per_row > avail:
+        raise ModelError("kinematics", "times", "results that fit in memory",
+                         f"{n} times of {per_row} bytes = {n * per_row / 2**30:.1f} GiB",
+                         f"{avail / 2**30:.1f} GiB available; ask for fewer output times")
+
+
+def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol: float = 1e-12,
+               max_iter: int = 30) -> KinematicsResult:
+    """Kinematic analysis of a driven mechanism and inverse dynamics.
+
+    The relative coordinates of the driven (abelian) joints are prescribed,
+    ``alpha_D(t) = f(t)`` (alpha of Eq. (60), measured from the model's initial configuration,
+    or absolute for joints given ``initial`` values).
+    With the joint constraints ``Phi = 0`` (Eq. (55)) they must leave no mobility: the Jacobian
+    ``J = [B; D]`` (B: Eq. (58); D: selection of the driven coordinates) must have rank nq,
+    redundant joint constraints being allowed. At every time:
+
+    * positions: Newton on ``[Phi; alpha_D - f(t)] = 0`` from the previous solution advanced by
+      ``exp(dt v + dt^2/2 vd)``, least-squares corrections ``J dn = -residual`` (SVD), to a
+      scaled residual below ``tol``;
+    * velocities: ``J v = [0; f'(t)]`` (``Phi_t = 0``: the joint constraints are scleronomic);
+    * accelerations: ``J vd = [-(dB/dt) v; f''(t)]``. The quadratic velocity term
+      ``c = (dB/dt) v = d/de [B(H exp(e v)) v]`` at ``e = 0`` (exactly, since ``T(e v) v = v``,
+      Eq. (23)) is a Richardson-extrapolated central difference of the exact Jacobian:
+      ``D(e) = (g(e) - g(-e)) / 2e``, ``c = (4 D(e/2) - D(e)) / 3``, truncation ``O(e^4)``, with
+      ``e`` such that the scaled increment ``e |v|`` is 1e-3: relative error ~1e-12 truncation,
+      ~1e-13 round-off;
+    * inverse dynamics: with these accelerations the equations of motion (Eq. (36)) give
+      ``Phi_q^T lambda + D^T mu = -(M vd - v^T M v + g_int - g_ext)`` (model actuators, PD laws,
+      springs, dampers, loads and gravity included), solved by least squares (minimum norm in
+      the scaled sense when constraints are redundant). The driver efforts are ``-mu`` (the
+      actuator force of Eq. (66) that produces the motion), the joint reactions ``lambda``.
+
+    Parameters
+    ----------
+    model_or_system : Model or System
+    drivers : mapping joint name -> number, array (k,), TimeFunction or callable of t
+        Prescribed relative coordinates of abelian joints (hinge, prismatic, cylindrical, screw,
+        universal). Derivatives: see :func:`time_derivatives`.
+    times : array_like (n,)
+        Increasing output times.
+    tol : float
+        Newton tolerance on the scaled residual (translations / L, radians).
+    max_iter : int
+        Maximum Newton iterations per time.
+
+    Returns
+    -------
+    KinematicsResult
+
+    Raises
+    ------
+    ModelError
+        Bad drivers (unknown joint, rigid or non-abelian joint, wrong number of components, a
+        driver the constraints already fix) or a remaining mobility (naming the free unknowns).
+    SimulationError
+        Newton failure or a singular configuration (the mechanism loses its determinacy, e.g. a
+        dead point), with the time and the worst item.
+    """
+    s = _as_system(model_or_system, "kinematics")
+    drv = _drivers(s, drivers)
+    try:
+        tt = np.asarray(times, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise ModelError("kinematics", "times", "increasing finite times", times) from None
+    if tt.size == 0 or not np.all(np.isfinite(tt)) or np.any(np.diff(tt) <= 0):
+        raise ModelError("kinematics", "times", "a non-empty list of increasing finite times",
+                         times)
+    _check_rows(s, tt.size)
+    if not (isinstance(tol, int | float) and 0 < tol < 1):
+        raise ModelError("kinematics", "tol", "a positive tolerance below 1", tol)
+    if not (isinstance(max_iter, int) and max_iter >= 1):
+        raise ModelError("kinematics", "max_iter", "a positive integer", max_iter)
+    nq, nm = s.nq, s.nm
+    ddofs = np.concatenate([d for _, d, _ in drv])
+    nd = len(ddofs)
+    D = np.zeros((nd, nq))
+    D[np.arange(nd), ddofs] = 1.0
+    L = _char_length(s)
+    cs = _unknown_scale(s, L)
+    rs = np.concatenate([_row_scale(s, L), 1.0 / cs[ddofs]])
+    blocks = _Blocks(s)
+    zq = np.zeros(nq)
+    lam0 = np.zeros(nm)
+    zin = _zero_inputs(s)
+    labels = list(s.labels)
+
+    def jac(ev):
+        _, PT, B = blocks(ev)
+        return np.vstack([B, D]), PT
+
+    # ----- structure at the initial configuration: mobility and redundant drivers
+    H, HJ, alpha = s.node_H0.copy(), s.joint_H0.copy(), s.alpha0.copy()
+    ev = evaluate(s, H, HJ, alpha, zq, zq, zq, lam0, zin, None, full_alpha=True)
+    J, _ = jac(ev)
+    Js = rs[:, None] * J * cs
+    r, N = _null_space(Js)
+    if r < nq:
+        raise ModelError("kinematics", "drivers", "drivers that leave no mobility (remaining "
+                         "degrees of freedom 0)", f"{nq - r} remaining degree(s) of freedom",
+                         "free motion involves " + _describe(N[:, 0] * cs, labels)
+                         + "; drive one of these joints or fix the motion")
+    rB = _null_space(Js[:nm])[0]
+    if rB + nd > r:
+        for name, dofs, _ in drv:
+            keep_rows = np.ones(nm + nd, dtype=bool)
+            keep_rows[nm + np.flatnonzero(np.isin(ddofs, dofs))] = False
+            if _null_space(Js[keep_rows])[0] == r:
+                raise ModelError(_joint_item(s, name), "drivers", "a driver on a coordinate the "
+                                 "constraints leave free", name, "the joint constraints "
+                                 "already determine this coordinate from the other drivers "
+                                 "(redundant or conflicting driver)")
+
+    n_t = tt.size
+    out_H = np.zeros((n_t, s.M, 4, 4))
+    out_HJ = np.zeros((n_t, s.m, 4, 4))
+    out_a = np.zeros((n_t, nq))
+    out_v = np.zeros((n_t, nq))
+    out_vd = np.zeros((n_t, nq))
+    out_lam = np.zeros((n_t, nm))
+    out_mu = np.zeros((n_t, nd))
+    energy = np.zeros((n_t, 3))
+    iters = np.zeros(n_t, dtype=int)
+    v = np.zeros(nq)
+    vd = np.zeros(nq)
+    for i, t in enumerate(tt):
+        f, fr, fa = _driver_values(drv, float(t))
+        # ----- positions: Newton from the predicted configuration
+        pred = zq if i == 0 else (t - tt[i - 1]) * v + 0.5 * (t - tt[i - 1]) ** 2 * vd
+        ev = evaluate(s, H, HJ, alpha, pred, zq, zq, lam0, zin, None, full_alpha=True)
+        it = 0
+        while True:
+            H, HJ, alpha = ev.H, ev.HJ, ev.alpha
+            res = np.concatenate([ev.phi, alpha[ddofs] - f]) * rs
+            err = float(np.abs(res).max(initial=0.0))
+            if not np.isfinite(err):
+                raise SimulationError(f"kinematics: t={t:.9g}: the configuration became "
+                                      "non-finite")
+            if err <= tol:
+                break
+            if it >= max_iter:
+                w = int(np.argmax(np.abs(res)))
+                where = labels[nq + w] if w < nm else f"driver on {labels[ddofs[w - nm]]}"
+                raise SimulationError(
+                    f"kinematics: Newton failed at t={t:.9g} after {it} iterations: scaled "
+                    f"residual {err:.3e} (tol {tol:.1e}); worst: {where}. The prescribed "
+                    "motion may be out of reach of the mechanism, or the time step too large "
+                    "for the predictor")
+            J, _ = jac(ev)
+            Js = rs[:, None] * J * cs
+            y = sla.lstsq(Js, -res, cond=_RCOND, lapack_driver="gelsd")[0]
+            ev = evaluate(s, H, HJ, alpha, cs * y, zq, zq, lam0, zin, None, full_alpha=True)
+            it += 1
+        iters[i] = it
+        # ----- velocities
+        J, PT = jac(ev)
+        Js = rs[:, None] * J * cs
+        U, sv, Vt = _svd(Js)
+        rank = int(np.sum(sv > _RCOND * sv[0])) if sv.size and sv[0] > 0 else 0
+        if rank < nq:
+            Nv = _svd(Js, full=True)[2][rank:].T
+            raise SimulationError(
+                f"kinematics: singular configuration at t={t:.9g}: the drivers no longer "
+                f"determine the motion (rank {rank} < {nq}; a dead point or a change of "
+                "branch); free motion involves " + _describe(Nv[:, 0] * cs, labels))
+        Ur, Vr, sr = U[:, :rank], Vt[:rank].T, sv[:rank]
+
+        def solve(rhs, Ur=Ur, Vr=Vr, sr=sr):
+            return cs * (Vr @ ((Ur.T @ (rs * rhs)) / sr))
+
+        v = solve(np.concatenate([np.zeros(nm), fr]))
+        # ----- accelerations: quadratic velocity term by Richardson extrapolation
+        vs = np.abs(v / cs).max(initial=0.0)
+        c = np.zeros(nm)
+        if vs > 0:
+            eps = 1e-3 / vs
+
+            def g(e, v=v, H=H, HJ=HJ, alpha=alpha):
+                evp = evaluate(s, H, HJ, alpha, e * v, zq, zq, lam0, zin, None, full_alpha=False)
+                return blocks(evp)[2] @ v
+
+            D1 = (g(eps) - g(-eps)) / (2 * eps)
+            D2 = (g(eps / 2) - g(-eps / 2)) / eps
+            c = (4 * D2 - D1) / 3
+        vd = solve(np.concatenate([-c, fa]))
+        # ----- inverse dynamics (Eq. (36)): Phi_q^T lam + D^T mu = -r0
+        inputs = step_inputs(s, float(t))
+        evd = evaluate(s, H, HJ, alpha, zq, v, vd, lam0, inputs, None, full_alpha=True)
+        # rows (equations) times cs and columns (multipliers) times rs: moment units
+        G = cs[:, None] * np.hstack([PT, D.T]) * rs
+        sol = rs * sla.lstsq(G, -cs * evd.r, cond=_RCOND, lapack_driver="gelsd")[0]
+        out_H[i], out_HJ[i], out_a[i] = H, HJ, alpha
+        out_v[i], out_vd[i] = v, vd
+        out_lam[i] = sol[:nm]
+        out_mu[i] = sol[nm:]
+        # kinetic (Eq. (47)), gravity potential, elastic energy of every element (joint
+        # springs Eq. (62), spring-dampers, bushings), by the element kernels
+        energy[i] = evd.energy[:3]
+    efforts = {}
+    off = 0
+    for name, dofs, _ in drv:
+        efforts[name] = -out_mu[:, off:off + len(dofs)]
+        off += len(dofs)
+    return KinematicsResult(system=s, t=tt, H=out_H, HJ=out_HJ, alpha=out_a, v=out_v,
+                            vd=out_vd, lam=out_lam, efforts=efforts, kinetic=energy[:, 0],
+                            potential=energy[:, 1], spring=energy[:, 2], iterations=iters)

@@ -1,0 +1,7 @@
+"""``python -m se3dyn.cli ...``: the ``se3dyn`` command."""
+
+import sys
+
+from se3dyn.cli.main import main
+
+sys.exit(main())

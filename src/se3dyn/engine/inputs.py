@@ -1,0 +1,163 @@
+"""Compiled system: numbered unknowns, struct-of-arrays element batches, fixed sparsity pattern,
+and the vectorised evaluation of the residual (Eq. (39)), the constraints (Eqs. (54)-(56)) and the
+iteration matrix (Eq. (46)).
+
+Unknowns (Sec. 3.3, Eq. (14)): for every free node 6 increments ``n_I = (n_U, n_Omega)`` and for
+every joint its k relative increments ``n_j`` -> ``nq = 6 M_free + sum k``. Multipliers: 6 per joint
+(Eq. (55)) -> ``nm = 6 m``. The iteration matrix has size ``N = nq + nm``.
+
+Naming follows MuJoCo's struct-of-arrays style: ``node_dofadr[i]`` is the first unknown of node i
+(-1 for a clamped node), ``joint_dofadr[j]`` the first relative increment of joint j, and
+``joint_multadr[j]`` its first multiplier row (in the multiplier vector).
+
+Scaling (the "scaled" iteration matrix). With ``beta' = (1-alpha_m)/(beta h^2 (1-alpha_f))`` the
+dynamic rows are divided by beta' and the multiplier columns multiplied by beta' (multipliers
+solved as ``lambda / beta'``). The matrix then reads
+
+    [[M + (gamma'/beta') C_T + K_T T / beta',  Phi_q^T],
+     [Phi_q* T,                                0      ]]
+
+whose entries are O(1) whatever the step, so Newton converges alike for h = 1e-1 and h = 1e-6
+(the unscaled matrix of Eq. (46) has a condition number growing like h^-4).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from se3dyn._lazy import LazyModule
+from se3dyn.errors import SimulationError
+
+if TYPE_CHECKING:
+    from se3dyn.engine.system import System
+    from se3dyn.model.specs import Model
+
+sla = LazyModule("scipy.linalg")
+sp = LazyModule("scipy.sparse")
+spla = LazyModule("scipy.sparse.linalg")
+
+
+class _Inputs:
+    """Slots of the time-dependent inputs ``u`` (nu,) handed to the element kernels.
+
+    ``u[0:3]`` is gravity; then per load its force (3) and torque (3) components, per actuated
+    joint its k actuator values, per controlled joint its k PD targets and k target rates.
+    ``kind`` (nu,) tells each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD
+    target rate), for load stepping in statics.
+    """
+
+    def __init__(self, d: dict, model: Model):
+        nidx = {n: i for i, n in enumerate(d["node_names"])}
+        self.sources = []  # (slot, k, time function, item, what, its rate is the input)
+        kind = [0, 0, 0]
+        self.load_slots = []
+        for ld in model.loads:
+            fs = ts = -1
+            if ld.force is not None:
+                fs = len(kind)
+                self.sources.append((fs, 3, ld.force, f"load '{ld.name}'", "force", False))
+                kind += [1] * 3
+            if ld.torque is not None:
+                ts = len(kind)
+                self.sources.append((ts, 3, ld.torque, f"load '{ld.name}'", "torque", False))
+                kind += [1] * 3
+            i = nidx[ld.node]
+            R0, x0 = d["node_H0"][i, :3, :3], d["node_H0"][i, :3, 3]
+            c = np.zeros(3) if ld.at is None else R0.T @ (ld.at - x0)
+            self.load_slots.append((i, c, fs, ts, int(ld.force_frame == "body"),
+                                    int(ld.torque_frame == "body")))
+        self.joint_slots = []  # (slot, k, kind, joint index)
+        for j, js in enumerate(model.joints):
+            k = js.k
+            if js.actuator is not None:
+                item = f"joint '{js.name}' actuator"
+                self.joint_slots.append((len(kind), k, "tau", j))
+                self.sources.append((len(kind), k, js.actuator, item, "value", False))
+                kind += [2] * k
+            if js.control is not None:
+                item = f"joint '{js.name}' control target"
+                tgt, rt = js.control.target, js.control.target_rate
+                self.joint_slots.append((len(kind), k, "ref", j))
+                self.sources.append((len(kind), k, tgt, item, "target", False))
+                kind += [3] * k
+                self.joint_slots.append((len(kind), k, "rate", j))
+                if rt is None:
+                    self.sources.append((len(kind), k, tgt, item, "target rate", True))
+                else:
+                    self.sources.append((len(kind), k, rt, item, "target_rate", False))
+                kind += [4] * k
+        self.kind = np.array(kind, np.int64)
+        self.nu = len(kind)
+        self.gravity = np.asarray(model.gravity, float)
+
+
+def _sample(f, t: float, shape: tuple[int, ...], item: str, what: str) -> np.ndarray:
+    """Evaluate a time function, checking shape and finiteness, naming the item on failure."""
+    try:
+        val = np.asarray(f(t), dtype=float)
+        val = np.broadcast_to(val, shape)
+    except Exception as exc:  # user callables may raise anything
+        raise SimulationError(f"t={t:.9g}: {item}: {what} could not be evaluated to "
+                              f"{shape[0]} component(s): {type(exc).__name__}: {exc}") from None
+    if not np.all(np.isfinite(val)):
+        raise SimulationError(f"t={t:.9g}: {item}: {what} returned a non-finite value {val}")
+    return val
+
+
+def step_inputs(s: System, t: float) -> dict:
+    """Time-dependent inputs at time t.
+
+    Returns
+    -------
+    dict
+        ``u`` (nu,): gravity, load forces and torques, actuator values, PD targets and target
+        rates in the slots of :class:`se3dyn.engine.inputs._Inputs` (what the element kernels read).
+
+    Raises
+    ------
+    SimulationError
+        When a time function fails, changes size or returns a non-finite value (naming it).
+    """
+    ins = s.inputs
+    u = np.zeros(ins.nu)
+    u[:3] = ins.gravity
+    for slot, k, tf, item, what, rate in ins.sources:
+        u[slot:slot + k] = _sample(tf.rate if rate else tf, t, (k,), item, what)
+    return dict(u=u)
+
+
+def input_table(s: System, times: np.ndarray) -> tuple[np.ndarray, int]:
+    """The inputs ``u`` of :func:`step_inputs` at many times, (nt, nu), one vectorised
+    evaluation per time function (:meth:`se3dyn.model.timefunc.TimeFunction.sample`); where that is
+    not possible, time by time. Returns the table and the number of leading rows filled: less
+    than nt when a time function fails at ``times[n_ok]`` (the step to that time then
+    reports the error, naming the function)."""
+    ins = s.inputs
+    nt = len(times)
+    U = np.zeros((nt, ins.nu))
+    U[:, :3] = ins.gravity
+    slow = []
+    for src in ins.sources:
+        slot, k, tf, _item, _what, rate = src
+        fn = getattr(tf, "sample_rate" if rate else "sample", None)
+        try:
+            val = np.asarray(fn(times), dtype=float).reshape(nt, -1)
+            val = np.broadcast_to(val, (nt, k))
+            ok = bool(np.all(np.isfinite(val)))
+        except Exception:  # user code: anything; the per-time path names the failure
+            ok = False
+        if ok:
+            U[:, slot:slot + k] = val
+        else:
+            slow.append(src)
+    if not slow:
+        return U, nt
+    for row, t in enumerate(times):
+        try:
+            for slot, k, tf, item, what, rate in slow:
+                U[row, slot:slot + k] = _sample(tf.rate if rate else tf, t, (k,), item, what)
+        except SimulationError:
+            return U, row
+    return U, nt
