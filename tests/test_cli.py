@@ -262,7 +262,7 @@ def test_the_command_lets_idle_blas_threads_sleep_and_skips_the_exit_collections
         env["OPENBLAS_THREAD_TIMEOUT"] = preset
     code = ("import atexit, gc, os, sys; atexit.register(lambda: print("
             "'frozen' if gc.get_freeze_count() else 'not frozen')); "
-            f"sys.argv = {argv!r}; import se3dyn; "
+            f"sys.argv = {argv!r}; import se3dyn.cli; "
             "print(os.environ.get('OPENBLAS_THREAD_TIMEOUT'), end=' ')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, env=env).stdout.strip()

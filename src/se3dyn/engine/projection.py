@@ -1,25 +1,6 @@
-"""Assembly of initial configurations and kinematic analysis with inverse dynamics.
-
-Both work directly on the unknowns of the dynamic formulation (Sec. 3.3, Eq. (14)): the
-increments ``n`` of the free nodes (6 each) and of the joint relative coordinates (k each), with
-the configuration updated on the group, ``H <- H exp(n)`` (Eq. (38)), and the frames re-based after
-every correction so that the tangent operator is ``T(0) = I`` (Eqs. (25)-(27)). The constraints
-are the vectorial map of Eq. (55), ``Phi_I = vect(H_B^-1 H_A H_J)`` (``vect((H_B X_B)^-1 H_A X_A
-H_J)`` for joints with attachment offsets), and the constraint Jacobian
-``B`` is its exact linearisation (Eq. (58) when ``Phi = 0``), obtained from
-:func:`se3dyn.engine.evaluate.matrix_values` with coefficients ``(0, 0, 0)``.
-
-* :func:`assemble` projects an inconsistent initial configuration onto ``Phi = 0`` by Gauss-Newton
-  with minimum-norm corrections, then the velocities onto the velocity constraints ``B v = 0``.
-* :func:`kinematics` prescribes the relative coordinates of abelian joints as functions of time
-  (driving constraints ``alpha_D - f(t) = 0``, with alpha of Eq. (60)) on a mechanism left with
-  no mobility, and solves positions, velocities, accelerations and, by inverse dynamics
-  (Eq. (36)), the multipliers: joint reactions and driver efforts.
-
-Scaling. Rank decisions and minimum-norm corrections use dimensionless unknowns and rows:
-translations (node components ``U``, joint coordinates along translations, constraint rows 0-2)
-are divided by the characteristic length ``L`` of the model (largest distance of a node from the
-centroid of all nodes), rotations are left in radians.
+"""Projection of given initial velocities onto the velocity constraints ``B v = 0`` (B: Eq. (58)),
+minimum kinetic-energy change in the mass metric, dense or sparse; shared by :func:`se3dyn.simulate`
+(initial velocities) and :func:`se3dyn.assemble`.
 """
 
 from __future__ import annotations

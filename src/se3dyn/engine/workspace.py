@@ -1,24 +1,6 @@
-"""Compiled system: numbered unknowns, struct-of-arrays element batches, fixed sparsity pattern,
-and the vectorised evaluation of the residual (Eq. (39)), the constraints (Eqs. (54)-(56)) and the
-iteration matrix (Eq. (46)).
-
-Unknowns (Sec. 3.3, Eq. (14)): for every free node 6 increments ``n_I = (n_U, n_Omega)`` and for
-every joint its k relative increments ``n_j`` -> ``nq = 6 M_free + sum k``. Multipliers: 6 per joint
-(Eq. (55)) -> ``nm = 6 m``. The iteration matrix has size ``N = nq + nm``.
-
-Naming follows MuJoCo's struct-of-arrays style: ``node_dofadr[i]`` is the first unknown of node i
-(-1 for a clamped node), ``joint_dofadr[j]`` the first relative increment of joint j, and
-``joint_multadr[j]`` its first multiplier row (in the multiplier vector).
-
-Scaling (the "scaled" iteration matrix). With ``beta' = (1-alpha_m)/(beta h^2 (1-alpha_f))`` the
-dynamic rows are divided by beta' and the multiplier columns multiplied by beta' (multipliers
-solved as ``lambda / beta'``). The matrix then reads
-
-    [[M + (gamma'/beta') C_T + K_T T / beta',  Phi_q^T],
-     [Phi_q* T,                                0      ]]
-
-whose entries are O(1) whatever the step, so Newton converges alike for h = 1e-1 and h = 1e-6
-(the unscaled matrix of Eq. (46) has a condition number growing like h^-4).
+"""The scratch of a run: the compiled engine of a system (its element batches with their work
+arrays) and the Newton steppers (sparse factors) by formulation and dropped equations
+(:class:`Workspace`), and the layout of a system built once (:func:`layout_of`).
 """
 
 from __future__ import annotations

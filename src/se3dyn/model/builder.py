@@ -1,24 +1,7 @@
-"""Model description: frozen, named specs built by :class:`ModelBuilder` and validated on build.
-
-A model is what the user describes, with names, not numbers: nodes (frames with optional mass and
-inertia, Sec. 2 and 6), kinematic joints between two nodes (``H_B = H_A H_J``, Eq. (7), or, with
-an attachment point ``at``, ``H_B X_B = H_A X_A H_J``) with their force elements (springs
-Eq. (62), dampers Eq. (64), actuators Eq. (66), PD control laws), nodal loads (Eq. (66)),
-point spring-dampers, geometrically exact beams (chains of SE(3) beam elements between nodes,
-:meth:`ModelBuilder.beam`, :mod:`se3dyn.elements.beam`) and gravity.
-:func:`se3dyn.engine.system.compile_model` turns it into arrays.
-
-Initial configuration (Sec. 5.2): node frames are ``H(R0, x0)`` with ``R0`` the identity unless
-an ``orientation`` is given; joint transformations start at ``H_J0 = H_A0^-1 H_B0`` so that the
-constraints hold exactly; joint axes are given in the inertial frame of the initial configuration
-and expressed in the material frame of node B by the compiler.
-
-Joint offsets. A joint given an attachment point ``at = p`` (inertial frame, initial
-configuration) connects constant attachment frames of its nodes instead of the node frames: with
-``P = H(I, p)``, ``X_A = H_A0^-1 P`` and ``X_B = H_B0^-1 P`` (4 x 4, constant), the joint imposes
-``H_B X_B = H_A X_A H_J`` (Eq. (7) between the attachment frames), ``H_J0 = I``, and its axes
-(inertial frame, initial configuration) are already expressed in the attachment frame of B. A rigid
-body with several joints then needs a single node; without ``at`` a joint is exactly the paper's.
+"""The mutable :class:`ModelBuilder`: nodes, joints (with their springs, dampers, actuators and PD
+laws), loads, spring-dampers, bushings and beams added by name and validated as they are added;
+``build()`` gives the frozen :class:`~se3dyn.model.specs.Model`. The conventions (initial
+configuration, attachment offsets) are in :mod:`se3dyn.model.specs`.
 """
 
 from __future__ import annotations

@@ -1,12 +1,5 @@
-"""Structural analysis of a compiled system: mobility and redundant constraints by rank analysis.
-
-The constraint Jacobian at the initial configuration is ``Phi_q = [Ad_{H_J^-1}, -I, A]`` per joint
-(Eq. (58); ``[Ad_{H_J^-1} PA, -PB, A]`` for a joint with attachment offsets, ``PA = Ad(X_A^-1)``,
-``PB = Ad(X_B^-1)``), a ``(6 m) x nq`` matrix. Its numerical rank r (SVD, relative tolerance) gives
-
-* the mobility (degrees of freedom) ``nq - r``;
-* the number of redundant constraint equations ``6 m - r``, named by a column-pivoted QR of
-  ``Phi_q^T``: the equations left out of the first r pivots depend on the others.
+"""Warnings about a model that is valid but probably not what was meant: an axis joint whose axis
+does not pass through the attachment point the user gave (``se3dyn check``, ``se3dyn run``).
 """
 
 from __future__ import annotations
