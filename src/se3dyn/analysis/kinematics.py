@@ -336,6 +336,49 @@ def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol:
     """
     s = _as_system(model_or_system, "kinematics")
     drv = _drivers(s, drivers)
+    tt = _check_settings(s, times, tol, max_iter)
+    kp = _problem(s, drv)
+    _check_structure(kp)
+    nq, nm, nd, zq = s.nq, s.nm, len(kp.ddofs), kp.zq
+    n_t = tt.size
+    out_H = np.zeros((n_t, s.M, 4, 4))
+    out_HJ = np.zeros((n_t, s.m, 4, 4))
+    out_a = np.zeros((n_t, nq))
+    out_v = np.zeros((n_t, nq))
+    out_vd = np.zeros((n_t, nq))
+    out_lam = np.zeros((n_t, nm))
+    out_mu = np.zeros((n_t, nd))
+    energy = np.zeros((n_t, 3))
+    iters = np.zeros(n_t, dtype=int)
+    H, HJ, alpha = s.node_H0.copy(), s.joint_H0.copy(), s.alpha0.copy()
+    v = np.zeros(nq)
+    vd = np.zeros(nq)
+    for i, t in enumerate(tt):
+        f, fr, fa = _driver_values(drv, float(t))
+        # ----- positions: Newton from the predicted configuration
+        pred = zq if i == 0 else (t - tt[i - 1]) * v + 0.5 * (t - tt[i - 1]) ** 2 * vd
+        ev, iters[i] = _positions(kp, H, HJ, alpha, pred, f, t, tol, max_iter)
+        H, HJ, alpha = ev.H, ev.HJ, ev.alpha
+        # ----- velocities
+        usv, PT = _velocity_solver(kp, ev, t)
+        v = _lsq(kp, usv, np.concatenate([np.zeros(nm), fr]))
+        # ----- accelerations: quadratic velocity term by Richardson extrapolation
+        c = _quadratic_velocity_term(kp, H, HJ, alpha, v)
+        vd = _lsq(kp, usv, np.concatenate([-c, fa]))
+        # ----- inverse dynamics (Eq. (36)): Phi_q^T lam + D^T mu = -r0
+        sol, energy[i] = _inverse_dynamics(kp, H, HJ, alpha, v, vd, PT, t)
+        out_H[i], out_HJ[i], out_a[i] = H, HJ, alpha
+        out_v[i], out_vd[i] = v, vd
+        out_lam[i] = sol[:nm]
+        out_mu[i] = sol[nm:]
+    return KinematicsResult(system=s, t=tt, H=out_H, HJ=out_HJ, alpha=out_a, v=out_v,
+                            vd=out_vd, lam=out_lam, efforts=_efforts(drv, out_mu),
+                            kinetic=energy[:, 0], potential=energy[:, 1], spring=energy[:, 2],
+                            iterations=iters)
+
+
+def _check_settings(s: System, times, tol, max_iter) -> np.ndarray:
+    """Refuse bad output times, tolerance or iteration limit; returns the times (n,)."""
     try:
         tt = np.asarray(times, dtype=float).ravel()
     except (TypeError, ValueError):
@@ -348,7 +391,30 @@ def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol:
         raise ModelError("kinematics", "tol", "a positive tolerance below 1", tol)
     if not (isinstance(max_iter, int) and max_iter >= 1):
         raise ModelError("kinematics", "max_iter", "a positive integer", max_iter)
-    nq, nm = s.nq, s.nm
+    return tt
+
+
+@dataclass(frozen=True, eq=False)
+class _Problem:
+    """The constant data of a kinematic analysis: the system, the drivers, the selection ``D``
+    of the driven unknowns, the row and unknown scales and the matrix blocks."""
+
+    s: System
+    drv: list
+    ddofs: np.ndarray
+    D: np.ndarray
+    rs: np.ndarray
+    cs: np.ndarray
+    blocks: _Blocks
+    zq: np.ndarray
+    lam0: np.ndarray
+    zin: object
+    labels: list
+
+
+def _problem(s: System, drv: list) -> _Problem:
+    """The driven unknowns, their selection matrix, the scales and the block extractor."""
+    nq = s.nq
     ddofs = np.concatenate([d for _, d, _ in drv])
     nd = len(ddofs)
     D = np.zeros((nd, nq))
@@ -356,26 +422,30 @@ def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol:
     L = _char_length(s)
     cs = _unknown_scale(s, L)
     rs = np.concatenate([_row_scale(s, L), 1.0 / cs[ddofs]])
-    blocks = _Blocks(s)
-    zq = np.zeros(nq)
-    lam0 = np.zeros(nm)
-    zin = _zero_inputs(s)
-    labels = list(s.labels)
+    return _Problem(s=s, drv=drv, ddofs=ddofs, D=D, rs=rs, cs=cs, blocks=_Blocks(s),
+                    zq=np.zeros(nq), lam0=np.zeros(s.nm), zin=_zero_inputs(s),
+                    labels=list(s.labels))
 
-    def jac(ev):
-        _, PT, B = blocks(ev)
-        return np.vstack([B, D]), PT
 
-    # ----- structure at the initial configuration: mobility and redundant drivers
+def _jac(kp: _Problem, ev) -> tuple[np.ndarray, np.ndarray]:
+    """``J = [B; D]`` and ``Phi_q^T`` of an evaluation."""
+    _, PT, B = kp.blocks(ev)
+    return np.vstack([B, kp.D]), PT
+
+
+def _check_structure(kp: _Problem) -> None:
+    """Refuse, at the initial configuration, a remaining mobility or a redundant driver."""
+    s, drv, ddofs, rs, cs, zq = kp.s, kp.drv, kp.ddofs, kp.rs, kp.cs, kp.zq
+    nq, nm, nd = s.nq, s.nm, len(ddofs)
     H, HJ, alpha = s.node_H0.copy(), s.joint_H0.copy(), s.alpha0.copy()
-    ev = evaluate(s, H, HJ, alpha, zq, zq, zq, lam0, zin, None, full_alpha=True)
-    J, _ = jac(ev)
+    ev = evaluate(s, H, HJ, alpha, zq, zq, zq, kp.lam0, kp.zin, None, full_alpha=True)
+    J, _ = _jac(kp, ev)
     Js = rs[:, None] * J * cs
     r, N = _null_space(Js)
     if r < nq:
         raise ModelError("kinematics", "drivers", "drivers that leave no mobility (remaining "
                          "degrees of freedom 0)", f"{nq - r} remaining degree(s) of freedom",
-                         "free motion involves " + _describe(N[:, 0] * cs, labels)
+                         "free motion involves " + _describe(N[:, 0] * cs, kp.labels)
                          + "; drive one of these joints or fix the motion")
     rB = _null_space(Js[:nm])[0]
     if rB + nd > r:
@@ -388,96 +458,101 @@ def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol:
                                  "already determine this coordinate from the other drivers "
                                  "(redundant or conflicting driver)")
 
-    n_t = tt.size
-    out_H = np.zeros((n_t, s.M, 4, 4))
-    out_HJ = np.zeros((n_t, s.m, 4, 4))
-    out_a = np.zeros((n_t, nq))
-    out_v = np.zeros((n_t, nq))
-    out_vd = np.zeros((n_t, nq))
-    out_lam = np.zeros((n_t, nm))
-    out_mu = np.zeros((n_t, nd))
-    energy = np.zeros((n_t, 3))
-    iters = np.zeros(n_t, dtype=int)
-    v = np.zeros(nq)
-    vd = np.zeros(nq)
-    for i, t in enumerate(tt):
-        f, fr, fa = _driver_values(drv, float(t))
-        # ----- positions: Newton from the predicted configuration
-        pred = zq if i == 0 else (t - tt[i - 1]) * v + 0.5 * (t - tt[i - 1]) ** 2 * vd
-        ev = evaluate(s, H, HJ, alpha, pred, zq, zq, lam0, zin, None, full_alpha=True)
-        it = 0
-        while True:
-            H, HJ, alpha = ev.H, ev.HJ, ev.alpha
-            res = np.concatenate([ev.phi, alpha[ddofs] - f]) * rs
-            err = float(np.abs(res).max(initial=0.0))
-            if not np.isfinite(err):
-                raise SimulationError(f"kinematics: t={t:.9g}: the configuration became "
-                                      "non-finite")
-            if err <= tol:
-                break
-            if it >= max_iter:
-                w = int(np.argmax(np.abs(res)))
-                where = labels[nq + w] if w < nm else f"driver on {labels[ddofs[w - nm]]}"
-                raise SimulationError(
-                    f"kinematics: Newton failed at t={t:.9g} after {it} iterations: scaled "
-                    f"residual {err:.3e} (tol {tol:.1e}); worst: {where}. The prescribed "
-                    "motion may be out of reach of the mechanism, or the time step too large "
-                    "for the predictor")
-            J, _ = jac(ev)
-            Js = rs[:, None] * J * cs
-            y = sla.lstsq(Js, -res, cond=_RCOND, lapack_driver="gelsd")[0]
-            ev = evaluate(s, H, HJ, alpha, cs * y, zq, zq, lam0, zin, None, full_alpha=True)
-            it += 1
-        iters[i] = it
-        # ----- velocities
-        J, PT = jac(ev)
-        Js = rs[:, None] * J * cs
-        U, sv, Vt = _svd(Js)
-        rank = int(np.sum(sv > _RCOND * sv[0])) if sv.size and sv[0] > 0 else 0
-        if rank < nq:
-            Nv = _svd(Js, full=True)[2][rank:].T
+
+def _positions(kp: _Problem, H, HJ, alpha, pred, f, t, tol: float, max_iter: int):
+    """Newton on ``[Phi; alpha_D - f(t)] = 0`` from the predicted configuration, least-squares
+    corrections; returns the converged evaluation and the number of iterations."""
+    s, ddofs, rs, cs, zq, lam0, zin = kp.s, kp.ddofs, kp.rs, kp.cs, kp.zq, kp.lam0, kp.zin
+    nq, nm, labels = s.nq, s.nm, kp.labels
+    ev = evaluate(s, H, HJ, alpha, pred, zq, zq, lam0, zin, None, full_alpha=True)
+    it = 0
+    while True:
+        H, HJ, alpha = ev.H, ev.HJ, ev.alpha
+        res = np.concatenate([ev.phi, alpha[ddofs] - f]) * rs
+        err = float(np.abs(res).max(initial=0.0))
+        if not np.isfinite(err):
+            raise SimulationError(f"kinematics: t={t:.9g}: the configuration became "
+                                  "non-finite")
+        if err <= tol:
+            return ev, it
+        if it >= max_iter:
+            w = int(np.argmax(np.abs(res)))
+            where = labels[nq + w] if w < nm else f"driver on {labels[ddofs[w - nm]]}"
             raise SimulationError(
-                f"kinematics: singular configuration at t={t:.9g}: the drivers no longer "
-                f"determine the motion (rank {rank} < {nq}; a dead point or a change of "
-                "branch); free motion involves " + _describe(Nv[:, 0] * cs, labels))
-        Ur, Vr, sr = U[:, :rank], Vt[:rank].T, sv[:rank]
+                f"kinematics: Newton failed at t={t:.9g} after {it} iterations: scaled "
+                f"residual {err:.3e} (tol {tol:.1e}); worst: {where}. The prescribed "
+                "motion may be out of reach of the mechanism, or the time step too large "
+                "for the predictor")
+        J, _ = _jac(kp, ev)
+        Js = rs[:, None] * J * cs
+        y = sla.lstsq(Js, -res, cond=_RCOND, lapack_driver="gelsd")[0]
+        ev = evaluate(s, H, HJ, alpha, cs * y, zq, zq, lam0, zin, None, full_alpha=True)
+        it += 1
 
-        def solve(rhs, Ur=Ur, Vr=Vr, sr=sr):
-            return cs * (Vr @ ((Ur.T @ (rs * rhs)) / sr))
 
-        v = solve(np.concatenate([np.zeros(nm), fr]))
-        # ----- accelerations: quadratic velocity term by Richardson extrapolation
-        vs = np.abs(v / cs).max(initial=0.0)
-        c = np.zeros(nm)
-        if vs > 0:
-            eps = 1e-3 / vs
+def _velocity_solver(kp: _Problem, ev, t) -> tuple[tuple, np.ndarray]:
+    """The truncated SVD ``(U_r, V_r, s_r)`` of the scaled ``J`` at the solved configuration,
+    refusing a singular one, and ``Phi_q^T``."""
+    nq, rs, cs = kp.s.nq, kp.rs, kp.cs
+    J, PT = _jac(kp, ev)
+    Js = rs[:, None] * J * cs
+    U, sv, Vt = _svd(Js)
+    rank = int(np.sum(sv > _RCOND * sv[0])) if sv.size and sv[0] > 0 else 0
+    if rank < nq:
+        Nv = _svd(Js, full=True)[2][rank:].T
+        raise SimulationError(
+            f"kinematics: singular configuration at t={t:.9g}: the drivers no longer "
+            f"determine the motion (rank {rank} < {nq}; a dead point or a change of "
+            "branch); free motion involves " + _describe(Nv[:, 0] * cs, kp.labels))
+    return (U[:, :rank], Vt[:rank].T, sv[:rank]), PT
 
-            def g(e, v=v, H=H, HJ=HJ, alpha=alpha):
-                evp = evaluate(s, H, HJ, alpha, e * v, zq, zq, lam0, zin, None, full_alpha=False)
-                return blocks(evp)[2] @ v
 
-            D1 = (g(eps) - g(-eps)) / (2 * eps)
-            D2 = (g(eps / 2) - g(-eps / 2)) / eps
-            c = (4 * D2 - D1) / 3
-        vd = solve(np.concatenate([-c, fa]))
-        # ----- inverse dynamics (Eq. (36)): Phi_q^T lam + D^T mu = -r0
-        inputs = step_inputs(s, float(t))
-        evd = evaluate(s, H, HJ, alpha, zq, v, vd, lam0, inputs, None, full_alpha=True)
-        # rows (equations) times cs and columns (multipliers) times rs: moment units
-        G = cs[:, None] * np.hstack([PT, D.T]) * rs
-        sol = rs * sla.lstsq(G, -cs * evd.r, cond=_RCOND, lapack_driver="gelsd")[0]
-        out_H[i], out_HJ[i], out_a[i] = H, HJ, alpha
-        out_v[i], out_vd[i] = v, vd
-        out_lam[i] = sol[:nm]
-        out_mu[i] = sol[nm:]
-        # kinetic (Eq. (47)), gravity potential, elastic energy of every element (joint
-        # springs Eq. (62), spring-dampers, bushings), by the element kernels
-        energy[i] = evd.energy[:3]
+def _lsq(kp: _Problem, usv: tuple, rhs: np.ndarray) -> np.ndarray:
+    """The solution of ``J x = rhs`` by the truncated SVD of :func:`_velocity_solver`."""
+    Ur, Vr, sr = usv
+    return kp.cs * (Vr @ ((Ur.T @ (kp.rs * rhs)) / sr))
+
+
+def _quadratic_velocity_term(kp: _Problem, H, HJ, alpha, v: np.ndarray) -> np.ndarray:
+    """``c = (dB/dt) v`` by a Richardson-extrapolated central difference of the exact
+    Jacobian."""
+    s, zq = kp.s, kp.zq
+    vs = np.abs(v / kp.cs).max(initial=0.0)
+    c = np.zeros(s.nm)
+    if vs > 0:
+        eps = 1e-3 / vs
+
+        def g(e):
+            evp = evaluate(s, H, HJ, alpha, e * v, zq, zq, kp.lam0, kp.zin, None,
+                           full_alpha=False)
+            return kp.blocks(evp)[2] @ v
+
+        D1 = (g(eps) - g(-eps)) / (2 * eps)
+        D2 = (g(eps / 2) - g(-eps / 2)) / eps
+        c = (4 * D2 - D1) / 3
+    return c
+
+
+def _inverse_dynamics(kp: _Problem, H, HJ, alpha, v, vd, PT, t) -> tuple[np.ndarray,
+                                                                            np.ndarray]:
+    """Inverse dynamics (Eq. (36)): ``Phi_q^T lam + D^T mu = -r0`` by least squares; returns
+    ``[lam; mu]`` and the kinetic, gravity and elastic energies."""
+    s, rs, cs, zq = kp.s, kp.rs, kp.cs, kp.zq
+    inputs = step_inputs(s, float(t))
+    evd = evaluate(s, H, HJ, alpha, zq, v, vd, kp.lam0, inputs, None, full_alpha=True)
+    # rows (equations) times cs and columns (multipliers) times rs: moment units
+    G = cs[:, None] * np.hstack([PT, kp.D.T]) * rs
+    sol = rs * sla.lstsq(G, -cs * evd.r, cond=_RCOND, lapack_driver="gelsd")[0]
+    # kinetic (Eq. (47)), gravity potential, elastic energy of every element (joint
+    # springs Eq. (62), spring-dampers, bushings), by the element kernels
+    return sol, evd.energy[:3]
+
+
+def _efforts(drv: list, out_mu: np.ndarray) -> dict:
+    """The driver efforts ``-mu``, joint by joint."""
     efforts = {}
     off = 0
     for name, dofs, _ in drv:
         efforts[name] = -out_mu[:, off:off + len(dofs)]
         off += len(dofs)
-    return KinematicsResult(system=s, t=tt, H=out_H, HJ=out_HJ, alpha=out_a, v=out_v,
-                            vd=out_vd, lam=out_lam, efforts=efforts, kinetic=energy[:, 0],
-                            potential=energy[:, 1], spring=energy[:, 2], iterations=iters)
+    return efforts

@@ -261,27 +261,14 @@ def _shield():
 
 def cmd_run(args) -> int:
     """Simulate a model file, stream the results to an HDF5 file, print a summary."""
-    import warnings
-
-    from se3dyn._version import __version__
-    from se3dyn.dynamics.run import simulate
+    import se3dyn.dynamics.run  # noqa: F401  (loaded with the collector paused, see _loaded)
     from se3dyn.engine.system import compile_model
-    from se3dyn.engine.threads import from_environment, set_threads
-    from se3dyn.errors import ModelError, Se3dynError, Se3dynWarning, SimulationError
-    from se3dyn.io.h5 import ResultsFileError, ResultsWriter
+    from se3dyn.errors import ModelError
 
     # --quiet: no summary; what was changed (initial velocities) or looks wrong goes to stderr
     say = print if not args.quiet else (lambda *a, **k: None)
 
-    if args.threads is None:  # (a bad SE3DYN_THREADS: refused before the results file is made)
-        from_environment()
-    else:
-        try:  # --threads replaces SE3DYN_THREADS; a bad one is said, not passed over in silence
-            from_environment()
-        except Se3dynError as exc:
-            print(f"se3dyn: warning: {exc}; ignored: --threads {args.threads} given",
-                  file=sys.stderr)
-        set_threads(args.threads)
+    _run_threads(args)
     model, settings = _load(args.model)
     text = Path(args.model).read_text(encoding="utf-8")  # stored as metadata, as given
     try:
@@ -296,67 +283,125 @@ def cmd_run(args) -> int:
             return 0
         cp = writer.checkpoint
     else:
-        cfg = dict(settings)
-        cfg.update(_overrides(args))
-        for key in ("t_end", "step"):
-            if key not in cfg:
-                raise _Usage(f"{args.model}: no '{key}' in the file's simulation settings; "
-                             f"give --{key.replace('_', '-')}")
-        out = Path(args.out if args.out is not None else "out")
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise _Usage(f"--out {out}: cannot create the folder ({exc.strerror})") from None
-        path = out / (Path(args.model).stem + ".h5")
-        try:
-            writer = ResultsWriter(path, s, model_text=text, settings=cfg,
-                                   overwrite=args.overwrite)
-        except ResultsFileError as exc:
-            if "exists" in exc.problem:
-                raise _Usage(f"{path}: a results file exists; give --overwrite to replace it, "
-                             f"or --resume {path} to continue its run") from None
-            raise _Usage(str(exc)) from None
+        writer, cfg, path = _new_results_file(args, s, settings, text)
         cp = None
     _loaded()  # (the results file's writer made: h5py loaded)
     quiet = args.quiet or not sys.stderr.isatty()
     t_from = cp.state.t if cp is not None else float(cfg.get("t_start", 0.0))
     prog = _Progress(t_from, float(cfg["t_end"]), not quiet, cp.steps if cp is not None else 0)
-    say(f"se3dyn {__version__}: {args.model} -> {path}"
-          + (f" (resumed at t = {cp.state.t:g} s)" if cp is not None else ""))
+    _announce_run(args, model, s, cfg, path, cp, say)
+    t0 = time.perf_counter()
+    code, res, failed, stats = _run_into_file(args, s, cfg, cp, writer, path, prog)
+    if code is not None:
+        return code
+    wall = time.perf_counter() - t0
+    if failed is not None:
+        _err(f"{failed}")
+        print(f"  simulation failed; {writer.rows} rows kept in {path}", file=sys.stderr)
+        return 1
+    _run_summary(args, res, stats, wall, path, writer.rows, say)
+    return 0
+
+
+def _run_threads(args) -> None:
+    """The number of threads: ``--threads`` or else ``SE3DYN_THREADS``."""
+    from se3dyn.engine.threads import from_environment, set_threads
+    from se3dyn.errors import Se3dynError
+
+    if args.threads is None:  # (a bad SE3DYN_THREADS: refused before the results file is made)
+        from_environment()
+    else:
+        try:  # --threads replaces SE3DYN_THREADS; a bad one is said, not passed over in silence
+            from_environment()
+        except Se3dynError as exc:
+            print(f"se3dyn: warning: {exc}; ignored: --threads {args.threads} given",
+                  file=sys.stderr)
+        set_threads(args.threads)
+
+
+def _new_results_file(args, s, settings: dict, text: str):
+    """The settings of a new run (the file's, the command line's overrides applied), its
+    results file's writer and path."""
+    from se3dyn.io.h5 import ResultsFileError, ResultsWriter
+
+    cfg = dict(settings)
+    cfg.update(_overrides(args))
+    for key in ("t_end", "step"):
+        if key not in cfg:
+            raise _Usage(f"{args.model}: no '{key}' in the file's simulation settings; "
+                         f"give --{key.replace('_', '-')}")
+    out = Path(args.out if args.out is not None else "out")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _Usage(f"--out {out}: cannot create the folder ({exc.strerror})") from None
+    path = out / (Path(args.model).stem + ".h5")
+    try:
+        writer = ResultsWriter(path, s, model_text=text, settings=cfg,
+                               overwrite=args.overwrite)
+    except ResultsFileError as exc:
+        if "exists" in exc.problem:
+            raise _Usage(f"{path}: a results file exists; give --overwrite to replace it, "
+                         f"or --resume {path} to continue its run") from None
+        raise _Usage(str(exc)) from None
+    return writer, cfg, path
+
+
+def _announce_run(args, model, s, cfg: dict, path: Path, cp, say) -> None:
+    """The header of a run: version, files, warnings on the model, its size and settings."""
+    from se3dyn._version import __version__
     from se3dyn.model.checks import off_axis_joints
 
+    say(f"se3dyn {__version__}: {args.model} -> {path}"
+          + (f" (resumed at t = {cp.state.t:g} s)" if cp is not None else ""))
     for line in off_axis_joints(model):
         print(f"se3dyn: warning: {line}", file=sys.stderr)
     nn, nj, _ = _counts(model)
     say(f"  {nn} nodes, {nj} joints; {s.nq} unknowns, {s.nm} "
           f"multipliers; t_end = {cfg['t_end']} s, h = {cfg['step']} s, "
           f"rho_inf = {cfg.get('rho_inf', 0.9)}, {cfg.get('formulation', 'index2')}")
-    t0 = time.perf_counter()
+
+
+def _simulate_rows(s, cfg: dict, cp, writer, prog, bound: bool):
+    """The run, its rows written to the results file (as they come, or at the end with
+    ``global_error: bound``); a signal stops it at its next progress report."""
+    import warnings
+
+    from se3dyn.dynamics.run import simulate
+    from se3dyn.errors import Se3dynWarning
+
+    def progress(t: float, i: int) -> None:
+        _check_stop()
+        prog(t, i)
+
+    _DEFER[0] = True
+    try:
+        with warnings.catch_warnings():  # (the summary below reports them)
+            warnings.simplefilter("ignore", Se3dynWarning)
+            if bound:  # a run may be repeated: its rows are written when it is done
+                res = simulate(s, progress=progress, initial_state=cp, **cfg)
+                writer.add_rows(res, None)
+            else:
+                res = simulate(s, progress=progress, on_rows=writer.add_rows,
+                               store=False, initial_state=cp, **cfg)
+    finally:
+        _DEFER[0] = False
+    _check_stop()
+    return res
+
+
+def _run_into_file(args, s, cfg: dict, cp, writer, path: Path, prog):
+    """The run with its results file, closed with the run's statistics whatever happens:
+    (exit code or None, results, the SimulationError or None, the stored statistics)."""
+    from se3dyn.errors import ModelError, SimulationError
+
     failed = None
     res = None
-    base_steps = cp.steps if cp is not None else 0
-    base_its = writer.base_iterations
     resume_hint = f"continue with: se3dyn run {args.model} --resume {path}"
     bound = cfg.get("global_error") == "bound"
     with writer:
         try:
-            def progress(t: float, i: int) -> None:
-                _check_stop()
-                prog(t, i)
-
-            _DEFER[0] = True
-            try:
-                with warnings.catch_warnings():  # (the summary below reports them)
-                    warnings.simplefilter("ignore", Se3dynWarning)
-                    if bound:  # a run may be repeated: its rows are written when it is done
-                        res = simulate(s, progress=progress, initial_state=cp, **cfg)
-                        writer.add_rows(res, None)
-                    else:
-                        res = simulate(s, progress=progress, on_rows=writer.add_rows,
-                                          store=False, initial_state=cp, **cfg)
-            finally:
-                _DEFER[0] = False
-            _check_stop()
+            res = _simulate_rows(s, cfg, cp, writer, prog, bound)
         except SimulationError as exc:
             failed = exc
             res = exc.result
@@ -380,25 +425,35 @@ def cmd_run(args) -> int:
                      f"nothing kept, {path} removed")
             else:
                 _err(f"{what}; results so far kept in {path} ({resume_hint})")
-            return 130 if isinstance(exc, KeyboardInterrupt) else 143
+            return 130 if isinstance(exc, KeyboardInterrupt) else 143, res, failed, None
         _shield()
         prog.done()
-        stats = dict(res.stats) if res is not None else {}
-        stats.pop("final_state", None)
-        stats["steps"] = base_steps + int(stats.get("steps", 0))
-        stats["newton_iterations"] = base_its + int(stats.get("newton_iterations", 0))
-        if failed is not None:
-            stats.update(failed=True, message=str(failed))
-        if cp is not None and "energy_balance_error" in stats:  # (the run it continues)
-            err, scale = writer.energy_balance()
-            stats.update(energy_balance_error=err, energy_scale=scale)
-            res.stats.update(energy_balance_error=err, energy_scale=scale)
+        stats = _file_stats(res, failed, writer, cp)
         writer.close(stats=stats, settings=cfg)
-    wall = time.perf_counter() - t0
+    return None, res, failed, stats
+
+
+def _file_stats(res, failed, writer, cp) -> dict:
+    """The statistics stored in the results file: those of the whole run when it continues
+    another (steps, Newton iterations, energy balance), the failure if any."""
+    base_steps = cp.steps if cp is not None else 0
+    base_its = writer.base_iterations
+    stats = dict(res.stats) if res is not None else {}
+    stats.pop("final_state", None)
+    stats["steps"] = base_steps + int(stats.get("steps", 0))
+    stats["newton_iterations"] = base_its + int(stats.get("newton_iterations", 0))
     if failed is not None:
-        _err(f"{failed}")
-        print(f"  simulation failed; {writer.rows} rows kept in {path}", file=sys.stderr)
-        return 1
+        stats.update(failed=True, message=str(failed))
+    if cp is not None and "energy_balance_error" in stats:  # (the run it continues)
+        err, scale = writer.energy_balance()
+        stats.update(energy_balance_error=err, energy_scale=scale)
+        res.stats.update(energy_balance_error=err, energy_scale=scale)
+    return stats
+
+
+def _run_summary(args, res, stats: dict, wall: float, path: Path, rows: int, say) -> None:
+    """The summary of a successful run: steps, iterations, condensation, the run report,
+    the constraint violation and the results file."""
     st = res.stats
     st.update(_energy_jump_in(path, st))
     say(f"  {stats['steps']} steps, {stats['newton_iterations']} Newton iterations "
@@ -413,8 +468,7 @@ def cmd_run(args) -> int:
         if args.quiet and ("WARNING" in line or line.startswith("initial velocities")):
             print(f"se3dyn: warning: {line}", file=sys.stderr)  # changes and problems: said
     say(f"  max constraint violation {st['max_constraint']:.2e}")
-    say(f"  results: {path} ({writer.rows} rows)")
-    return 0
+    say(f"  results: {path} ({rows} rows)")
 
 
 def _resume(args, s, text: str):

@@ -297,17 +297,37 @@ def condensation(s, enabled: bool = True) -> Condensation | None:
 
 
 def _build(s) -> Condensation | None:
-    from se3dyn.engine.evaluate import evaluate
-    from se3dyn.engine.inputs import step_inputs
-    from se3dyn.engine.system import combine_inertia, compile_model
-    from se3dyn.engine.workspace import Workspace
+    from se3dyn.engine.system import compile_model
 
-    model = s.model
     nidx = {name: i for i, name in enumerate(s.node_names)}
+    root, used = _rigid_groups(s, nidx)
+    if not used:
+        return None
+    rigid = np.array(sorted(used), np.int64)
+    roots = [i for i in range(s.M) if root[i] == i]
+    rpos = {i: k for k, i in enumerate(roots)}
+    node_root = np.array([rpos[int(root[i])] for i in range(s.M)], np.int64)
+    H0 = s.node_H0
+    C = lie.inverse(H0[root]) @ H0
+    C[roots] = np.eye(4)
+    r = compile_model(_reduced_model(s, nidx, root, roots, rigid, C))
+    root_full, joint_full, dof_full, mult_full = _maps(s, r, roots)
+    depth, child, child_dofs, parent_dofs, Dc, Dp = _multiplier_blocks(s, rigid, root)
+    return Condensation(full=s, reduced=r, rigid=rigid, node_root=node_root, node_C=C,
+                        node_Ad=lie.adjoint_inv(C), root_full=root_full, joint_full=joint_full,
+                        dof_full=dof_full, mult_full=mult_full,
+                        order=np.argsort(-depth[child], kind="stable"), child_dofs=child_dofs,
+                        parent_dofs=parent_dofs, child_inv=np.linalg.inv(Dc), parent_block=Dp)
+
+
+def _rigid_groups(s, nidx: dict) -> tuple[np.ndarray | None, list]:
+    """The groups of the condensed rigid joints: (root of every node (M,), joints used),
+    dropping the groups that cannot be condensed (see the module docstring)."""
+    model = s.model
     cand = [j for j, js in enumerate(model.joints)
             if js.type == "rigid" and js.k == 0 and js.composite is None]
     if not cand:
-        return None
+        return None, []
     pinned = _pinned(model)
     ends = _ends(model)
     while True:
@@ -325,19 +345,16 @@ def _build(s) -> Condensation | None:
             if body and root[i] != i and not np.array_equal(R0[i], R0[root[i]]):
                 bad.add(int(root[i]))
         if not bad:
-            break
+            return root, used
         cand = [j for j in cand if root[nidx[model.joints[j].node_a]] not in bad]
-    if not used:
-        return None
-    rigid = np.array(sorted(used), np.int64)
-    roots = [i for i in range(s.M) if root[i] == i]
-    rpos = {i: k for k, i in enumerate(roots)}
-    node_root = np.array([rpos[int(root[i])] for i in range(s.M)], np.int64)
-    H0 = s.node_H0
-    C = lie.inverse(H0[root]) @ H0
-    C[roots] = np.eye(4)
 
-    # the reduced model: one node per group, the elements moved to the roots
+
+def _lumped_nodes(s, root: np.ndarray, roots: list) -> list:
+    """One node per group: its root's, with the group's whole mass, centre of mass and
+    inertia about it (parallel-axis rule, Sec. 6)."""
+    from se3dyn.engine.system import combine_inertia
+
+    model = s.model
     nodes = []
     for i in roots:
         grp = [model.nodes[k] for k in range(s.M) if root[k] == i]
@@ -351,6 +368,12 @@ def _build(s) -> Condensation | None:
             np.array([g.inertia for g in grp]))
         # (a fixed node is always its group's root: the group is fixed)
         nodes.append(dataclasses.replace(n0, mass=M, inertia=J, com=com))
+    return nodes
+
+
+def _moved_joints(s, root: np.ndarray, rigid: np.ndarray, C: np.ndarray) -> list:
+    """The joints that are not condensed, attached to the roots through their attachment
+    frames ``X -> C X``."""
     name_of = lambda k: s.node_names[int(root[k])]  # noqa: E731
     A_mat = {}
     for g in s.groups:
@@ -358,7 +381,7 @@ def _build(s) -> Condensation | None:
             A_mat[int(jid)] = g.A[q]
     rset = set(rigid.tolist())
     joints = []
-    for j, js in enumerate(model.joints):
+    for j, js in enumerate(s.model.joints):
         if j in rset:
             continue
         a, b = s.joint_a[j], s.joint_b[j]
@@ -369,6 +392,16 @@ def _build(s) -> Condensation | None:
             js, node_a=name_of(a), node_b=name_of(b),
             frames=(C[a] @ s.joint_XA[j], C[b] @ s.joint_XB[j], s.joint_H0[j].copy(),
                     A_mat[j])))
+    return joints
+
+
+def _reduced_model(s, nidx: dict, root: np.ndarray, roots: list, rigid: np.ndarray,
+                   C: np.ndarray) -> Model:
+    """The reduced model: one node per group, the elements moved to the roots."""
+    model, H0 = s.model, s.node_H0
+    nodes = _lumped_nodes(s, root, roots)
+    name_of = lambda k: s.node_names[int(root[k])]  # noqa: E731
+    joints = _moved_joints(s, root, rigid, C)
     loads = []
     for ld in model.loads:
         i = nidx[ld.node]
@@ -383,11 +416,13 @@ def _build(s) -> Condensation | None:
     bushings = tuple(dataclasses.replace(b, node_a=name_of(nidx[b.node_a]),
                                          node_b=name_of(nidx[b.node_b]))
                      for b in model.bushings)
-    red = Model(nodes=tuple(nodes), joints=tuple(joints), loads=tuple(loads),
-                gravity=model.gravity, composites=model.composites, name=model.name,
-                springs=springs, visuals=(), beams=model.beams, bushings=bushings)
-    r = compile_model(red)
+    return Model(nodes=tuple(nodes), joints=tuple(joints), loads=tuple(loads),
+                 gravity=model.gravity, composites=model.composites, name=model.name,
+                 springs=springs, visuals=(), beams=model.beams, bushings=bushings)
 
+
+def _maps(s, r, roots: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The node, joint, unknown and multiplier of ``s`` of every reduced one of ``r``."""
     root_full = np.array(roots, np.int64)
     jnames = list(s.joint_names)
     joint_full = np.array([jnames.index(n) for n in r.joint_names], np.int64)
@@ -400,6 +435,15 @@ def _build(s) -> Condensation | None:
             dof_full[r.joint_dofadr[k] + np.arange(r.joint_k[k])] = (
                 s.joint_dofadr[j] + np.arange(s.joint_k[j]))
     mult_full = (s.joint_multadr[joint_full][:, None] + np.arange(6)).reshape(-1)
+    return root_full, joint_full, dof_full, mult_full
+
+
+def _multiplier_blocks(s, rigid: np.ndarray, root: np.ndarray) -> tuple:
+    """The constant blocks ``d r / d lambda`` of the rigid joints on the rows of their child
+    and parent nodes: (depth, child, child_dofs, parent_dofs, Dc, Dp)."""
+    from se3dyn.engine.evaluate import evaluate
+    from se3dyn.engine.inputs import step_inputs
+    from se3dyn.engine.workspace import Workspace
 
     # the rigid joints' multipliers: the rows of the node each carries (the end further from
     # the root) and of its other end, by the residual's linearity in lambda (constant blocks:
@@ -441,11 +485,7 @@ def _build(s) -> Condensation | None:
                 Dc[q, :, k] = d[child_dofs[q]]
                 if parent_dofs[q, 0] >= 0:
                     Dp[q, :, k] = d[parent_dofs[q]]
-    return Condensation(full=s, reduced=r, rigid=rigid, node_root=node_root, node_C=C,
-                        node_Ad=lie.adjoint_inv(C), root_full=root_full, joint_full=joint_full,
-                        dof_full=dof_full, mult_full=mult_full,
-                        order=np.argsort(-depth[child], kind="stable"), child_dofs=child_dofs,
-                        parent_dofs=parent_dofs, child_inv=np.linalg.inv(Dc), parent_block=Dp)
+    return depth, child, child_dofs, parent_dofs, Dc, Dp
 
 
 def _depths(rigid: np.ndarray, s, root: np.ndarray) -> np.ndarray:

@@ -63,6 +63,82 @@ def _first_order(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u[order], rank[inv.reshape(-1)]
 
 
+def _frames(s) -> tuple:
+    """The frames of a system (Eq. (12)): their number F, first unknown, number of unknowns k
+    and constant matrix A (the identity for nodes, Eq. (9) for joints)."""
+    M, m = s.M, s.m
+    F = M + m
+    dof = np.full(F, -1, np.int64)
+    k = np.zeros(F, np.int64)
+    A = np.zeros((F, 6, 6))
+    A[:M] = np.eye(6)
+    free = np.flatnonzero(~np.asarray(s.node_fixed, bool))
+    dof[free] = np.asarray(s.node_dofadr)[free]
+    k[free] = 6
+    for g in s.groups:
+        ids = np.asarray(g.ids, np.int64)
+        k[M + ids] = g.k
+        if g.k:
+            dof[M + ids] = np.asarray(s.joint_dofadr)[ids]
+            A[M + ids, :, :g.k] = g.A
+    return F, dof, k, A
+
+
+def _group_codes(dof: np.ndarray, k: np.ndarray, m: int, nq: int, nm: int,
+                 madr: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+    """The number G of codes per kind and the first row and size of every group code."""
+    F = len(dof)
+    # group codes: kind * G + index (kind 0 frame unknowns, 1 multipliers, 2 xi), -1 none
+    G = max(F, m, 1)
+    gstart = np.full(3 * G, -1, np.int64)
+    gsize = np.zeros(3 * G, np.int64)
+    gstart[:F], gsize[:F] = dof, k
+    gstart[G:G + m], gsize[G:G + m] = nq + madr, 6
+    gstart[2 * G:2 * G + m], gsize[2 * G:2 * G + m] = nq + nm + madr, 6
+    return G, gstart, gsize
+
+
+def _touch(con_c: np.ndarray, con_f: np.ndarray, k: np.ndarray, F: int) -> tuple:
+    """(constraint, slot, frame) of the constrained frames with unknowns, grouped by frame
+    (frames in order of first appearance, each frame's entries in declaration order), with the
+    count and start of each group, by group and by frame."""
+    tc = np.repeat(con_c, 3)
+    ts = np.tile(np.arange(3, dtype=np.int64), len(con_c))
+    tf = con_f.reshape(-1)
+    keep = k[tf] > 0
+    tc, ts, tf = tc[keep], ts[keep], tf[keep]
+    tframes, trank = _first_order(tf)
+    o = np.argsort(trank, kind="stable")
+    tc, ts, tf = tc[o], ts[o], tf[o]
+    tcount = np.bincount(trank, minlength=len(tframes)).astype(np.int64)
+    tstart = np.cumsum(tcount) - tcount
+    fcount = np.zeros(F, np.int64)
+    fstart = np.zeros(F, np.int64)
+    fcount[tframes], fstart[tframes] = tcount, tstart
+    return tc, ts, tf, tcount, tstart, fcount, fstart
+
+
+def _log_tables(s, A: np.ndarray, F: int, needed_frames: list) -> dict:
+    """The tables of the relative coordinates of non-abelian joints (log coordinates)."""
+    M, m = s.M, s.m
+    jk = np.asarray(s.joint_k, np.int64)
+    logs = np.flatnonzero((jk > 0) & ~np.asarray(s.joint_abelian, bool)) if m \
+        else np.zeros(0, np.int64)
+    lA = np.zeros((len(logs), 6, 6))
+    for kk in sorted(set(jk[logs].tolist())):  # (not np.unique: it imports numpy.ma)
+        sel = np.flatnonzero(jk[logs] == kk)
+        lA[sel, :kk, :] = np.linalg.pinv(A[M + logs[sel]][:, :, :kk])
+    needed = np.zeros(F, bool)
+    if needed_frames:
+        needed[np.concatenate(needed_frames)] = True
+    return dict(
+        log_frame=(M + logs).astype(np.int64),
+        log_H0inv=(np.ascontiguousarray(lie.inverse(s.joint_H0[logs])) if len(logs)
+                   else np.zeros((0, 4, 4))),
+        log_Apinv=lA,
+        log_needed=needed[M + logs].astype(np.int64))
+
+
 class Layout:
     """Frames, element tables, block pattern and products of a compiled system.
 
@@ -86,30 +162,10 @@ class Layout:
     def __init__(self, s) -> None:
         self.s = s
         M, m, nq, nm = s.M, s.m, s.nq, s.nm
-        F = M + m
-        dof = np.full(F, -1, np.int64)
-        k = np.zeros(F, np.int64)
-        A = np.zeros((F, 6, 6))
-        A[:M] = np.eye(6)
-        free = np.flatnonzero(~np.asarray(s.node_fixed, bool))
-        dof[free] = np.asarray(s.node_dofadr)[free]
-        k[free] = 6
-        for g in s.groups:
-            ids = np.asarray(g.ids, np.int64)
-            k[M + ids] = g.k
-            if g.k:
-                dof[M + ids] = np.asarray(s.joint_dofadr)[ids]
-                A[M + ids, :, :g.k] = g.A
-        self.F, self.frame_dof, self.frame_k, self.frame_A = F, dof, k, A
-        # group codes: kind * G + index (kind 0 frame unknowns, 1 multipliers, 2 xi), -1 none
-        self._G = G = max(F, m, 1)
-        gstart = np.full(3 * G, -1, np.int64)
-        gsize = np.zeros(3 * G, np.int64)
-        gstart[:F], gsize[:F] = dof, k
+        self.F, self.frame_dof, self.frame_k, self.frame_A = _frames(s)
         madr = np.asarray(s.joint_multadr, np.int64)
-        gstart[G:G + m], gsize[G:G + m] = nq + madr, 6
-        gstart[2 * G:2 * G + m], gsize[2 * G:2 * G + m] = nq + nm + madr, 6
-        self._gstart, self._gsize = gstart, gsize
+        self._G, self._gstart, self._gsize = _group_codes(self.frame_dof, self.frame_k, m, nq, nm,
+                                                          madr)
         # registered blocks: key = row code * 3G + column code -> offset; sorted arrays plus
         # the blocks registered one by one since they were last merged
         self._sk = np.zeros(0, np.int64)
@@ -119,7 +175,7 @@ class Layout:
         self._vel: list = []        # arrays (f, g) of velocity-level blocks, in call order
         self._con: list = []        # arrays (c, frames (., 3)) of constraint elements
         self._logs: list = []       # arrays of joint frames whose logs Newton needs
-        fr = self.frame_groups(np.arange(F))  # every free frame has its diagonal block (LU)
+        fr = self.frame_groups(np.arange(self.F))  # every free frame has its diagonal block (LU)
         self.blocks(fr, fr)
         elements = []
         for key, mod in REGISTRY.items():
@@ -130,23 +186,31 @@ class Layout:
             if hasattr(mod, "index2_tables"):
                 mod.index2_tables(s, self, dict(elements)[key])
         con_c, con_f = self._constraint_arrays()
-        # touch: (constraint, slot, frame) of the constrained frames with unknowns, grouped by
-        # frame (frames in order of first appearance, each frame's entries in declaration order)
-        tc = np.repeat(con_c, 3)
-        ts = np.tile(np.arange(3, dtype=np.int64), len(con_c))
-        tf = con_f.reshape(-1)
-        keep = k[tf] > 0
-        tc, ts, tf = tc[keep], ts[keep], tf[keep]
-        tframes, trank = _first_order(tf)
-        o = np.argsort(trank, kind="stable")
-        tc, ts, tf = tc[o], ts[o], tf[o]
-        tcount = np.bincount(trank, minlength=len(tframes)).astype(np.int64)
-        tstart = np.cumsum(tcount) - tcount
-        fcount = np.zeros(F, np.int64)
-        fstart = np.zeros(F, np.int64)
-        fcount[tframes], fstart[tframes] = tcount, tstart
-        # velocity-level blocks (distinct, in declaration order) times B_n^T of every constraint
-        # element touching their column frame
+        touch = _touch(con_c, con_f, self.frame_k, self.F)
+        velprod = self._velprod(touch)
+        xiprod = self._xiprod(touch)
+        xc = self.xi_groups(con_c)
+        self.blocks(xc, xc)
+        self.nvals2 = self.n
+        self.tables = dict(
+            nq=nq, nm=nm, nu=s.inputs.nu, nvals=self.nvals, nvals2=self.nvals2,
+            frame_dof=self.frame_dof, frame_k=self.frame_k,
+            frame_node=(np.arange(self.F) < M).astype(np.int64),
+            frame_A=self.frame_A, frame_joint=(np.arange(self.F) >= M).astype(np.int64),
+            elements=[(key, {n: np.ascontiguousarray(v) for n, v in t.items()})
+                      for key, t in elements],
+            velprod=np.ascontiguousarray(velprod, np.int64).reshape(-1, 6),
+            xiprod=np.ascontiguousarray(xiprod, np.int64).reshape(-1, 6),
+            **_log_tables(s, self.frame_A, self.F, self._logs))
+        rg = self._blocks_in_value_order()
+        self.groups2, self.groups3 = self._lu_groups(rg, con_c, con_f)
+
+    def _velprod(self, touch: tuple) -> np.ndarray:
+        """Register the index-2 blocks ``-(cM M + cC C_T) B_n^T`` (dynamic rows, xi columns) and
+        return their products: the velocity-level blocks (distinct, in declaration order) times
+        B_n^T of every constraint element touching their column frame."""
+        tc, ts, _, _, _, fcount, fstart = touch
+        k = self.frame_k
         vf, vg = self._velocity_pairs()
         ok = (k[vf] > 0) & (k[vg] > 0)
         vf, vg = vf[ok], vg[ok]
@@ -156,43 +220,24 @@ class Layout:
         pair, within = _ragged(fcount[vg])
         ent = fstart[vg][pair] + within
         tgt = self.blocks(self.frame_groups(vf[pair]), self.xi_groups(tc[ent]))
-        velprod = np.stack([tgt, src[pair], k[vf][pair], k[vg][pair], tc[ent], ts[ent]],
-                           axis=1) if len(ent) else np.zeros((0, 6), np.int64)
-        # pairs of constraint elements sharing a frame
+        return np.stack([tgt, src[pair], k[vf][pair], k[vg][pair], tc[ent], ts[ent]],
+                        axis=1) if len(ent) else np.zeros((0, 6), np.int64)
+
+    def _xiprod(self, touch: tuple) -> np.ndarray:
+        """Register the index-2 blocks ``-B B_n^T`` (xi rows and columns) of the pairs of
+        constraint elements sharing a frame and return their products."""
+        tc, ts, tf, tcount, tstart, _, _ = touch
         grp, w = _ragged(tcount * tcount)
         i, j = w // tcount[grp], w % tcount[grp]
         e1, e2 = tstart[grp] + i, tstart[grp] + j
         tgt = self.blocks(self.xi_groups(tc[e1]), self.xi_groups(tc[e2]))
-        xiprod = np.stack([tgt, k[tf[e1]], tc[e1], ts[e1], tc[e2], ts[e2]], axis=1) \
+        return np.stack([tgt, self.frame_k[tf[e1]], tc[e1], ts[e1], tc[e2], ts[e2]], axis=1) \
             if len(e1) else np.zeros((0, 6), np.int64)
-        xc = self.xi_groups(con_c)
-        self.blocks(xc, xc)
-        self.nvals2 = self.n
-        # --- relative coordinates of non-abelian joints: log coordinates
-        jk = np.asarray(s.joint_k, np.int64)
-        logs = np.flatnonzero((jk > 0) & ~np.asarray(s.joint_abelian, bool)) if m \
-            else np.zeros(0, np.int64)
-        lA = np.zeros((len(logs), 6, 6))
-        for kk in sorted(set(jk[logs].tolist())):  # (not np.unique: it imports numpy.ma)
-            sel = np.flatnonzero(jk[logs] == kk)
-            lA[sel, :kk, :] = np.linalg.pinv(A[M + logs[sel]][:, :, :kk])
-        needed = np.zeros(F, bool)
-        if self._logs:
-            needed[np.concatenate(self._logs)] = True
-        self.tables = dict(
-            nq=nq, nm=nm, nu=s.inputs.nu, nvals=self.nvals, nvals2=self.nvals2,
-            frame_dof=dof, frame_k=k, frame_node=(np.arange(F) < M).astype(np.int64),
-            frame_A=A, frame_joint=(np.arange(F) >= M).astype(np.int64),
-            elements=[(key, {n: np.ascontiguousarray(v) for n, v in t.items()})
-                      for key, t in elements],
-            velprod=np.ascontiguousarray(velprod, np.int64).reshape(-1, 6),
-            xiprod=np.ascontiguousarray(xiprod, np.int64).reshape(-1, 6),
-            log_frame=(M + logs).astype(np.int64),
-            log_H0inv=(np.ascontiguousarray(lie.inverse(s.joint_H0[logs])) if len(logs)
-                       else np.zeros((0, 4, 4))),
-            log_Apinv=lA,
-            log_needed=needed[M + logs].astype(np.int64))
-        # --- the blocks in value order
+
+    def _blocks_in_value_order(self) -> np.ndarray:
+        """Set ``blocks_table`` and ``nblocks3`` from the registered blocks (ending the
+        registration); returns the row group code of every block."""
+        G, gstart, gsize = self._G, self._gstart, self._gsize
         self._merge()
         order = np.argsort(self._so, kind="stable")
         keys, offs = self._sk[order], self._so[order]
@@ -202,6 +247,12 @@ class Layout:
             if len(keys) else np.zeros((0, 5), np.int64)
         self.nblocks3 = int(np.searchsorted(offs, self.nvals))
         del self._sk, self._so, self._pending
+        return rg
+
+    def _lu_groups(self, rg: np.ndarray, con_c: np.ndarray, con_f: np.ndarray) -> tuple:
+        """The block-group id of every row of the index-2 and of the index-3 matrix."""
+        G, gstart, gsize = self._G, self._gstart, self._gsize
+        nq, nm = self.s.nq, self.s.nm
         # ordering hint for the sparse LU: each constraint element's rows (multipliers, xi) go in
         # one group with the frames it couples that no earlier constraint took (for a tree or a
         # chain: a joint with its own coordinates and its child node), so the ordering sees the
@@ -221,7 +272,7 @@ class Layout:
         groups = np.zeros(nq + 2 * nm, np.int64)
         idx = np.repeat(gstart[gid], gsize[gid]) + _ragged(gsize[gid])[1]
         groups[idx] = np.repeat(owner[gid], gsize[gid])
-        self.groups2, self.groups3 = groups, groups[:nq + nm]
+        return groups, groups[:nq + nm]
 
     # --- what element modules call -----------------------------------------------------------
     def frame_group(self, f: int):

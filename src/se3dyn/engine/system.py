@@ -173,14 +173,45 @@ def compile_model(model: Model) -> System:
     if not isinstance(model, Model):
         raise ModelError("compile", "model", "an se3dyn.Model (from ModelBuilder.build())",
                          type(model).__name__)
-    nodes = model.nodes
+    nodes, joints = model.nodes, model.joints
     M = len(nodes)
     nidx = {n.name: i for i, n in enumerate(nodes)}
-    node_fixed = np.array([n.fixed for n in nodes], dtype=bool)
-    node_dofadr = -np.ones(M, dtype=np.int64)
-    nq = 0
     labels: list[str] = []
     items: list[str] = []
+    node = _number_nodes(nodes, labels, items)
+    R0, node_tables = _node_tables(nodes)
+    H0 = node_tables["node_H0"]
+    joint, nq = _number_joints(joints, node["nq"], labels, items)
+    ja, jb, has_at, frames = _joint_frames(joints, nidx, H0)
+    abelian = _abelian(joints)
+    groups = _joint_groups(joint["joint_k"], _joint_bases(joints, R0, jb, has_at), ja, jb,
+                           node["node_fixed"], node["node_dofadr"], joint["joint_dofadr"],
+                           joint["joint_multadr"], abelian, frames["joint_H0"])
+    pos = H0[:, :3, 3]
+    L = float(np.max(np.linalg.norm(pos - pos.mean(axis=0), axis=1))) if M else 1.0
+    sysd = dict(
+        model=model, nq=nq, nm=6 * len(joints), node_names=tuple(n.name for n in nodes),
+        node_fixed=node["node_fixed"], node_dofadr=node["node_dofadr"],
+        node_free=node["node_free"], node_dofidx=node["node_dofidx"], **node_tables,
+        joint_names=tuple(j.name for j in joints), joint_type=tuple(j.type for j in joints),
+        **joint, joint_a=ja, joint_b=jb, **frames, joint_abelian=abelian, groups=groups,
+        **_dof_tables(joints, joint["joint_dofadr"], nq),
+        gravity=model.gravity.copy(), labels=tuple(labels), items=tuple(items),
+        length_scale=max(L, 1.0), pattern={}, node_com=_node_com(nodes, H0),
+        springs=_springs(model, nidx, H0), beams=_beams(model, nidx))
+    _lump_beam_masses(sysd, model, nidx)
+    sysd["inputs"] = _Inputs(sysd, model)
+    return System(**sysd)
+
+
+def _number_nodes(nodes, labels: list, items: list) -> dict:
+    """Number the 6 unknowns of every free node (Eq. (14)), appending their row labels.
+
+    Returns ``node_fixed``, ``node_dofadr``, ``node_free``, ``node_dofidx`` and the count ``nq``.
+    """
+    node_fixed = np.array([n.fixed for n in nodes], dtype=bool)
+    node_dofadr = -np.ones(len(nodes), dtype=np.int64)
+    nq = 0
     for i, n in enumerate(nodes):
         if not n.fixed:
             node_dofadr[i] = nq
@@ -189,6 +220,14 @@ def compile_model(model: Model) -> System:
             items += [f"node '{n.name}'"] * 6
     node_free = np.flatnonzero(~node_fixed)
     node_dofidx = node_dofadr[node_free][:, None] + np.arange(6)
+    return dict(node_fixed=node_fixed, node_dofadr=node_dofadr, node_free=node_free,
+                node_dofidx=node_dofidx, nq=nq)
+
+
+def _node_tables(nodes) -> tuple[np.ndarray, dict]:
+    """Initial orientations R0 and the node tables ``node_H0``, ``node_mass``, ``node_J``
+    (material frame) and ``node_v0`` (material velocities)."""
+    M = len(nodes)
     R0 = np.array([n.orientation for n in nodes])
     H0 = lie.make_frame(R0, np.array([n.position for n in nodes]))
     node_mass = np.array([n.mass for n in nodes])
@@ -197,8 +236,12 @@ def compile_model(model: Model) -> System:
     vin = np.array([n.velocity for n in nodes]).reshape(M, 6)
     node_v0 = np.concatenate([np.einsum("nji,nj->ni", R0, vin[:, :3]),
                               np.einsum("nji,nj->ni", R0, vin[:, 3:])], axis=1)
+    return R0, dict(node_H0=H0, node_mass=node_mass, node_J=node_J, node_v0=node_v0)
 
-    joints = model.joints
+
+def _number_joints(joints, nq: int, labels: list, items: list) -> tuple[dict, int]:
+    """Number the k relative increments of every joint after the node unknowns and its 6
+    multipliers (Eq. (55)), appending their row labels; returns the joint tables and ``nq``."""
     m = len(joints)
     joint_k = np.array([j.k for j in joints], dtype=np.int64)
     joint_dofadr = -np.ones(m, dtype=np.int64)
@@ -208,11 +251,17 @@ def compile_model(model: Model) -> System:
             nq += j.k
             labels += [f"joint '{j.name}' alpha_{c}" for c in range(j.k)]
             items += [f"joint '{j.name}'"] * j.k
-    nm = 6 * m
     for j in joints:
         labels += [f"joint '{j.name}' constraint {c}" for c in range(6)]
         items += [f"joint '{j.name}'"] * 6
     joint_multadr = 6 * np.arange(m, dtype=np.int64)
+    return dict(joint_k=joint_k, joint_dofadr=joint_dofadr, joint_multadr=joint_multadr), nq
+
+
+def _joint_frames(joints, nidx: dict, H0: np.ndarray) -> tuple:
+    """Node indices of the joints, which have an attachment point, and the frames
+    ``joint_H0``, ``joint_XA``, ``joint_XB`` (Sec. 5.2)."""
+    m = len(joints)
     ja = np.array([nidx[j.node_a] for j in joints], dtype=np.int64)
     jb = np.array([nidx[j.node_b] for j in joints], dtype=np.int64)
     joint_H0 = lie.compose(lie.inverse(H0[ja]), H0[jb]) if m else np.zeros((0, 4, 4))
@@ -229,6 +278,11 @@ def compile_model(model: Model) -> System:
     for jj, j in enumerate(joints):  # joints of a condensed model (se3dyn.dynamics.condense)
         if j.frames is not None:
             joint_XA[jj], joint_XB[jj], joint_H0[jj] = j.frames[:3]
+    return ja, jb, has_at, dict(joint_H0=joint_H0, joint_XA=joint_XA, joint_XB=joint_XB)
+
+
+def _joint_bases(joints, R0: np.ndarray, jb: np.ndarray, has_at: np.ndarray) -> list:
+    """The subalgebra bases A of the joints in the material frame of node B (Eq. (9))."""
     # A in the material frame of node B: e -> (R_B0^T e_U, R_B0^T e_Omega); with ``at`` the
     # attachment frame of B has the inertial orientation at t0, so A is already material
     A_mat = []
@@ -241,8 +295,13 @@ def compile_model(model: Model) -> System:
             continue
         Rb = R0[jb[jj]]
         A_mat.append(np.concatenate([Rb.T @ j.A[:3], Rb.T @ j.A[3:]], axis=0))
+    return A_mat
+
+
+def _abelian(joints) -> np.ndarray:
+    """(m,) bool: whether each joint's subalgebra is abelian."""
     abelian_of: dict = {}  # the bracket test once per distinct A (large models repeat a few)
-    abelian = np.zeros(m, dtype=bool)
+    abelian = np.zeros(len(joints), dtype=bool)
     for jj, j in enumerate(joints):
         A_ = np.asarray(j.A)
         key = (A_.shape, A_.dtype.str, A_.tobytes())
@@ -250,7 +309,12 @@ def compile_model(model: Model) -> System:
         if ab is None:
             ab = abelian_of[key] = bool(j.abelian)
         abelian[jj] = ab
+    return abelian
 
+
+def _dof_tables(joints, joint_dofadr: np.ndarray, nq: int) -> dict:
+    """The (nq,) tables of the force elements on joint unknowns and the initial coordinates
+    ``alpha0``, zero on node unknowns."""
     dof_K = np.zeros(nq)
     dof_ref = np.zeros(nq)
     dof_C = np.zeros(nq)
@@ -271,7 +335,13 @@ def compile_model(model: Model) -> System:
         if j.control is not None:
             dof_kp[d] = j.control.kp
             dof_kd[d] = j.control.kd
+    return dict(dof_stiffness=dof_K, dof_reference=dof_ref, dof_damping=dof_C, dof_kp=dof_kp,
+                dof_kd=dof_kd, dof_is_joint=dof_is_joint, alpha0=alpha0)
 
+
+def _joint_groups(joint_k, A_mat, ja, jb, node_fixed, node_dofadr, joint_dofadr,
+                  joint_multadr, abelian, joint_H0) -> tuple[JointGroup, ...]:
+    """Batch the joints by their number k of relative coordinates (:class:`JointGroup`)."""
     groups = []
     for k in sorted(set(joint_k.tolist())):
         ids = np.flatnonzero(joint_k == k)
@@ -285,26 +355,7 @@ def compile_model(model: Model) -> System:
             k=k, ids=ids, A=A, a=ja[ids], b=jb[ids], dof_a=dof_a, dof_b=dof_b,
             jdof=jdof.reshape(len(ids), k), mult=joint_multadr[ids][:, None] + np.arange(6),
             abelian=abelian[ids], H0=joint_H0[ids]))
-
-    pos = H0[:, :3, 3]
-    L = float(np.max(np.linalg.norm(pos - pos.mean(axis=0), axis=1))) if M else 1.0
-    sysd = dict(
-        model=model, nq=nq, nm=nm, node_names=tuple(n.name for n in nodes),
-        node_fixed=node_fixed, node_dofadr=node_dofadr, node_free=node_free,
-        node_dofidx=node_dofidx, node_mass=node_mass, node_J=node_J, node_H0=H0,
-        node_v0=node_v0, joint_names=tuple(j.name for j in joints),
-        joint_type=tuple(j.type for j in joints), joint_k=joint_k, joint_dofadr=joint_dofadr,
-        joint_multadr=joint_multadr, joint_a=ja, joint_b=jb, joint_H0=joint_H0,
-        joint_XA=joint_XA, joint_XB=joint_XB,
-        joint_abelian=abelian, groups=tuple(groups), dof_stiffness=dof_K, dof_reference=dof_ref,
-        dof_damping=dof_C, dof_kp=dof_kp, dof_kd=dof_kd, dof_is_joint=dof_is_joint,
-        alpha0=alpha0,
-        gravity=model.gravity.copy(), labels=tuple(labels), items=tuple(items),
-        length_scale=max(L, 1.0), pattern={}, node_com=_node_com(nodes, H0),
-        springs=_springs(model, nidx, H0), beams=_beams(model, nidx))
-    _lump_beam_masses(sysd, model, nidx)
-    sysd["inputs"] = _Inputs(sysd, model)
-    return System(**sysd)
+    return tuple(groups)
 
 
 def system_of(model: Model | System) -> System:

@@ -539,8 +539,8 @@ class ModelBuilder:
             Axial and torsional stiffness (N, N m^2), > 0.
         GA, EI : float or (float, float)
             Shear stiffness along section axes 2, 3 (N) and bending stiffness about them
-            (N m^2): one number for an isotropic section, or a pair. See :mod:`se3dyn.model.sections`
-            for the values of common sections.
+            (N m^2): one number for an isotropic section, or a pair. See
+            :mod:`se3dyn.model.sections` for the values of common sections.
         mass_per_length : float
             kg/m, >= 0; lumped: each element puts half its mass and rotary inertia on each of
             its nodes.
@@ -571,114 +571,14 @@ class ModelBuilder:
                                      or isinstance(elements, bool) or elements < 1
                                      or elements > 100000):
             raise ModelError(item, "elements", "an integer >= 1", elements)
-
-        def nums(fld, v, sizes, what, positive):
-            """v as an array of one of ``sizes`` (a single number fills the first size)."""
-            try:
-                if isinstance(v, bool | str):
-                    raise TypeError(v)
-                a = np.asarray(v, dtype=float)
-            except (TypeError, ValueError):
-                raise ModelError(item, fld, what, v) from None
-            if a.ndim == 0 and sizes[0] > 1:
-                a = np.full(sizes[0], float(a))
-            ok = ((a.ndim == 0 and sizes[0] == 1)
-                  or (a.ndim == 1 and a.shape[0] in sizes and a.shape[0] > 1))
-            if (not ok or not np.all(np.isfinite(a)) or np.any(np.abs(a) > MAX_ABS)
-                    or np.any(a <= 0 if positive else a < 0)):
-                raise ModelError(item, fld, what, v)
-            return a
-
-        ea = float(nums("EA", EA, (1,), "a positive number (N)", True))
-        gj = float(nums("GJ", GJ, (1,), "a positive number (N m^2)", True))
-        ga = nums("GA", GA, (2,), "a positive number or a pair (GA2, GA3) (N)", True)
-        ei = nums("EI", EI, (2,), "a positive number or a pair (EI2, EI3) (N m^2)", True)
-        Kd = np.array([ea, ga[0], ga[1], gj, ei[0], ei[1]])
-        try:
-            mpl = float(mass_per_length)
-        except (TypeError, ValueError):
-            raise ModelError(item, "mass_per_length", "a non-negative number (kg/m)",
-                             mass_per_length) from None
-        if (isinstance(mass_per_length, bool) or not math.isfinite(mpl) or mpl < 0
-                or mpl > MAX_ABS):
-            raise ModelError(item, "mass_per_length", "a non-negative number (kg/m)",
-                             mass_per_length)
-        rot = (np.zeros(3) if rotary_inertia is None
-               else nums("rotary_inertia", rotary_inertia, (3,), "three non-negative values "
-                         "(kg m) about section axes 1, 2, 3", False))
-        if mpl > 0 and np.any(rot <= 0):
-            raise ModelError(item, "rotary_inertia", "three positive values (kg m) for a beam "
-                             "with mass", rotary_inertia, "density * (I2 + I3, I2, I3); the "
-                             "helpers of se3dyn.model.sections give them")
-        if mpl == 0 and np.any(rot != 0):
-            raise ModelError(item, "rotary_inertia", "no rotary inertia without a mass",
-                             rotary_inertia, "give mass_per_length")
-        if rot[0] > (rot[1] + rot[2]) * (1 + 1e-9) or rot[1] > (rot[0] + rot[2]) * (1 + 1e-9) \
-                or rot[2] > (rot[0] + rot[1]) * (1 + 1e-9):
-            raise ModelError(item, "rotary_inertia", "moments satisfying the triangle "
-                             "inequality (as density * (I2 + I3, I2, I3) does)", rotary_inertia)
-        Dd = nums("damping", damping, (1, 6), "a non-negative number beta (s, D = beta K) or "
-                  "the 6 non-negative diagonal entries of D", False)
-        Dd = Dd * Kd if Dd.ndim == 0 else Dd
+        Kd, Dd, mpl, rot = _beam_section(item, EA, GA, GJ, EI, mass_per_length, rotary_inertia,
+                                         damping)
         if frames is None:
             n = 1 if elements is None else int(elements)
-            xa, xb = na.position, nb.position
-            Lc = float(np.linalg.norm(xb - xa))
-            if Lc == 0:
-                raise ModelError(item, "node_b", "a node at another position than node_a",
-                                 node_b, "the beam has zero length")
-            e1 = (xb - xa) / Lc
-            if axis2 is None:
-                a2 = np.cross([0.0, 0.0, 1.0], e1)
-                if np.linalg.norm(a2) < 1e-6:
-                    a2 = np.array([0.0, 1.0, 0.0])
-            else:
-                a2 = _vec(axis2, 3, item, "axis2")
-            a2 = a2 - (a2 @ e1) * e1
-            if np.linalg.norm(a2) < 1e-9 * max(1.0, float(np.linalg.norm(a2 + e1))):
-                raise ModelError(item, "axis2", "a direction not parallel to the beam", axis2)
-            e2 = a2 / np.linalg.norm(a2)
-            R = np.column_stack([e1, e2, np.cross(e1, e2)])
-            F = np.broadcast_to(np.eye(4), (n + 1, 4, 4)).copy()
-            F[:, :3, :3] = R
-            F[:, :3, 3] = xa + np.linspace(0.0, 1.0, n + 1)[:, None] * (xb - xa)
+            F = _straight_frames(item, na, nb, node_b, n, axis2)
         else:
-            if axis2 is not None:
-                raise ModelError(item, "axis2", "no axis2 with frames (the frames give the "
-                                 "section axes)", axis2)
-            try:
-                F = np.array(frames, dtype=float)
-            except (TypeError, ValueError):
-                raise ModelError(item, "frames", "an array of 4x4 frames, shape (n + 1, 4, 4)",
-                                 frames) from None
-            if F.ndim != 3 or F.shape[1:] != (4, 4) or len(F) < 2 or not np.all(np.isfinite(F)):
-                raise ModelError(item, "frames", "an array of 4x4 frames, shape (n + 1, 4, 4)",
-                                 frames)
-            n = len(F) - 1
-            if elements is not None and elements != n:
-                raise ModelError(item, "elements", f"{n} (the number of frames minus one) or "
-                                 "nothing", elements)
-            for i in range(n + 1):
-                _rotation(F[i, :3, :3], item, f"frames[{i}]")
-                if np.any(F[i, 3] != [0, 0, 0, 1]):
-                    raise ModelError(item, f"frames[{i}]", "a homogeneous frame (last row "
-                                     "0, 0, 0, 1)", F[i])
-            scale = max(1.0, float(np.abs(F[:, :3, 3]).max()))
-            for i, nd in ((0, na), (n, nb)):
-                if np.linalg.norm(F[i, :3, 3] - nd.position) > 1e-9 * scale:
-                    raise ModelError(item, f"frames[{i}]", f"a frame at the position of node "
-                                     f"{nd.name!r} {nd.position.tolist()}", F[i, :3, 3])
-        from se3dyn import lie
-        for i in range(n):
-            d0 = lie.log_se3(lie.inverse(F[i]) @ F[i + 1])
-            ang = float(np.linalg.norm(d0[3:]))
-            if ang >= 0.95 * math.pi:
-                raise ModelError(item, "frames", "consecutive frames less than 0.95 pi apart "
-                                 "in rotation", f"{ang:.4g} rad between frames {i} and {i + 1}",
-                                 "use more elements")
-            if np.linalg.norm(d0[:3]) == 0:
-                raise ModelError(item, "frames", "consecutive frames at distinct positions",
-                                 f"element {i} has zero length")
+            F, n = _given_frames(item, na, nb, frames, elements, axis2)
+        _check_frame_steps(item, F, n)
         names = [node_a] + [f"{name}/{i}" for i in range(1, n)] + [node_b]
         for nm_ in names[1:-1]:
             _check_name("node", nm_)
@@ -690,12 +590,7 @@ class ModelBuilder:
         if na.fixed and nb.fixed and n == 1:
             raise ModelError(item, "node_b", "at least one free node", node_b,
                              "both nodes are fixed: the element does nothing")
-        X = np.broadcast_to(np.eye(4), (n + 1, 4, 4)).copy()
-        for i, nd in ((0, na), (n, nb)):
-            H0 = np.eye(4)
-            H0[:3, :3], H0[:3, 3] = nd.orientation, nd.position
-            X[i] = lie.inverse(H0) @ F[i]
-            X[i, :3, 3] = 0.0  # the node sits on the beam end
+        X = _end_offsets(na, nb, F, n)
         for i in range(1, n):
             vel = np.zeros(6)
             if initial_velocity == "rigid":
@@ -831,3 +726,156 @@ class ModelBuilder:
                      self._name, tuple(self._springs.values()),
                      visuals=tuple(self._visuals.values()),
                      bushings=tuple(self._bushings.values()), beams=tuple(self._beams.values()))
+
+
+# ---------------------------------------------------------------------------------------------
+# ModelBuilder.beam: validation of the section, the reference frames and the end offsets
+def _beam_numbers(item: str, fld: str, v: Any, sizes: tuple, what: str,
+                  positive: bool) -> np.ndarray:
+    """v as an array of one of ``sizes`` (a single number fills the first size)."""
+    try:
+        if isinstance(v, bool | str):
+            raise TypeError(v)
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(item, fld, what, v) from None
+    if a.ndim == 0 and sizes[0] > 1:
+        a = np.full(sizes[0], float(a))
+    ok = ((a.ndim == 0 and sizes[0] == 1)
+          or (a.ndim == 1 and a.shape[0] in sizes and a.shape[0] > 1))
+    if (not ok or not np.all(np.isfinite(a)) or np.any(np.abs(a) > MAX_ABS)
+            or np.any(a <= 0 if positive else a < 0)):
+        raise ModelError(item, fld, what, v)
+    return a
+
+
+def _beam_section(item: str, EA: Any, GA: Any, GJ: Any, EI: Any, mass_per_length: Any,
+                  rotary_inertia: Any, damping: Any) -> tuple:
+    """The checked section of a beam: the diagonals of K and D (6,), the mass per length and
+    the rotary inertia (3,)."""
+    ea = float(_beam_numbers(item, "EA", EA, (1,), "a positive number (N)", True))
+    gj = float(_beam_numbers(item, "GJ", GJ, (1,), "a positive number (N m^2)", True))
+    ga = _beam_numbers(item, "GA", GA, (2,), "a positive number or a pair (GA2, GA3) (N)", True)
+    ei = _beam_numbers(item, "EI", EI, (2,), "a positive number or a pair (EI2, EI3) (N m^2)",
+                       True)
+    Kd = np.array([ea, ga[0], ga[1], gj, ei[0], ei[1]])
+    mpl, rot = _beam_mass(item, mass_per_length, rotary_inertia)
+    Dd = _beam_numbers(item, "damping", damping, (1, 6), "a non-negative number beta (s, "
+                       "D = beta K) or the 6 non-negative diagonal entries of D", False)
+    Dd = Dd * Kd if Dd.ndim == 0 else Dd
+    return Kd, Dd, mpl, rot
+
+
+def _beam_mass(item: str, mass_per_length: Any, rotary_inertia: Any) -> tuple[float,
+                                                                               np.ndarray]:
+    """The checked mass per length and rotary inertia (3,) of a beam's section."""
+    try:
+        mpl = float(mass_per_length)
+    except (TypeError, ValueError):
+        raise ModelError(item, "mass_per_length", "a non-negative number (kg/m)",
+                         mass_per_length) from None
+    if (isinstance(mass_per_length, bool) or not math.isfinite(mpl) or mpl < 0
+            or mpl > MAX_ABS):
+        raise ModelError(item, "mass_per_length", "a non-negative number (kg/m)",
+                         mass_per_length)
+    rot = (np.zeros(3) if rotary_inertia is None
+           else _beam_numbers(item, "rotary_inertia", rotary_inertia, (3,), "three "
+                              "non-negative values (kg m) about section axes 1, 2, 3", False))
+    if mpl > 0 and np.any(rot <= 0):
+        raise ModelError(item, "rotary_inertia", "three positive values (kg m) for a beam "
+                         "with mass", rotary_inertia, "density * (I2 + I3, I2, I3); the "
+                         "helpers of se3dyn.model.sections give them")
+    if mpl == 0 and np.any(rot != 0):
+        raise ModelError(item, "rotary_inertia", "no rotary inertia without a mass",
+                         rotary_inertia, "give mass_per_length")
+    if rot[0] > (rot[1] + rot[2]) * (1 + 1e-9) or rot[1] > (rot[0] + rot[2]) * (1 + 1e-9) \
+            or rot[2] > (rot[0] + rot[1]) * (1 + 1e-9):
+        raise ModelError(item, "rotary_inertia", "moments satisfying the triangle "
+                         "inequality (as density * (I2 + I3, I2, I3) does)", rotary_inertia)
+    return mpl, rot
+
+
+def _straight_frames(item: str, na: NodeSpec, nb: NodeSpec, node_b: str, n: int,
+                     axis2: Any) -> np.ndarray:
+    """The section frames (n + 1, 4, 4) of a straight beam from node a to node b."""
+    xa, xb = na.position, nb.position
+    Lc = float(np.linalg.norm(xb - xa))
+    if Lc == 0:
+        raise ModelError(item, "node_b", "a node at another position than node_a",
+                         node_b, "the beam has zero length")
+    e1 = (xb - xa) / Lc
+    if axis2 is None:
+        a2 = np.cross([0.0, 0.0, 1.0], e1)
+        if np.linalg.norm(a2) < 1e-6:
+            a2 = np.array([0.0, 1.0, 0.0])
+    else:
+        a2 = _vec(axis2, 3, item, "axis2")
+    a2 = a2 - (a2 @ e1) * e1
+    if np.linalg.norm(a2) < 1e-9 * max(1.0, float(np.linalg.norm(a2 + e1))):
+        raise ModelError(item, "axis2", "a direction not parallel to the beam", axis2)
+    e2 = a2 / np.linalg.norm(a2)
+    R = np.column_stack([e1, e2, np.cross(e1, e2)])
+    F = np.broadcast_to(np.eye(4), (n + 1, 4, 4)).copy()
+    F[:, :3, :3] = R
+    F[:, :3, 3] = xa + np.linspace(0.0, 1.0, n + 1)[:, None] * (xb - xa)
+    return F
+
+
+def _given_frames(item: str, na: NodeSpec, nb: NodeSpec, frames: Any, elements: Any,
+                  axis2: Any) -> tuple[np.ndarray, int]:
+    """The checked section frames (n + 1, 4, 4) of a curved or pre-twisted beam, and n."""
+    if axis2 is not None:
+        raise ModelError(item, "axis2", "no axis2 with frames (the frames give the "
+                         "section axes)", axis2)
+    try:
+        F = np.array(frames, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(item, "frames", "an array of 4x4 frames, shape (n + 1, 4, 4)",
+                         frames) from None
+    if F.ndim != 3 or F.shape[1:] != (4, 4) or len(F) < 2 or not np.all(np.isfinite(F)):
+        raise ModelError(item, "frames", "an array of 4x4 frames, shape (n + 1, 4, 4)",
+                         frames)
+    n = len(F) - 1
+    if elements is not None and elements != n:
+        raise ModelError(item, "elements", f"{n} (the number of frames minus one) or "
+                         "nothing", elements)
+    for i in range(n + 1):
+        _rotation(F[i, :3, :3], item, f"frames[{i}]")
+        if np.any(F[i, 3] != [0, 0, 0, 1]):
+            raise ModelError(item, f"frames[{i}]", "a homogeneous frame (last row "
+                             "0, 0, 0, 1)", F[i])
+    scale = max(1.0, float(np.abs(F[:, :3, 3]).max()))
+    for i, nd in ((0, na), (n, nb)):
+        if np.linalg.norm(F[i, :3, 3] - nd.position) > 1e-9 * scale:
+            raise ModelError(item, f"frames[{i}]", f"a frame at the position of node "
+                             f"{nd.name!r} {nd.position.tolist()}", F[i, :3, 3])
+    return F, n
+
+
+def _check_frame_steps(item: str, F: np.ndarray, n: int) -> None:
+    """Refuse consecutive section frames 0.95 pi or more apart in rotation, or at one
+    position."""
+    from se3dyn import lie
+    for i in range(n):
+        d0 = lie.log_se3(lie.inverse(F[i]) @ F[i + 1])
+        ang = float(np.linalg.norm(d0[3:]))
+        if ang >= 0.95 * math.pi:
+            raise ModelError(item, "frames", "consecutive frames less than 0.95 pi apart "
+                             "in rotation", f"{ang:.4g} rad between frames {i} and {i + 1}",
+                             "use more elements")
+        if np.linalg.norm(d0[:3]) == 0:
+            raise ModelError(item, "frames", "consecutive frames at distinct positions",
+                             f"element {i} has zero length")
+
+
+def _end_offsets(na: NodeSpec, nb: NodeSpec, F: np.ndarray, n: int) -> np.ndarray:
+    """The section offsets ``X = H0^-1 F`` (n + 1, 4, 4) of the beam's nodes: the end nodes
+    keep their own frames, sitting on the beam ends; the identity for the others."""
+    from se3dyn import lie
+    X = np.broadcast_to(np.eye(4), (n + 1, 4, 4)).copy()
+    for i, nd in ((0, na), (n, nb)):
+        H0 = np.eye(4)
+        H0[:3, :3], H0[:3, 3] = nd.orientation, nd.position
+        X[i] = lie.inverse(H0) @ F[i]
+        X[i, :3, 3] = 0.0  # the node sits on the beam end
+    return X

@@ -386,6 +386,58 @@ def execute_plan(plan: SweepPlan, *, workers: int | None = None, scheduler: str 
                  log: Callable[[str], None] | None = None):
     """Run a plan made by :func:`prepare`; the options and the result are those of
     :func:`run_sweep`."""
+    _check_options(plan, workers, scheduler, client, resume, retry_failed, progress, as_frame,
+                   log)
+    say = log or (lambda _msg: None)
+    out_p, ctx, total = plan.out, plan.ctx, len(plan.runs)
+    rows: dict[int, dict] = {}
+    journal = None
+    if out_p is not None:
+        rows, journal = _open_out(plan, resume, say)
+    todo = [i for i in range(total)
+            if out_p is None or not _finished(rows.get(i), out_p, ctx, retry_failed)]
+    already = total - len(todo)
+    if plan.seed is not None:
+        say(f"  {plan.definition['method']} sampling, seed {plan.seed}")
+    if already:
+        say(f"  {already} of {total} runs already done; {len(todo)} to run")
+    show = sys.stderr.isatty() if progress is None else bool(progress)
+    prog = Progress(total, already, show)
+    cluster = own = scratch = None
+    name = f"se3dyn-sweep-{uuid.uuid4().hex[:12]}"
+    interrupted = False
+    t0 = time.perf_counter()
+    try:
+        if todo:
+            _need_distributed()
+            if client is None:
+                client, cluster, desc, scratch = _client(scheduler, workers)
+                own = client
+                say(f"  on a {desc}")
+            futures = _submit(client, name, plan, todo)
+            interrupted = _collect_all(client, futures, plan, rows, journal, prog)
+    finally:
+        prog.close()
+        if journal is not None:
+            journal.close()
+        _release(client, bool(todo), name, own, cluster, scratch)
+        if out_p is not None:
+            _clean_tmp(out_p / "runs")
+            table_rows = [rows[i] for i in sorted(rows)]
+            write_summary(out_p, table_rows, plan.cols)
+    wall = time.perf_counter() - t0
+    done = len(rows)
+    if interrupted:
+        raise SweepInterrupted(done, total, out_p)
+    failed = sum(1 for r in rows.values() if r.get("status") != "ok")
+    say(f"  {total} runs: {total - failed} ok, {failed} failed ({len(todo)} executed in "
+        f"{wall:.1f} s)")
+    return to_table([rows[i] for i in sorted(rows)], plan.cols, as_frame)
+
+
+def _check_options(plan: SweepPlan, workers, scheduler, client, resume, retry_failed, progress,
+                   as_frame, log) -> None:
+    """Refuse bad options of :func:`execute_plan`."""
     for name, value in (("resume", resume), ("retry_failed", retry_failed),
                         ("progress", progress), ("as_frame", as_frame)):
         if not (isinstance(value, bool) or value is None and name in ("progress", "as_frame")):
@@ -407,106 +459,89 @@ def execute_plan(plan: SweepPlan, *, workers: int | None = None, scheduler: str 
     if retry_failed and not resume:
         raise SweepSpecError("sweep", "retry_failed", "resume=True as well (it runs the failed "
                              "runs of a resumed sweep again)", retry_failed)
-    say = log or (lambda _msg: None)
-    out_p, ctx, total = plan.out, plan.ctx, len(plan.runs)
-    rows: dict[int, dict] = {}
-    journal = None
-    if out_p is not None:
-        if out_p.exists() and not out_p.is_dir():
-            raise SweepSpecError("--out", "out", "a folder", str(out_p))
-        stored = _check_definition(out_p, plan.definition, resume)
-        if resume and stored is None:
-            say(f"  nothing to resume in {out_p}: a new sweep")
-        if stored is None and (out_p / JOURNAL).exists():
-            (out_p / JOURNAL).unlink()  # rows of no known sweep
-        try:
-            (out_p / "runs").mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise SweepSpecError("--out", "out", "a folder that can be created",
-                                 str(out_p), exc.strerror or "") from None
-        (out_p / DEFINITION).write_text(json.dumps(plan.definition, indent=1) + "\n",
-                                        encoding="utf-8")
-        journal = Journal(out_p / JOURNAL)
-        rows = {r: row for r, row in journal.read().items() if 0 <= r < total}
-        _clean_tmp(out_p / "runs")
-    todo = [i for i in range(total)
-            if out_p is None or not _finished(rows.get(i), out_p, ctx, retry_failed)]
-    already = total - len(todo)
-    if plan.seed is not None:
-        say(f"  {plan.definition['method']} sampling, seed {plan.seed}")
-    if already:
-        say(f"  {already} of {total} runs already done; {len(todo)} to run")
-    show = sys.stderr.isatty() if progress is None else bool(progress)
-    prog = Progress(total, already, show)
-    cluster = own = scratch = None
-    name = f"se3dyn-sweep-{uuid.uuid4().hex[:12]}"
-    interrupted = False
-    t0 = time.perf_counter()
+
+
+def _open_out(plan: SweepPlan, resume: bool, say) -> tuple[dict[int, dict], Journal]:
+    """The output folder made (the definition written, a stale journal dropped): the rows
+    of its journal (resume) and the journal opened for appending."""
+    out_p, total = plan.out, len(plan.runs)
+    if out_p.exists() and not out_p.is_dir():
+        raise SweepSpecError("--out", "out", "a folder", str(out_p))
+    stored = _check_definition(out_p, plan.definition, resume)
+    if resume and stored is None:
+        say(f"  nothing to resume in {out_p}: a new sweep")
+    if stored is None and (out_p / JOURNAL).exists():
+        (out_p / JOURNAL).unlink()  # rows of no known sweep
     try:
-        if todo:
-            _need_distributed()
-            if client is None:
-                client, cluster, desc, scratch = _client(scheduler, workers)
-                own = client
-                say(f"  on a {desc}")
-            from se3dyn.sweep.worker import SweepPlugin, run_task
+        (out_p / "runs").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SweepSpecError("--out", "out", "a folder that can be created",
+                             str(out_p), exc.strerror or "") from None
+    (out_p / DEFINITION).write_text(json.dumps(plan.definition, indent=1) + "\n",
+                                    encoding="utf-8")
+    journal = Journal(out_p / JOURNAL)
+    rows = {r: row for r, row in journal.read().items() if 0 <= r < total}
+    _clean_tmp(out_p / "runs")
+    return rows, journal
 
-            client.register_plugin(SweepPlugin(name, ctx), name=name)
-            futures = {}
-            for i in todo:
-                fut = client.submit(run_task, name, i, plan.runs[i], key=f"{name}-run-{i}",
-                                    pure=False)
-                futures[fut] = i
-            from distributed import as_completed
 
-            try:
-                for fut in as_completed(list(futures)):
-                    i = futures.pop(fut)
-                    row = _collect(fut, i, plan)
-                    data = row.pop("_h5", None)
-                    if data is not None and out_p is not None:
-                        try:
-                            _write_bytes(out_p / "runs" / result_name(i, ctx.width), data)
-                        except OSError as exc:
-                            row.update(status="failed", message=f"results file: {exc}",
-                                       results="")
-                    if journal is not None:
-                        journal.append(row)  # the marker first: a row in the summary is done
-                    rows[i] = row
-                    prog.update(row["status"] != "ok")
-                    fut.release()
-            except KeyboardInterrupt:
-                interrupted = True
-                client.cancel(list(futures))
-    finally:
-        prog.close()
-        if journal is not None:
-            journal.close()
-        if client is not None and todo:
-            try:
-                client.unregister_worker_plugin(name)
-            except Exception:  # noqa: BLE001 - a closing cluster; nothing left to undo
-                pass
-        if own is not None:
-            own.close()
-        if cluster is not None:
-            cluster.close()
-        if scratch is not None:
-            import shutil
+def _submit(client, name: str, plan: SweepPlan, todo: list[int]) -> dict:
+    """The sweep's plugin registered on the workers and its runs submitted: future -> run."""
+    from se3dyn.sweep.worker import SweepPlugin, run_task
 
-            shutil.rmtree(scratch, ignore_errors=True)
-        if out_p is not None:
-            _clean_tmp(out_p / "runs")
-            table_rows = [rows[i] for i in sorted(rows)]
-            write_summary(out_p, table_rows, plan.cols)
-    wall = time.perf_counter() - t0
-    done = len(rows)
-    if interrupted:
-        raise SweepInterrupted(done, total, out_p)
-    failed = sum(1 for r in rows.values() if r.get("status") != "ok")
-    say(f"  {total} runs: {total - failed} ok, {failed} failed ({len(todo)} executed in "
-        f"{wall:.1f} s)")
-    return to_table([rows[i] for i in sorted(rows)], plan.cols, as_frame)
+    client.register_plugin(SweepPlugin(name, plan.ctx), name=name)
+    futures = {}
+    for i in todo:
+        fut = client.submit(run_task, name, i, plan.runs[i], key=f"{name}-run-{i}",
+                            pure=False)
+        futures[fut] = i
+    return futures
+
+
+def _collect_all(client, futures: dict, plan: SweepPlan, rows: dict, journal, prog) -> bool:
+    """The rows of the runs as they finish, into ``rows`` (and the journal, and their results
+    files into the output folder); True when interrupted (Ctrl-C: the rest cancelled)."""
+    from distributed import as_completed
+
+    out_p, ctx = plan.out, plan.ctx
+    try:
+        for fut in as_completed(list(futures)):
+            i = futures.pop(fut)
+            row = _collect(fut, i, plan)
+            data = row.pop("_h5", None)
+            if data is not None and out_p is not None:
+                try:
+                    _write_bytes(out_p / "runs" / result_name(i, ctx.width), data)
+                except OSError as exc:
+                    row.update(status="failed", message=f"results file: {exc}",
+                               results="")
+            if journal is not None:
+                journal.append(row)  # the marker first: a row in the summary is done
+            rows[i] = row
+            prog.update(row["status"] != "ok")
+            fut.release()
+    except KeyboardInterrupt:
+        client.cancel(list(futures))
+        return True
+    return False
+
+
+def _release(client, submitted: bool, name: str, own, cluster, scratch) -> None:
+    """The sweep's plugin unregistered, the client and cluster made for the sweep closed and
+    their scratch folder removed."""
+    if client is not None and submitted:
+        try:
+            client.unregister_worker_plugin(name)
+        except Exception:  # noqa: BLE001 - a closing cluster; nothing left to undo
+            pass
+    if own is not None:
+        own.close()
+    if cluster is not None:
+        cluster.close()
+    if scratch is not None:
+        import shutil
+
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def _collect(fut, i: int, plan: SweepPlan) -> dict:
