@@ -297,7 +297,7 @@ bushings:
 
 
 def test_model_file_bushings_give_the_builder_model_and_are_counted_by_check(tmp_path, capsys):
-    from se3dyn.cli.main import main
+    from se3dyn.cli.commands import main
     from se3dyn.io.modelfile import loads_model, save_model
 
     model, _ = loads_model(MOUNT)

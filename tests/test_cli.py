@@ -236,11 +236,12 @@ def test_a_run_imports_no_module_it_does_not_use(tmp_path):
     # the `run` path of the command (as the console script calls it): scipy, matplotlib and the
     # opt-in layers stay out, the package's lazy names still resolve afterwards, and the
     # garbage collector, paused while the command loads, runs again
-    code = ("import gc, sys; sys.argv[0] = 'se3dyn'; from se3dyn.cli.main import main; "
+    code = ("import gc, sys; sys.argv[0] = 'se3dyn'; from se3dyn.cli.commands import main; "
             "print(gc.isenabled()); "
             f"assert main(['run', {str(SLIDER)!r}, '--out', {str(tmp_path)!r}, '--quiet']) == 0; "
             "bad = ('scipy', 'matplotlib', 'dask', 'se3dyn.viewer', 'se3dyn.sweep', "
-            "'se3dyn.analysis.statics'); print(sorted(m for m in sys.modules if m.startswith(bad))); "
+            "'se3dyn.analysis.statics'); "
+            "print(sorted(m for m in sys.modules if m.startswith(bad))); "
             "import se3dyn; print(se3dyn.static_equilibrium.__name__, se3dyn.kinematics.__name__,"
             " gc.isenabled())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -105,7 +105,7 @@ def assert_same_rows(a: dict, b: dict):
 # 3. memory
 _MEASURE = """
 import sys
-from se3dyn.cli.main import main
+from se3dyn.cli.commands import main
 code = main(sys.argv[1:])
 hwm = [int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM")][0]
 print("VmHWM", hwm, "exit", code)

@@ -2,7 +2,8 @@
 
 A companion run takes the run's accepted steps two at a time; the scheme being second order,
 the run's global position error is the difference of the two runs over 2^2 - 1 = 3 where they
-meet (Richardson's global extrapolation, :class:`se3dyn.dynamics.stepcontrol.GlobalEstimate`). Checked
+meet (Richardson's global extrapolation,
+:class:`se3dyn.dynamics.stepcontrol.GlobalEstimate`). Checked
 against closed-form solutions (a damped oscillator, the IFToMM A01 pendulum) and, on a
 mechanism that amplifies errors (the paper's slider-crank, global error above ``tol``),
 against a converged reference run whose own error is 1/800 of the run's.
@@ -157,7 +158,7 @@ def test_bad_global_error_settings_are_named(kw, want):
 
 
 def test_command_line_and_model_file_report_the_estimate(tmp_path, capsys):
-    from se3dyn.cli.main import main
+    from se3dyn.cli.commands import main
 
     text = (ROOT / "examples" / "slider_crank.yaml").read_text()
     assert "global_error" not in text
@@ -226,7 +227,7 @@ def test_bound_on_the_published_squeezer_divides_its_error_by_the_refinement_squ
 
 
 def test_command_line_bound_writes_the_refined_run_and_refuses_to_resume_it(tmp_path, capsys):
-    from se3dyn.cli.main import main
+    from se3dyn.cli.commands import main
     from se3dyn.io.h5 import read_results
 
     model = ROOT / "examples" / "slider_crank.yaml"
@@ -263,7 +264,7 @@ def test_model_file_global_error_takes_true_false_or_bound():
 
 def test_command_line_bound_run_that_fails_keeps_its_rows(tmp_path, capsys):
     # kept in memory while it runs: a failing run still writes the rows it computed
-    from se3dyn.cli.main import main
+    from se3dyn.cli.commands import main
     from se3dyn.io.h5 import read_results
 
     text = (ROOT / "examples" / "slider_crank.yaml").read_text()

@@ -213,6 +213,7 @@ def test_errors_are_se3dyn_and_value_errors(tmp_path):
 
 
 def test_core_package_does_not_import_h5():
-    code = "import sys, se3dyn; assert 'se3dyn.io.h5' not in sys.modules and 'h5py' not in sys.modules"
+    code = ("import sys, se3dyn; "
+            "assert 'se3dyn.io.h5' not in sys.modules and 'h5py' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True,
                    env={**os.environ, "PYTHONPATH": SRC})

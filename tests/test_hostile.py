@@ -4,7 +4,7 @@ A deterministic generator mutates valid model files (fields deleted, duplicated 
 extreme numbers, wrong nesting, bad names, YAML tags, unicode, huge lists, broken text) and
 draws hostile arguments for the Python API. Asserted: ``se3dyn check`` and ``se3dyn run``
 exit with 0, 1 or 2, a single-line message and no traceback; the Python API raises only
-subclasses of :class:`se3dyn.Se3dynError`. The CLI runs in-process (``se3dyn.cli.main``) for
+subclasses of :class:`se3dyn.Se3dynError`. The CLI runs in-process (``se3dyn.cli.commands``) for
 speed, a few cases in real subprocesses. Plus one test per class of crash found by fuzzing
 (huge step counts, nothing to solve, overflowing numbers, unstorable names, tags, API types).
 """
@@ -27,7 +27,7 @@ import pytest
 import yaml
 
 import se3dyn as sd
-from se3dyn.cli.main import main
+from se3dyn.cli.commands import main
 from se3dyn.errors import Se3dynError
 from se3dyn.io.modelfile import load_model, loads_model, save_model
 
@@ -749,7 +749,7 @@ READERS = (("info", "RESULTS"), ("channels", "RESULTS"),
 READER_TIMEOUT = 600
 _READERS_CHILD = r"""
 import contextlib, fcntl, io, json, os, sys, time
-from se3dyn.cli.main import main
+from se3dyn.cli.commands import main
 from se3dyn.errors import Se3dynError
 from se3dyn.io.h5 import read_results
 

@@ -15,7 +15,8 @@ What is asserted:
   (massless nodes included), so with the rigid joints kept (``condense=False``) its discrete
   solution depends on the parametrisation: there the two models differ by O(h^2), a small part
   of the discretisation error, and agree as h -> 0. By default the rigid joints are condensed
-  for the time loop (:mod:`se3dyn.dynamics.condense`) and both forms agree to Newton tolerance in both
+  for the time loop (:mod:`se3dyn.dynamics.condense`) and both forms agree to Newton tolerance
+  in both
   formulations.
   Checked on the slider-crank of Sec. 11 (``examples.slider_crank_bodies`` vs
   ``examples.slider_crank``), on an N-link spherical pendulum chain, on a universal joint.

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
-from se3dyn.engine import workspace as system  # (SPLIT_INDEX2)
 from se3dyn.dynamics.integrator import GeneralizedAlpha
+from se3dyn.engine import workspace as system  # (SPLIT_INDEX2)
 from se3dyn.engine.memory import SolverMemory
 from se3dyn.io.modelfile import load_model
 

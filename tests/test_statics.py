@@ -1,4 +1,5 @@
-"""Static equilibrium (se3dyn.analysis.statics): analytic equilibria, moment balance, virtual work, errors.
+"""Static equilibrium (se3dyn.analysis.statics): analytic equilibria, moment balance, virtual
+work, errors.
 
 Newton converges to ``|r| <= 1e-10`` relative to the largest force and ``|Phi| <= 1e-10`` (scaled
 by the characteristic length), so equilibrium angles, spring torques and reactions are compared

@@ -1,4 +1,5 @@
-"""The error norm of adaptive steps (:mod:`se3dyn.dynamics.stepcontrol`): the root mean square over a
+"""The error norm of adaptive steps (:mod:`se3dyn.dynamics.stepcontrol`): the root mean square
+over a
 body's mass of the position errors of its material points, checked against the points of a
 uniform box (two-point Gauss rule per axis, exact for the quadratic integrand), and the step
 controller's rules."""

@@ -30,19 +30,11 @@ import se3dyn
 distributed = pytest.importorskip("distributed")
 h5py = pytest.importorskip("h5py")
 
-from se3dyn.cli.main import main as cli_main  # noqa: E402
+from se3dyn.cli.commands import main as cli_main  # noqa: E402
 from se3dyn.io.h5 import read_results  # noqa: E402
 from se3dyn.io.modelfile import parse_model_data  # noqa: E402
-from se3dyn.sweep.metrics import parse_metric
-from se3dyn.sweep.spec import (  # noqa: E402
-    SweepSpecError,
-    Variable,
-    check_path,
-    get_path,
-    parse_spec,
-    plan_runs,
-    set_path,
-)
+from se3dyn.sweep import SweepSpecError, parse_metric, parse_spec, plan_runs  # noqa: E402
+from se3dyn.sweep.spec import Variable, check_path, get_path, set_path  # noqa: E402
 from se3dyn.sweep.table import read_summary_csv  # noqa: E402
 
 PENDULUM = """\
@@ -222,13 +214,13 @@ def test_worker_model_cache_serves_simulation_only_variants():
 
 
 def test_core_never_imports_the_sweep_layer_and_se3dyn_sweep_is_callable():
-    code = ("import sys, se3dyn, se3dyn.cli.main, se3dyn.io.h5; "
+    code = ("import sys, se3dyn, se3dyn.cli.commands, se3dyn.io.h5; "
             "print(any(m.startswith(('se3dyn.sweep', 'distributed', 'dask')) "
             "for m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "False"
-    code = ("import sys; from se3dyn.cli.main import build_parser; build_parser(); "
+    code = ("import sys; from se3dyn.cli.commands import build_parser; build_parser(); "
             "print(sorted(m for m in sys.modules "
             "if m.startswith(('se3dyn.sweep', 'distributed'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

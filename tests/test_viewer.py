@@ -591,7 +591,7 @@ def test_cli_bad_input_is_one_line_and_exit_2(results_file, tmp_path, args, mess
 
 
 def test_view_without_output_opens_the_browser(results_file, monkeypatch):
-    from se3dyn.cli.main import main as cli
+    from se3dyn.cli import commands as cli
 
     opened = []
     monkeypatch.setattr("webbrowser.open", lambda url, *a, **k: opened.append(url) or True)
@@ -614,7 +614,7 @@ def test_results_show_is_an_inline_frame(crank):
 
 
 def test_the_core_never_imports_the_viewer():
-    code = ("import sys, se3dyn, se3dyn.io.modelfile, se3dyn.io.h5, se3dyn.cli.main; "
+    code = ("import sys, se3dyn, se3dyn.io.modelfile, se3dyn.io.h5, se3dyn.cli.commands; "
             "m = sorted(k for k in sys.modules if k.startswith(('se3dyn.viewer', 'trimesh', "
             "'pygltflib'))); print(m); assert not m")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

@@ -2,6 +2,6 @@
 
 import sys
 
-from se3dyn.cli.main import main
+from se3dyn.cli.commands import main
 
 sys.exit(main())

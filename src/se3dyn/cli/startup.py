@@ -15,14 +15,15 @@ def prepare_process() -> None:
       processes the command starts (sweep workers) inherit the setting.
     * The cyclic garbage collector pauses while the modules load (their objects all live
       on: the collections of the start-up only walked them, 10-15 ms of CPU); once they are
-      loaded, ``se3dyn.cli.main`` freezes what exists (``gc.freeze``: never walked again) and
+      loaded, ``se3dyn.cli.commands`` freezes what exists (``gc.freeze``: never walked again) and
       resumes it, before the simulation. At exit, the interpreter's last collections walk
       every object (50-80 ms of wall time): the objects are frozen first (the last atexit
       handler; all of them go with the process). The handlers registered later, the
       teardown of the modules and the finalizers of the objects that no cycle holds run as
       before. Not for ``sweep``: dask shuts its machinery down as usual.
     * Ctrl-C while the package loads prints one line and exits with 130, no traceback, and
-      SIGTERM likewise with 143 (:func:`se3dyn.cli.main.main` installs its own handlers once it runs).
+      SIGTERM likewise with 143 (:func:`se3dyn.cli.commands.main` installs its own handlers
+      once it runs).
     """
     import os
     import sys
@@ -36,7 +37,7 @@ def prepare_process() -> None:
 
         global GC_PAUSED
         GC_PAUSED = gc.isenabled()
-        gc.disable()  # se3dyn.cli.main resumes it
+        gc.disable()  # se3dyn.cli.commands resumes it
         atexit.register(gc.freeze)  # registered first: runs last
 
     import signal
@@ -61,5 +62,5 @@ def prepare_process() -> None:
         pass
 
 
-GC_PAUSED = False  # by prepare_process, until se3dyn.cli.main resumes the collector
+GC_PAUSED = False  # by prepare_process, until se3dyn.cli.commands resumes the collector
 prepare_process()

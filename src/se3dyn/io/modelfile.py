@@ -1,6 +1,7 @@
 """Declarative, versioned YAML model files (format version 1).
 
-A model file describes a :class:`~se3dyn.model.specs.Model` (nodes, joints, loads, gravity) plus optional
+A model file describes a :class:`~se3dyn.model.specs.Model` (nodes, joints, loads, gravity)
+plus optional
 simulation settings, with names instead of numbers::
 
     se3dyn: 1
@@ -29,7 +30,8 @@ Safety: files are parsed with a :class:`yaml.SafeLoader` subclass (nothing is ev
 code); YAML tags, anchors and aliases are rejected (no "billion laughs"), and file size, nesting
 depth, collection lengths and node counts are bounded. Every invalid file raises
 :class:`ModelFileError` naming the file, the line, the item, the field, what was expected and what
-came. Regenerate the schema with ``python -m se3dyn.io.modelfile schema docs/model-file.schema.json``.
+came. Regenerate the schema with
+``python -m se3dyn.io.modelfile schema docs/model-file.schema.json``.
 """
 
 from __future__ import annotations

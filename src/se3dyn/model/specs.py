@@ -149,7 +149,8 @@ class JointSpec:
     at: np.ndarray | None = None
     initial: np.ndarray | None = None
     #: Internal (never given by users): the compiled joint of a condensed model
-    #: (:mod:`se3dyn.dynamics.condense`), ``(X_A, X_B, H_J0, A)`` with the attachment frames (4, 4) on its
+    #: (:mod:`se3dyn.dynamics.condense`), ``(X_A, X_B, H_J0, A)`` with the attachment frames
+    #: (4, 4) on its
     #: nodes, the initial joint transformation and A (6, k) in the attachment frame of node B.
     frames: tuple | None = None
 

@@ -1,4 +1,5 @@
-"""Stable channel names over a :class:`~se3dyn.results.results.Results` (in memory or read from a file).
+"""Stable channel names over a :class:`~se3dyn.results.results.Results` (in memory or read
+from a file).
 
 A channel is one scalar time history, shape (n,), named by a path (see ``docs/results-file.md``)::
 

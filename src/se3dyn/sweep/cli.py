@@ -1,7 +1,8 @@
 """``se3dyn sweep``: the command-line side of :func:`se3dyn.sweep.run_sweep`.
 
 :func:`add_arguments` declares the sweep's own options (the run-time overrides ``--t-end``,
-``--step``, ... are declared by :mod:`se3dyn.cli.main`, shared with ``se3dyn run``); :func:`main`
+``--step``, ... are declared by :mod:`se3dyn.cli.commands`, shared with ``se3dyn run``);
+:func:`main`
 runs it. Exit codes: 0 every run ok, 1 some runs failed (the summary is complete), 2 bad input
 (one line, before any run starts), 130 interrupted (the summary holds the finished runs;
 ``--resume`` completes it).

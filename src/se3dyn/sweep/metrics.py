@@ -1,7 +1,8 @@
 """Scalar metrics of a run: ``NAME=FUNC(EXPR)``.
 
 FUNC is one of ``max``, ``min``, ``final``, ``mean``, ``rms``; EXPR is a channel name
-(:mod:`se3dyn.results.channels`, e.g. ``joint/1/multiplier/3``), optionally wrapped in ``abs(...)``::
+(:mod:`se3dyn.results.channels`, e.g. ``joint/1/multiplier/3``), optionally wrapped in
+``abs(...)``::
 
     peak=max(abs(joint/1/multiplier/3))
     e_end=final(energy/total)
