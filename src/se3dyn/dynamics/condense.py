@@ -297,10 +297,8 @@ def condensation(s, enabled: bool = True) -> Condensation | None:
 
 
 def _build(s) -> Condensation | None:
-    from se3dyn.engine.evaluate import evaluate
-    from se3dyn.engine.inputs import step_inputs
-    from se3dyn.engine.system import combine_inertia, compile_model
-    from se3dyn.engine.workspace import Workspace
+    """The condensation of ``s`` (:func:`condensation`)."""
+    from se3dyn.engine.system import compile_model
 
     model = s.model
     nidx = {name: i for i, name in enumerate(s.node_names)}
@@ -308,6 +306,32 @@ def _build(s) -> Condensation | None:
             if js.type == "rigid" and js.k == 0 and js.composite is None]
     if not cand:
         return None
+    root, used = _choose_groups(s, cand, nidx)
+    if not used:
+        return None
+    rigid = np.array(sorted(used), np.int64)
+    roots = [i for i in range(s.M) if root[i] == i]
+    rpos = {i: k for k, i in enumerate(roots)}
+    node_root = np.array([rpos[int(root[i])] for i in range(s.M)], np.int64)
+    H0 = s.node_H0
+    C = lie.inverse(H0[root]) @ H0
+    C[roots] = np.eye(4)
+    r = compile_model(_reduced_model(s, root, roots, rigid, C, nidx))
+    root_full, joint_full, dof_full, mult_full = _index_maps(s, r, roots)
+    depth = _depths(rigid, s, root)
+    child, child_dofs, parent_dofs, Dc, Dp = _rigid_blocks(s, rigid, root, depth)
+    return Condensation(full=s, reduced=r, rigid=rigid, node_root=node_root, node_C=C,
+                        node_Ad=lie.adjoint_inv(C), root_full=root_full, joint_full=joint_full,
+                        dof_full=dof_full, mult_full=mult_full,
+                        order=np.argsort(-depth[child], kind="stable"), child_dofs=child_dofs,
+                        parent_dofs=parent_dofs, child_inv=np.linalg.inv(Dc), parent_block=Dp)
+
+
+def _choose_groups(s, cand: list, nidx: dict):
+    """The groups of the candidate rigid joints ``cand``: ``(root, used)`` of :func:`_groups`,
+    dropping the groups that close a loop or carry a body-frame load on a member turned
+    against its root."""
+    model = s.model
     pinned = _pinned(model)
     ends = _ends(model)
     while True:
@@ -327,17 +351,15 @@ def _build(s) -> Condensation | None:
         if not bad:
             break
         cand = [j for j in cand if root[nidx[model.joints[j].node_a]] not in bad]
-    if not used:
-        return None
-    rigid = np.array(sorted(used), np.int64)
-    roots = [i for i in range(s.M) if root[i] == i]
-    rpos = {i: k for k, i in enumerate(roots)}
-    node_root = np.array([rpos[int(root[i])] for i in range(s.M)], np.int64)
-    H0 = s.node_H0
-    C = lie.inverse(H0[root]) @ H0
-    C[roots] = np.eye(4)
+    return root, used
 
-    # the reduced model: one node per group, the elements moved to the roots
+
+def _reduced_model(s, root: np.ndarray, roots: list, rigid: np.ndarray, C: np.ndarray,
+                   nidx: dict) -> Model:
+    """The reduced model: one node per group, the elements moved to the roots."""
+    from se3dyn.engine.system import combine_inertia
+
+    model, H0 = s.model, s.node_H0
     nodes = []
     for i in roots:
         grp = [model.nodes[k] for k in range(s.M) if root[k] == i]
@@ -386,8 +408,12 @@ def _build(s) -> Condensation | None:
     red = Model(nodes=tuple(nodes), joints=tuple(joints), loads=tuple(loads),
                 gravity=model.gravity, composites=model.composites, name=model.name,
                 springs=springs, visuals=(), beams=model.beams, bushings=bushings)
-    r = compile_model(red)
+    return red
 
+
+def _index_maps(s, r, roots: list):
+    """Where the reduced system ``r``'s nodes, joints, unknowns and the multipliers of its
+    joints are in the full system ``s``."""
     root_full = np.array(roots, np.int64)
     jnames = list(s.joint_names)
     joint_full = np.array([jnames.index(n) for n in r.joint_names], np.int64)
@@ -400,11 +426,20 @@ def _build(s) -> Condensation | None:
             dof_full[r.joint_dofadr[k] + np.arange(r.joint_k[k])] = (
                 s.joint_dofadr[j] + np.arange(s.joint_k[j]))
     mult_full = (s.joint_multadr[joint_full][:, None] + np.arange(6)).reshape(-1)
+    return root_full, joint_full, dof_full, mult_full
+
+
+def _rigid_blocks(s, rigid: np.ndarray, root: np.ndarray, depth: np.ndarray):
+    """``(child, child_dofs, parent_dofs, Dc, Dp)``: the node each rigid joint carries, the
+    unknowns of its two ends and the constant blocks of the residual's rows of those ends in
+    the joint's multipliers."""
+    from se3dyn.engine.evaluate import evaluate
+    from se3dyn.engine.inputs import step_inputs
+    from se3dyn.engine.workspace import Workspace
 
     # the rigid joints' multipliers: the rows of the node each carries (the end further from
     # the root) and of its other end, by the residual's linearity in lambda (constant blocks:
     # H_J of a rigid joint is constant, Eq. (58)); joints sharing no node perturbed together
-    depth = _depths(rigid, s, root)
     a_, b_ = s.joint_a[rigid], s.joint_b[rigid]
     child = np.where(depth[b_] > depth[a_], b_, a_)
     parent = np.where(depth[b_] > depth[a_], a_, b_)
@@ -441,11 +476,7 @@ def _build(s) -> Condensation | None:
                 Dc[q, :, k] = d[child_dofs[q]]
                 if parent_dofs[q, 0] >= 0:
                     Dp[q, :, k] = d[parent_dofs[q]]
-    return Condensation(full=s, reduced=r, rigid=rigid, node_root=node_root, node_C=C,
-                        node_Ad=lie.adjoint_inv(C), root_full=root_full, joint_full=joint_full,
-                        dof_full=dof_full, mult_full=mult_full,
-                        order=np.argsort(-depth[child], kind="stable"), child_dofs=child_dofs,
-                        parent_dofs=parent_dofs, child_inv=np.linalg.inv(Dc), parent_block=Dp)
+    return child, child_dofs, parent_dofs, Dc, Dp
 
 
 def _depths(rigid: np.ndarray, s, root: np.ndarray) -> np.ndarray:
