@@ -138,7 +138,7 @@ initial_velocities :
 
 def _global_error_setting(val, adaptive: bool) -> bool:
     """``global_error`` checked: True or False, True with ``tol`` only ("bound" is handled
-    by :func:`_bound`)."""
+    by :func:`se3dyn.dynamics.run._bound`)."""
     on = True if isinstance(val, str) and val == "bound" else val
     if not isinstance(on, bool | np.bool_):
         raise ModelError("simulate", "global_error", "True, False or 'bound'", val)
