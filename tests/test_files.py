@@ -227,7 +227,7 @@ def test_a_run_continued_from_a_checkpoint_equals_the_uninterrupted_run(kw, monk
     # rows (with the newest checkpoint) are handed on at most every _EMIT_EVERY seconds in the
     # step-by-step runs, a checkpoint then replacing the one still waiting: emitting at every
     # chance makes the checkpoints seen independent of the machine's speed
-    monkeypatch.setattr(sys.modules["se3dyn.dynamics.run"], "_EMIT_EVERY", 0.0)
+    monkeypatch.setattr(sys.modules["se3dyn.dynamics.recorder"], "_EMIT_EVERY", 0.0)
     m = sd.examples.slider_crank()
     full = sd.simulate(m, 3.0, 1e-3, **kw)
     cps = []

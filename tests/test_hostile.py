@@ -455,7 +455,7 @@ def test_huge_step_counts_are_refused_before_allocating(t_end, step):
 
 
 def test_stored_rows_beyond_memory_are_refused(monkeypatch):
-    simmod = importlib.import_module("se3dyn.dynamics.run")
+    simmod = importlib.import_module("se3dyn.dynamics.settings")  # (where _check_size reads it)
 
     monkeypatch.setattr(simmod, "_available_memory", lambda: 3e7)
     with pytest.raises(sd.ModelError, match="output_every or output_step"):
@@ -495,7 +495,7 @@ def test_compiled_loop_in_blocks_equals_one_block(monkeypatch):
 
     a, ea = run()
     monkeypatch.setattr(simmod, "_BLOCK", 7)
-    monkeypatch.setattr(simmod, "_INITIAL_ROWS", 2)
+    monkeypatch.setattr(importlib.import_module("se3dyn.dynamics.recorder"), "_INITIAL_ROWS", 2)
     b, eb = run()
     for f in ("t", "H", "v", "vd", "lam", "alpha", "kinetic", "work_actuators", "iterations"):
         assert np.array_equal(getattr(a, f), getattr(b, f)), f
@@ -718,7 +718,7 @@ def test_storage_grows_as_the_run_goes_up_to_the_rows_expected(monkeypatch):
         return real(self, stats)
 
     monkeypatch.setattr(simmod._Recorder, "results", spy)
-    monkeypatch.setattr(simmod, "_INITIAL_ROWS", 16)
+    monkeypatch.setattr(importlib.import_module("se3dyn.dynamics.recorder"), "_INITIAL_ROWS", 16)
     r = sd.simulate(_pendulum(), t_end=1.0, step=0.01)
     assert len(r.t) == 101 and sizes[-1] == (101, 102)  # 16, 32, 64, then the 102 expected
     r = sd.simulate(_pendulum(), t_end=1.0, step=0.01, tol=1e-3, output_step=0.02)
@@ -1333,7 +1333,7 @@ def test_python_calls_raise_se3dyn_errors(tmp_path, monkeypatch):
     """read_results(None), save_model(None), write_html(None), kinematics with 10^7 output
     times, Model.node('ghost') and get_channel(res, 'nope') as bare KeyErrors; PD('x') and
     Callable(5) accepted; static_equilibrium(load_steps=10**9) ran on without end."""
-    simmod = importlib.import_module("se3dyn.dynamics.run")
+    simmod = importlib.import_module("se3dyn.dynamics.settings")
     monkeypatch.setattr(simmod, "_available_memory", lambda: 2.0**30)  # (1 GiB, as measured)
     calls = _python_calls(tmp_path)
     for what, call in calls:

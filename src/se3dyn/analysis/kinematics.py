@@ -268,7 +268,7 @@ def _driver_values(drv, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _check_rows(s: System, n: int) -> None:
     """Refuse, before anything is computed, more output times than a run may store
     (``simulate.MAX_STEPS``) or rows that would not fit in the available memory."""
-    from se3dyn.dynamics.run import MAX_STEPS, _available_memory
+    from se3dyn.dynamics.settings import MAX_STEPS, _available_memory
 
     if n > MAX_STEPS:
         raise ModelError("kinematics", "times", f"at most {MAX_STEPS:.0e} output times",

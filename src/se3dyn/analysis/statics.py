@@ -284,7 +284,7 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         load factor reached.
     """
     s = _as_system(model_or_system, "static_equilibrium")
-    from se3dyn.dynamics.run import MAX_STEPS
+    from se3dyn.dynamics.settings import MAX_STEPS
 
     for name, val, lo in (("load_steps", load_steps, 1), ("max_iter", max_iter, 1),
                           ("max_cuts", max_cuts, 0)):

@@ -1,10 +1,17 @@
-"""``simulate``: run the generalized-alpha integrator over a time interval and record results."""
+"""``simulate``: run the generalized-alpha integrator over a time interval and record results.
+
+A run goes: its settings, checked once (:class:`~se3dyn.dynamics.settings.RunSettings`), the
+plan of the run (:func:`_plan`: fixed or adaptive steps, the compiled loop or the step-by-step
+one, the output grid, the sizes), its start (:class:`_Run`: the initial state, the condensed
+rigid joints, the recorder, the global error companion), one loop (:func:`_fixed_compiled` or
+:func:`_stepwise`), the reports (:mod:`se3dyn.dynamics.reports`) and the results
+(:mod:`se3dyn.dynamics.recorder`).
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
@@ -14,6 +21,21 @@ import numpy as np
 from se3dyn.dynamics import stepcontrol
 from se3dyn.dynamics.condense import condensation
 from se3dyn.dynamics.integrator import GeneralizedAlpha, energies, interpolate
+from se3dyn.dynamics.recorder import CHECKPOINT_EVERY as CHECKPOINT_EVERY
+from se3dyn.dynamics.recorder import SCALARS, Checkpoint, _Recorder, checkpoint_interval
+from se3dyn.dynamics.reports import _balance_and_scale as _balance_and_scale
+from se3dyn.dynamics.reports import (
+    _energy_check,
+    _global_error_check,
+    _velocity_report,
+    energy_balance_check,
+    energy_cause,
+    energy_jump,
+    energy_rows,
+    energy_warning,
+)
+from se3dyn.dynamics.settings import MAX_STEPS as MAX_STEPS
+from se3dyn.dynamics.settings import RunSettings
 from se3dyn.dynamics.state import State
 from se3dyn.engine.inputs import step_inputs
 from se3dyn.engine.rank import equation_name
@@ -26,274 +48,11 @@ if TYPE_CHECKING:
     from se3dyn.model.specs import Model
 
 __all__ = ["simulate", "check_settings", "energy_balance_check", "energy_jump",
-           "energy_warning", "energy_cause", "energy_rows", "SCALARS"]
+           "energy_warning", "energy_cause", "energy_rows", "SCALARS", "Checkpoint"]
 
 
-#: Most steps of one fixed-step run (the compiled loop counts steps in 32-bit integers), and
-#: most stored rows of one run; more is refused before anything is allocated.
-MAX_STEPS = 10**8
-#: Rows allocated at the start; the recorder grows (doubling) as the run goes.
-_INITIAL_ROWS = 4096
 #: Steps whose times and inputs are tabulated at once by the compiled fixed-step loop.
 _BLOCK = 65536
-
-#: Names of the scalar columns of a stored row, in order (see ``on_output`` of :func:`simulate`).
-SCALARS = ("kinetic", "potential", "spring", "work_actuators", "work_loads", "dissipation",
-           "iterations", "residual", "constraint")
-
-
-@dataclasses.dataclass(frozen=True)
-class Checkpoint:
-    """A point from which a run continues bit for bit (see ``on_rows`` of :func:`simulate`).
-
-    Attributes
-    ----------
-    state : State
-        The integration state after the last row of the block it comes with.
-    steps : int
-        Steps from ``t_start`` up to ``state`` (a multiple of the checkpoint interval,
-        ``CHECKPOINT_EVERY`` rounded up to a multiple of ``output_every``).
-    h_next : float
-        The step the run takes next (adaptive runs: the controller's step; fixed: ``step``).
-    newton_iterations, rejected : int
-        Counters of this call up to ``state``.
-    rows : int
-        Rows stored by this call up to ``state`` (its row included; the initial one too).
-    """
-
-    state: State
-    steps: int
-    h_next: float
-    newton_iterations: int = 0
-    rejected: int = 0
-    rows: int = 0
-
-
-#: Steps between checkpoints (a multiple of output_every is taken): states (with the linear
-#: solver's memory, ``State.solver``) from which a run continues, in any process, exactly as
-#: the uninterrupted run, and whose stored rows are exactly those of that run.
-CHECKPOINT_EVERY = 1000
-#: Bytes of rows held at most in memory by a streamed run (``store=False``) between blocks.
-_STREAM_BYTES = 4 << 20
-#: Wall time (s) after which rows computed step by step are passed on to ``on_rows``.
-_EMIT_EVERY = 0.2
-
-
-class _Recorder:
-    """The stored rows of one run.
-
-    With ``store`` every row is kept: the arrays grow in place (``ndarray.resize``, which
-    reallocates without a copy where the C library can, doubling up to the rows expected) and
-    are trimmed in place at the end, so the results cost their own size. Without ``store``
-    (streamed runs) rows are held only until they are passed on to ``on_rows``: memory stays
-    flat whatever the length of the run, and the results keep the first and the last row.
-    The summary statistics (energy balance error, largest energy, constraint violation and
-    Newton iterations) cover every row either way.
-    """
-
-    _FIELDS = ("t", "H", "v", "vd", "lam", "alpha", "scal")
-
-    def __init__(self, s: System, capacity: int, sink=None, limit: int | None = None, *,
-                 store: bool = True, on_rows=None, cond=None, full_ws=None):
-        self.s = s
-        self.cond = cond  # rows of cond.reduced, passed on as rows of cond.full (condense)
-        self.full_ws = full_ws  # the run's workspace of cond.full (its rigid reactions)
-        self.out_system = s if cond is None else cond.full
-        self.sink = sink
-        self.on_rows = on_rows
-        self.store = store
-        self.limit = limit  # rows expected in all (fixed steps): growth stops there
-        self.row_bytes = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
-        if not store:
-            capacity = max(16, min(capacity, _STREAM_BYTES // self.row_bytes))
-        self.n = 0  # rows in the buffer
-        self.sent = 0  # rows of the buffer already passed on to on_rows
-        self.summarized = 0  # rows of the buffer already in the summary
-        self.total = 0  # rows recorded in all
-        self.first = None  # (store=False) the first row, kept for the results
-        self.pending = None  # the latest checkpoint not yet passed on
-        self.last_emit = time.perf_counter()
-        self.summary = dict(e0=None, balance=0.0, energy=0.0, constraint=0.0, iterations=0)
-        # (np.empty: every row below self.n is written before it is read, by add() or the
-        # compiled loop, and nothing reads beyond; a 1000-link chain's 1001 rows are 390 MB,
-        # and the first call in a fresh process took 3.92 s with np.zeros against 3.76 s with
-        # np.empty, means of 7 alternated fresh-process pairs: docs/performance.md)
-        self.t = np.empty(capacity)
-        self.H = np.empty((capacity, s.M, 4, 4))
-        self.v = np.empty((capacity, s.nq))
-        self.vd = np.empty((capacity, s.nq))
-        self.lam = np.empty((capacity, s.nm))
-        self.alpha = np.empty((capacity, s.nq))
-        self.scal = np.empty((capacity, 9))
-
-    def _resize(self, rows: int) -> None:
-        for name in self._FIELDS:
-            shape = (rows,) + getattr(self, name).shape[1:]
-            try:
-                # in place (realloc), zero-filled; refused while anything else references the
-                # array (so no local name for it here)
-                getattr(self, name).resize(shape)
-            except ValueError:
-                old = getattr(self, name)
-                new = np.zeros(shape)
-                k = min(rows, len(old))
-                new[:k] = old[:k]
-                setattr(self, name, new)
-                del old
-
-    def _grow(self):
-        n = len(self.t)
-        if not self.store:
-            self._resize(2 * n)  # rows of one step beyond the buffer (dense output)
-            return
-        extra = n if self.limit is None or self.limit <= n else min(n, self.limit - n)
-        self._resize(n + max(extra, 1))
-
-    def free(self) -> int:
-        """Rows that fit in the buffer without growing it."""
-        return len(self.t) - self.n
-
-    def add(self, st: State, kin: float, pot: float, spring: float, iters: int, res: float,
-            con: float):
-        if self.n == len(self.t):
-            self._grow()
-        i = self.n
-        self.t[i] = st.t
-        self.H[i] = st.H
-        self.v[i] = st.v
-        self.vd[i] = st.vd
-        self.lam[i] = st.lam
-        self.alpha[i] = st.alpha
-        self.scal[i] = (kin, pot, spring, st.work_act, st.work_ext, st.dissipated, iters, res,
-                        con)
-        self.n += 1
-        self.total += 1
-        if self.sink is not None:
-            self.sink_row(st, self.scal[i])
-
-    def sink_row(self, st: State, scal: np.ndarray) -> None:
-        """Pass a stored row on to ``on_output`` (as a state of the model's own system)."""
-        self.sink(st if self.cond is None else self.cond.expand(st, self.full_ws),
-                  dict(zip(SCALARS, scal.tolist(), strict=True)))
-
-    def added(self, count: int) -> None:
-        """``count`` rows were written into the buffer by the compiled loop."""
-        self.total += count - self.n
-        self.n = count
-
-    def _summarize(self) -> None:
-        lo, hi = self.summarized, self.n
-        if hi <= lo:
-            return
-        c = self.scal[lo:hi]
-        sm = self.summary
-        if sm["e0"] is None:  # the first row: the references of the balance and the scale
-            sm["e0"] = c[0, :6].copy()
-        err, scale = _balance_and_scale(c, sm["e0"])
-        sm["balance"] = max(sm["balance"], err)
-        sm["scale"] = max(sm.get("scale", 0.0), scale)
-        sm["energy"] = max(sm["energy"], float(np.abs(c[:, 0] + c[:, 1] + c[:, 2]).max()))
-        sm["constraint"] = max(sm["constraint"], float(c[:, 8].max()))
-        sm["iterations"] = max(sm["iterations"], int(c[:, 6].max()))
-        self.summarized = hi
-
-    def _block(self, lo: int, hi: int, stats: dict | None = None, copy: bool = True
-               ) -> Results:
-        c = self.scal[lo:hi]
-        cp = (lambda x: x[lo:hi].copy()) if copy else (lambda x: x[lo:hi])  # noqa: E731
-        rows = dict(t=cp(self.t), H=cp(self.H), v=cp(self.v), vd=cp(self.vd),
-                    lam=cp(self.lam), alpha=cp(self.alpha))
-        if self.cond is not None:
-            rows["H"], rows["v"], rows["vd"], rows["alpha"], rows["lam"] = (
-                self.cond.expand_rows(rows["H"], rows["v"], rows["vd"], rows["alpha"],
-                                      rows["lam"]))
-        out = Results(system=self.out_system, **rows,
-                      kinetic=c[:, 0].copy(), potential=c[:, 1].copy(), spring=c[:, 2].copy(),
-                      work_actuators=c[:, 3].copy(), work_loads=c[:, 4].copy(),
-                      dissipation=c[:, 5].copy(), iterations=c[:, 6].astype(int),
-                      residual=c[:, 7].copy(), constraint=c[:, 8].copy(),
-                      stats=stats if stats is not None else {})
-        if self.cond is not None and len(self.cond.rigid):
-            out.defer_multipliers(self.cond.fill_multipliers)
-        return out
-
-    def emit(self, checkpoint: Checkpoint | None = None, force: bool = True) -> None:
-        """Pass the new rows (and the checkpoint reached after them) on to ``on_rows``; in a
-        streamed run, drop them from the buffer. Without ``force``, only when the buffer is
-        nearly full or ``_EMIT_EVERY`` seconds have passed."""
-        if checkpoint is not None:
-            self.pending = checkpoint  # passed on with the next block
-        if not force and self.free() > 1 and time.perf_counter() - self.last_emit < _EMIT_EVERY:
-            return
-        self._summarize()
-        checkpoint, self.pending = self.pending, None
-        if checkpoint is not None and self.cond is not None and self.on_rows is not None:
-            checkpoint = dataclasses.replace(checkpoint,
-                                             state=self.cond.expand(checkpoint.state,
-                                                                    self.full_ws))
-        if self.on_rows is not None and (self.n > self.sent or checkpoint is not None):
-            self.on_rows(self._block(self.sent, self.n), checkpoint)
-        self.sent = self.n
-        self.last_emit = time.perf_counter()
-        if not self.store and self.n:
-            if self.first is None:
-                self.first = self._block(0, 1)
-            self._move_last_to_front()
-
-    def uncondense(self) -> None:
-        """The run goes on with the rigid joints kept: the rows held become the model's own
-        (their rigid joints' multipliers computed now), and so will the next ones."""
-        c, n, cap = self.cond, self.n, len(self.t)
-        rows = c.expand_rows(self.H[:n], self.v[:n], self.vd[:n], self.alpha[:n], self.lam[:n])
-        c.fill_rows(self.t[:n], rows[0], rows[3], rows[1], rows[2], rows[4], self.full_ws)
-        for name, arr in zip(("H", "v", "vd", "alpha", "lam"), rows, strict=True):
-            new = np.zeros((cap,) + arr.shape[1:])
-            new[:n] = arr
-            setattr(self, name, new)
-        if self.pending is not None:
-            self.pending = dataclasses.replace(self.pending,
-                                               state=c.expand(self.pending.state,
-                                                              self.full_ws))
-        self.s = self.out_system = c.full
-        self.cond = None
-        s = self.s
-        self.row_bytes = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
-
-    def _move_last_to_front(self) -> None:
-        """(store=False) Keep only the last row, at the front of the buffer."""
-        for name in self._FIELDS:
-            arr = getattr(self, name)
-            arr[0] = arr[self.n - 1]
-        self.n = self.sent = self.summarized = 1
-
-    def last_time(self) -> float | None:
-        return float(self.t[self.n - 1]) if self.n else None
-
-    def stats(self) -> dict:
-        """The summary statistics over every row recorded."""
-        self._summarize()
-        sm = self.summary
-        return dict(rows=self.total, energy_balance_error=sm["balance"],
-                    energy_scale=sm.get("scale", 0.0), max_energy=sm["energy"],
-                    max_constraint=sm["constraint"], max_iterations=sm["iterations"])
-
-    def results(self, stats: dict) -> Results:
-        stats.update(self.stats())
-        n = self.n
-        if not self.store:
-            first = self.first if self.first is not None else (
-                self._block(0, 1) if n else None)
-            last = self._block(n - 1, n) if n else None
-            if self.total <= 1 or first is None or last is None:
-                out = first if first is not None else last
-                out.stats = stats
-                return out
-            return Results(system=self.out_system, stats=stats, **{
-                f.name: np.concatenate([getattr(first, f.name), getattr(last, f.name)])
-                for f in dataclasses.fields(Results) if f.name not in ("system", "stats")})
-        # in place: the trimmed arrays become the results (no copy of the rows)
-        self._resize(n)
-        return self._block(0, n, stats, copy=False)
 
 
 def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float = 0.9,
@@ -479,470 +238,26 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         return _bound({k: v for k, v in locals().items()
                        if k not in ("global_error", "_schedule")})
     s = system_of(model)
-    t_end, step, t_start, output_every, span, opt = _settings(
-        t_end, step, t_start, output_every, tol, h_min, h_max, output_step)
-    for fld, val in (("progress", progress), ("on_output", on_output), ("on_rows", on_rows)):
-        if val is not None and not callable(val):
-            raise ModelError("simulate", fld, "a callable or None", val)
-    for fld, val in (("store", store), ("condense", condense)):
-        if not isinstance(val, bool | np.bool_):
-            raise ModelError("simulate", fld, "True or False", val)
-    store, condense = bool(store), bool(condense)
-    adaptive = opt["tol"] is not None
-    global_error = _global_error_setting(global_error, adaptive)
-    k0 = 0  # steps before the first one of this call (fixed steps from an initial_state)
-    first_step = None
-    if isinstance(initial_state, Checkpoint):
-        first_step = initial_state.h_next
-        k0 = int(initial_state.steps) if adaptive else 0
-        initial_state = initial_state.state
-    if initial_state is not None:
-        k0 = _check_initial_state(s, initial_state, t_start, t_end, step, adaptive) or k0
-    _check_size(s, span, step, output_every, opt["output_step"], adaptive, store)
-    if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool):
-        rho_inf = float(rho_inf)
-    integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,
-                             tol_constraint=tol_constraint, max_iter=max_iter,
-                             formulation=formulation, redundant=redundant, engine=engine,
-                             newton=newton, initial_velocities=initial_velocities)
-    grid = None  # the output times t_start + j output_step, the last moved to t_end
-    gi = 1  # next grid time to fill
-    if opt["output_step"] is not None:
-        k = max(1, math.ceil(span / opt["output_step"] - 1e-9))
-        dt_out = opt["output_step"]
-
-        def grid(j: int) -> float:  # computed when needed: nothing allocated per row
-            return t_end if j >= k else min(t_start + dt_out * j, t_end)
-
-        n_grid = k + 1
-        capacity = n_grid
-        if initial_state is not None:
-            gi = min(n_grid, max(1, int((initial_state.t - t_start) / dt_out) - 1))
-            while gi < n_grid and grid(gi) <= initial_state.t + 1e-12 * span:
-                gi += 1
-            capacity = n_grid - gi + 1
-    elif adaptive:
-        capacity = 1024
+    cfg = RunSettings.of(
+        s, t_end=t_end, step=step, rho_inf=rho_inf, t_start=t_start, tol_residual=tol_residual,
+        tol_constraint=tol_constraint, max_iter=max_iter, output_every=output_every,
+        formulation=formulation, redundant=redundant, tol=tol, h_min=h_min, h_max=h_max,
+        output_step=output_step, engine=engine, newton=newton,
+        initial_velocities=initial_velocities, progress=progress, on_output=on_output,
+        on_rows=on_rows, store=store, initial_state=initial_state, condense=condense,
+        global_error=global_error)
+    plan = _plan(cfg, _schedule)
+    run = _Run(s, cfg, plan)
+    if plan.compiled:
+        _fixed_compiled(run)
     else:
-        capacity = (max(1, math.ceil(span / step - 1e-9)) // output_every + 2
-                    - k0 // output_every)
-    wall0 = time.perf_counter()
-    ws = Workspace(s)  # this run's engine and steppers, shared with no other run
-    if initial_state is None:
-        st = integ.init(s, t_start, ws=ws)
-    else:
-        st = initial_state
-    e = energies(s, st, step_inputs(s, st.t), ws)
-    # (a continued run starts from a state, not from the model's velocities)
-    v_report = _velocity_report(s, st, e["kinetic"], ws) if initial_state is None else {}
-    model_system, redundant_names = s, [equation_name(s, r) for r in st.dropped]
-    ws_full = ws  # the model's own system: its state at t0, the condensed rows expanded
-    # rigid joints condensed for the time loop (se3dyn.dynamics.condense): the steps run on the
-    # reduced system, the stored rows are the model's own
-    cond = condensation(s) if condense else None
-    if cond is not None:
-        reduced = cond.restrict(st if initial_state is not None
-                                else dataclasses.replace(st, solver=None))
-        if reduced is None:  # a redundant equation of a rigid joint: kept as it is
-            cond = None
-        else:
-            s, st = cond.reduced, reduced
-            ws = Workspace(s)
-    run_ws = [ws_full] + ([ws] if ws is not ws_full else [])  # (their steppers' counters)
-    # storage grows as the run goes (doubling, up to the rows expected)
-    rec = _Recorder(s, min(capacity, _INITIAL_ROWS), on_output,
-                    None if adaptive and grid is None else capacity, store=store,
-                    on_rows=on_rows, cond=cond, full_ws=ws_full)
-    solver = integ.solver(s, st)
-    rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
-    stats = dict(steps=0, rejected=0, newton_iterations=0, rho_inf=rho_inf, step=step,
-                 t_start=t_start, t_end=t_end, tol_residual=tol_residual,
-                 tol_constraint=tol_constraint, unknowns=model_system.nq,
-                 multipliers=model_system.nm, matrix_size=solver.N, formulation=formulation,
-                 redundant=redundant_names,
-                 condensed=[] if cond is None else [model_system.joint_names[j]
-                                                     for j in cond.rigid],
-                 linear_solver="dense LU" if solver.dense else "sparse LU (SuperLU)",
-                 adaptive=adaptive, tol=opt["tol"], h_min_used=math.inf, h_max_used=0.0,
-                 **v_report)
-    if initial_state is not None:
-        stats["resumed_at"] = st.t
-    gest = None  # the companion run of the global error estimate
-    step_times = [st.t]  # of an adaptive run: the times its accepted steps reached
-    c_st = None  # the error coefficient of the state st, once computed (stepcontrol)
-    if adaptive:
-        norm = stepcontrol.ErrorNorm(s)
-        stats["error_estimate"] = 0.0
-        if global_error:
-            gest = stepcontrol.GlobalEstimate(norm, st, _companion(integ, s))
-    nsteps = 0 if adaptive else max(1, math.ceil(span / step - 1e-9))
-    h = min(step, opt["h_max"]) if adaptive else step
-    if adaptive and first_step is not None:
-        h = min(first_step, opt["h_max"])
-    i = k0
-    cpe = output_every * math.ceil(CHECKPOINT_EVERY / output_every)  # checkpoint interval
-    if k0 % cpe == 0:  # the start is a checkpoint too
-        rec.pending = Checkpoint(st, k0, h, 0, 0, 1)
-
-    def uncondense() -> None:
-        # a step of the reduced system failed: the run goes on with the rigid joints kept
-        # (a condensed run never fails where the model itself goes on; stats say from when)
-        nonlocal s, st, ws, solver, cond, norm, c_st
-        c_st = None  # (another norm from here)
-        stats["condensed_until"] = st.t
-        full = dataclasses.replace(cond.expand(st, ws_full), solver=None)
-        rec.uncondense()
-        if gest is not None:
-            gest.replace(stepcontrol.ErrorNorm(model_system),
-                         dataclasses.replace(cond.expand(gest.coarse, ws_full), solver=None),
-                         _companion(integ, model_system))
-        s, st, cond, ws = model_system, full, None, ws_full
-        solver = integ.solver(s, st)
-        if adaptive:
-            norm = stepcontrol.ErrorNorm(s)
-
-    def final_stats(failed: bool) -> None:  # (the run's end, or where it failed)
-        if gest is not None:
-            stats.update(gest.stats())
-        if adaptive:
-            stats["step_times"] = np.asarray(step_times)
-        if integ.index2:  # (split index-2 steps that fell back to the full matrix)
-            stats["full_matrix_steps"] = sum(w.full_matrix_steps() for w in run_ws)
-        stats.update(steps=i - k0, failed=failed, wall_time=time.perf_counter() - wall0,
-                     final_state=st if cond is None else cond.expand(st, ws_full))
-
-    def fail(exc: SimulationError):
-        final_stats(True)
-        if grid is None and rec.n and rec.last_time() != st.t:
-            e = energies(s, st, step_inputs(s, st.t), ws)
-            rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
-        rec.emit()
-        exc.result = rec.results(stats)
-        raise exc
-
-    stats["linear_solver"] = ("sparse LU (se3dyn/_core/sparse_lu.hpp)"
-                              + (" and LDL^T (sparse_ldlt.hpp) of the split index-2 iteration's "
-                                 "xi block" if integ.index2 and integ.newton == "modified" and s.nm
-                                 else ""))
-    stats["engine"] = "compiled"
-    if not adaptive and grid is None:
-        # the whole fixed-step loop in the compiled engine, in chunks between which progress
-        # and streamed rows are reported; a failing step is repeated by
-        # GeneralizedAlpha.step, which raises the error naming time, norms and item
-        def times(k0: int, k1: int) -> np.ndarray:  # the times of steps k0 <= k < k1
-            out = t_start + np.arange(k0 + 1, k1 + 1, dtype=np.int64).astype(float) * step
-            if k1 == nsteps:
-                out[-1] = t_end
-            return out
-
-        st, i, fac, hs = _run_compiled(s, integ, st, times, k0, nsteps, output_every, cpe,
-                                       rec, progress, stats, ws)
-        if i < nsteps and cond is not None:
-            uncondense()
-            st, i, fac2, hs2 = _run_compiled(s, integ, st, times, i, nsteps, output_every,
-                                             cpe, rec, progress, stats, ws)
-            fac += fac2
-            hs = (min(hs[0], hs2[0]), max(hs[1], hs2[1]))
-        stats["factorizations"] = fac
-        if i < nsteps:
-            try:
-                integ.step(s, st, float(times(i, i + 1)[0]) - st.t, solver, ws)
-            except SimulationError as exc:
-                fail(exc)
-            raise AssertionError("the compiled step failed but GeneralizedAlpha.step converged")
-        if nsteps > k0:
-            stats["h_min_used"], stats["h_max_used"] = hs
-    while st.t < t_end and (adaptive or i < nsteps):
-        if adaptive and _schedule is None:
-            h = min(h, t_end - st.t)
-            if t_end - st.t - h < 1e-9 * h:
-                h = t_end - st.t
-            try:
-                new, info = integ.step(s, st, h, solver, ws)
-            except SimulationError as exc:
-                if cond is not None and isinstance(exc, NewtonError):
-                    uncondense()
-                    continue
-                if not isinstance(exc, NewtonError):
-                    fail(exc)
-                if h / 4 < opt["h_min"]:
-                    fail(NewtonError(f"{exc}; the step cannot be reduced below h_min="
-                                     f"{opt['h_min']:.3g}", **_err_kwargs(exc)))
-                stats["rejected"] += 1
-                h /= 4
-                continue
-            tol_h = stepcontrol.share(opt["tol"], span, st.t, t_start, i, h)
-            est = norm(info.error)
-            err = est / tol_h
-            lim = stepcontrol.allowance(st.t, t_start, i, h)
-            if not err <= lim:
-                if h <= opt["h_min"] * (1 + 1e-9):
-                    worst = norm.worst(info.error)
-                    fail(SimulationError(
-                        f"t={st.t:.9g}: the local error estimate {est:.3e} m exceeds the step's "
-                        f"share {tol_h:.3e} m of tol={opt['tol']:g} at the minimum step "
-                        f"h_min={opt['h_min']:.3g}; worst: {s.labels[worst]} "
-                        "(a discontinuous input, or a tolerance too tight for the model)"))
-                stats["rejected"] += 1
-                stats["newton_iterations"] += info.iterations
-                h = max(opt["h_min"], stepcontrol.next_step(h, err, accepted=False))
-                continue
-            stats["error_estimate"] += est
-            t1 = st.t + h if t_end - st.t - h > 1e-12 * span else t_end
-            regular = True  # (an adaptive run continues to its own t_end only)
-        else:  # prescribed times: fixed steps, or the refined repetition of global_error="bound"
-            if _schedule is not None:
-                t1, regular = float(_schedule[i + 1]), True
-            else:
-                t1 = t_start + (i + 1) * step if i + 1 < nsteps else t_end
-                regular = t1 == t_start + (i + 1) * step
-            h = t1 - st.t
-            try:
-                new, info = integ.step(s, st, h, solver, ws)
-            except SimulationError as exc:
-                if cond is not None and isinstance(exc, NewtonError):
-                    uncondense()
-                    continue
-                fail(exc)
-            if _schedule is not None:
-                stats["error_estimate"] += norm(info.error)
-        new = dataclasses.replace(new, t=t1)  # exact times, no drift
-        i += 1
-        if adaptive:
-            step_times.append(t1)
-        if gest is not None:
-            gest.accepted(new, final=t1 >= t_end)
-        stats["newton_iterations"] += info.iterations
-        stats["h_min_used"] = min(stats["h_min_used"], h)
-        stats["h_max_used"] = max(stats["h_max_used"], h)
-        stored = False
-        if grid is not None:
-            stored = True  # every grid time up to t1 is filled
-            while gi < n_grid and grid(gi) <= t1 + 1e-12 * span:
-                tg = grid(gi)
-                if abs(tg - t1) <= 1e-12 * span:
-                    out = new
-                else:
-                    out = dataclasses.replace(
-                        interpolate(s, st, new, info.increment, (tg - st.t) / h, ws), t=tg)
-                ei = energies(s, out, step_inputs(s, tg), ws)
-                out = dataclasses.replace(out, power=ei["power"])
-                rec.add(out, ei["kinetic"], ei["potential"], ei["spring"], info.iterations,
-                        info.residual, info.constraint)
-                if tg != t_start + opt["output_step"] * gi:
-                    regular = False  # the last grid time, moved to t_end
-                gi += 1
-        elif i % output_every == 0 or t1 >= t_end:
-            e = info.energies
-            rec.add(new, e["kinetic"], e["potential"], e["spring"], info.iterations,
-                    info.residual, info.constraint)
-            stored = i % output_every == 0 or adaptive
-        prev, st = st, new
-        if progress is not None:
-            progress(st.t, i)
-        if adaptive and _schedule is None:
-            c0 = c_st if c_st is not None else stepcontrol.coefficient(norm, prev, integ.params)
-            c_st = stepcontrol.coefficient(norm, st, integ.params)
-            cs = (c0, c_st)
-            h = min(opt["h_max"],
-                    stepcontrol.next_step(h, err, accepted=True, c=cs, limit=lim))
-        cp = None
-        if stored and regular and i % cpe == 0:
-            cp = Checkpoint(st, i, h, stats["newton_iterations"], stats["rejected"], rec.total)
-        rec.emit(cp, force=st.t >= t_end or (not adaptive and i >= nsteps))
-    rec.emit()
-    final_stats(False)
-    res = rec.results(stats)
+        _stepwise(run)
+    run.rec.emit()
+    run.final_stats(False)
+    res = run.rec.results(run.stats)
     _energy_check(res)
     _global_error_check(res)
     return res
-
-
-#: Runs of ``simulate(..., global_error="bound")`` at most (the first and its refinements),
-#: and the fraction of ``tol`` a refinement aims at.
-BOUND_RUNS, BOUND_AIM = 3, 0.8
-
-
-def _bound(call: dict) -> Results:
-    """``simulate(..., global_error="bound")``: the run, repeated on its own steps refined
-    until the estimated global error is within ``tol`` (see :func:`simulate`)."""
-    import warnings
-
-    from se3dyn.errors import Se3dynWarning
-
-    why = None
-    if call["tol"] is None:
-        why = "an adaptive run (tol given)"
-    elif call["on_output"] is not None or call["on_rows"] is not None or call["store"] is not True:
-        why = ("results kept in memory (store=True, no on_output or on_rows): a run may be "
-               "repeated")
-    elif call["initial_state"] is not None:
-        why = "a run from the model's initial state (no initial_state)"
-    if why:
-        raise ModelError("simulate", "global_error", f"'bound' with {why}", "bound")
-    tol = float(call["tol"])
-    with warnings.catch_warnings():  # (the first run's estimate above tol is what follows)
-        warnings.filterwarnings("ignore", "global error estimate", Se3dynWarning)
-        res = simulate(**call, global_error=True)
-    est = res.stats["global_error"]
-    times = res.stats["step_times"]
-    runs = [dict(refine=1, steps=res.stats["steps"], rejected=res.stats["rejected"],
-                 global_error=est)]
-    norm = stepcontrol.ErrorNorm(system_of(call["model"]))
-    refine = 1
-    while (est is not None and est > tol and len(runs) < BOUND_RUNS
-           and res.stats.get("global_error_until") is None):
-        m = max(2, math.ceil(math.sqrt(est / (BOUND_AIM * tol))))
-        refine *= m
-        frac = np.arange(refine) / refine  # every step of the first run split in `refine`
-        sched = np.append((times[:-1, None] + frac * np.diff(times)[:, None]).ravel(),
-                          times[-1])
-        sched[::refine] = times  # (the first run's times exactly)
-        try:
-            new = simulate(**call, global_error=False, _schedule=sched)
-        except SimulationError as exc:  # the refined run failed: the last run is kept
-            runs.append(dict(refine=refine, steps=0, rejected=0, global_error=None,
-                             failure=str(exc).split(";")[0]))
-            break
-        common, ia, ib = np.intersect1d(res.t, new.t, return_indices=True)
-        est = float(norm.frames(new.H[ib], res.H[ia]).max(initial=0.0)) / (m * m - 1)
-        runs.append(dict(refine=refine, steps=new.stats["steps"], rejected=0,
-                         global_error=est))
-        res = new
-    if runs[-1].get("failure"):  # the results and estimate are the run before's
-        refine = runs[-2]["refine"]
-    res.stats.update(global_error=est, global_error_runs=runs, global_error_refine=refine)
-    if len(runs) > 1:
-        for k in ("global_error_at", "global_error_final", "global_error_history",
-                  "global_error_steps"):
-            res.stats.pop(k, None)
-    if est is not None and est > tol:
-        warnings.warn(Se3dynWarning(
-            f"global_error='bound': the estimated global error {est:.3g} m is still above "
-            f"tol = {tol:g} m after {len(runs)} runs (steps refined {refine} times)"
-            + (f"; the refinement of the last failed: {runs[-1]['failure']}"
-               if runs[-1].get("failure") else "")
-            + (f"; the estimate stopped at t = {res.stats['global_error_until']:.6g} s"
-               if res.stats.get("global_error_until") is not None else "")),
-            stacklevel=3)
-    return res
-
-
-def _global_error_setting(val, adaptive: bool) -> bool:
-    """``global_error`` checked: True or False, True with ``tol`` only ("bound" is handled
-    by :func:`_bound`)."""
-    on = True if isinstance(val, str) and val == "bound" else val
-    if not isinstance(on, bool | np.bool_):
-        raise ModelError("simulate", "global_error", "True, False or 'bound'", val)
-    if on and not adaptive:
-        raise ModelError("simulate", "global_error", "an adaptive run (tol given): the "
-                         "estimate follows the run's own steps", val)
-    return bool(on)
-
-
-def _companion(integ: GeneralizedAlpha, s: System):
-    """The step of the companion run of a global error estimate: from a state to a time, in a
-    workspace of its own (:class:`~se3dyn.dynamics.stepcontrol.GlobalEstimate`)."""
-    ws = Workspace(s)
-
-    def step(st: State, t: float) -> State:
-        new, _ = integ.step(s, st, t - st.t, None, ws)
-        return dataclasses.replace(new, t=t)
-
-    return step
-
-
-def _check_initial_state(s: System, st, t_start: float, t_end: float, step: float,
-                         adaptive: bool) -> int:
-    """Validate ``initial_state``; the number of fixed steps before it (0 when adaptive)."""
-    if not isinstance(st, State):
-        raise ModelError("simulate", "initial_state", "a State (stats['final_state'] of an "
-                         "earlier run) or None", st)
-    F = {"H": (s.M, 4, 4), "HJ": (s.m, 4, 4), "v": (s.nq,), "vd": (s.nq,), "a": (s.nq,),
-         "lam": (s.nm,), "alpha": (s.nq,)}
-    for name, shape in F.items():
-        arr = np.asarray(getattr(st, name))
-        if arr.shape != shape:
-            raise ModelError("simulate", "initial_state", f"a state of this model ({name} of "
-                             f"shape {shape})", f"{name} of shape {arr.shape}")
-    t = float(st.t)
-    if not (math.isfinite(t) and t_start <= t < t_end):
-        raise ModelError("simulate", "initial_state", f"a state at a time in [t_start, t_end) ="
-                         f" [{t_start:g}, {t_end:g})", f"t = {t!r}")
-    if adaptive:
-        return 0
-    k = round((t - t_start) / step)
-    if abs(t_start + k * step - t) > 1e-9 * step:
-        raise ModelError("simulate", "initial_state", f"a state at a step time t_start + k "
-                         f"step ({t_start:g} + k {step:g})", f"t = {t!r}",
-                         "give the t_start of the run that computed it, or t_start=t")
-    return int(k)
-
-
-def _check_size(s: System, span: float, step: float, output_every: int,
-                output_step: float | None, adaptive: bool, store: bool = True) -> None:
-    """Refuse, before anything is allocated, a run of more than MAX_STEPS fixed steps or more
-    than MAX_STEPS stored rows, or whose stored rows would not fit in the available memory
-    (streamed runs, ``store=False``, keep no rows)."""
-    what = f"(t_end - t_start) / step = {span:g} / {step:g}"
-    n = span / step  # may be inf
-    if not adaptive and not n <= MAX_STEPS:
-        raise ModelError("simulate", "step", f"at most {MAX_STEPS:.0e} steps", step,
-                         f"{what} = {n:.3g} steps; use a larger step")
-    rows = span / output_step + 1 if output_step is not None else (
-        None if adaptive else n / output_every + 2)
-    if rows is None:
-        return
-    if not rows <= MAX_STEPS:
-        raise ModelError("simulate", "output_step" if output_step is not None else
-                         "output_every", f"at most {MAX_STEPS:.0e} stored rows", rows,
-                         "store fewer rows: a larger output_step or output_every")
-    if not store:
-        return
-    per_row = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
-    need = rows * per_row
-    avail = _available_memory()
-    if avail is not None and need > avail:
-        raise ModelError(
-            "simulate", "output_step" if output_step is not None else "step",
-            "results that fit in memory", f"{rows:.3g} stored rows of {per_row} bytes = "
-            f"{need / 2**30:.1f} GiB", f"{avail / 2**30:.1f} GiB available; store fewer rows "
-            "with output_every or output_step (CLI: --output-step), or use a larger step")
-
-
-def _settings(t_end, step, t_start, output_every, tol, h_min, h_max, output_step):
-    """The time settings of a run, checked (ModelError naming the field) and normalised:
-    (t_end, step, t_start, output_every, span, dict of tol, h_min, h_max, output_step)."""
-    for fld, val in (("t_end", t_end), ("step", step), ("t_start", t_start)):
-        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
-                or not math.isfinite(float(val))):
-            raise ModelError("simulate", fld, "a finite number (s)", val)
-    t_end, step, t_start = float(t_end), float(step), float(t_start)
-    if not step > 0:
-        raise ModelError("simulate", "step", "a positive time step (s)", step)
-    if not t_end > t_start:
-        raise ModelError("simulate", "t_end", f"a time after t_start={t_start}", t_end)
-    if isinstance(output_every, numbers.Integral) and not isinstance(output_every, bool):
-        output_every = int(output_every)
-    if not (isinstance(output_every, int) and 1 <= output_every <= MAX_STEPS):
-        raise ModelError("simulate", "output_every", f"a positive integer of at most "
-                         f"{MAX_STEPS:.0e} (the most steps a run takes)", output_every)
-    span = t_end - t_start
-    opt = {}
-    for fld, val, default in (("tol", tol, None), ("h_min", h_min, 1e-12 * span),
-                              ("h_max", h_max, span / 10), ("output_step", output_step, None)):
-        if val is None:
-            opt[fld] = default
-            continue
-        if (not isinstance(val, numbers.Real) or isinstance(val, bool)
-                or not (math.isfinite(float(val)) and float(val) > 0)):
-            raise ModelError("simulate", fld, "a positive number", val)
-        opt[fld] = float(val)
-    if opt["tol"] is not None and opt["tol"] < 1e-15:
-        raise ModelError("simulate", "tol", "a tolerance of at least 1e-15 (m, rad)", opt["tol"])
-    if opt["h_min"] > opt["h_max"]:
-        raise ModelError("simulate", "h_min", f"at most h_max={opt['h_max']:g}", opt["h_min"])
-    return t_end, step, t_start, output_every, span, opt
 
 
 def check_settings(model: Model | System, **settings) -> None:
@@ -958,182 +273,379 @@ def check_settings(model: Model | System, **settings) -> None:
         raise ModelError("simulation", "settings", "names of simulate's parameters",
                          ", ".join(settings), str(exc)) from None
     b.apply_defaults()
-    a = b.arguments
-    s = system_of(model)
-    t_end, step, t_start, output_every, span, opt = _settings(
-        a["t_end"], a["step"], a["t_start"], a["output_every"], a["tol"], a["h_min"],
-        a["h_max"], a["output_step"])
-    _check_size(s, span, step, output_every, opt["output_step"], opt["tol"] is not None)
-    _global_error_setting(a["global_error"], opt["tol"] is not None)
-    GeneralizedAlpha(rho_inf=a["rho_inf"], tol_residual=a["tol_residual"],
-                     tol_constraint=a["tol_constraint"], max_iter=a["max_iter"],
-                     formulation=a["formulation"], redundant=a["redundant"],
-                     engine=a["engine"], newton=a["newton"],
-                     initial_velocities=a["initial_velocities"])
+    kw = {k: v for k, v in b.arguments.items() if k not in ("model", "_schedule")}
+    RunSettings.of(system_of(model), **kw)
 
 
-def _velocity_report(s: System, st: State, kinetic: float, ws) -> dict:
-    """Stats entries on the initial velocities init changed (and a warning when they matter)."""
-    import warnings
+@dataclasses.dataclass(frozen=True)
+class _Plan:
+    """What a run decides before its first step (:func:`_plan`).
 
-    from se3dyn.dynamics.integrator import initial_velocity_changes
-    from se3dyn.errors import Se3dynWarning
-
-    changes = initial_velocity_changes(s, st)
-    if not changes:
-        return dict(initial_velocity_changes=[])
-    v0 = np.zeros(s.nq)
-    v0[s.node_dofidx] = s.node_v0[s.node_free]
-    given = energies(s, dataclasses.replace(st, v=v0), step_inputs(s, st.t), ws)["kinetic"]
-    rows = [dict(node=c["node"], dv=c["dv"], dw=c["dw"], given=c["given"].tolist(),
-                 used=c["used"].tolist()) for c in changes]
-    scale = max(float(np.abs(s.node_v0).max()), 1e-300)
-    worst = max(changes, key=lambda c: max(c["dv"], c["dw"]))
-    if max(worst["dv"], worst["dw"]) > 1e-6 * scale:
-        names = ", ".join(repr(c["node"]) for c in changes[:5]) + (
-            f" and {len(changes) - 5} more" if len(changes) > 5 else "")
-        warnings.warn(Se3dynWarning(
-            f"initial velocities projected onto the joints' velocity constraints: {names} "
-            f"changed (largest: node {worst['node']!r}, velocity by {worst['dv']:.3g} m/s, "
-            f"angular velocity by {worst['dw']:.3g} rad/s); kinetic energy {given:.6g} J "
-            f"given, {kinetic:.6g} J used (stats['initial_velocity_changes']; "
-            "initial_velocities='strict' refuses them)"), stacklevel=3)
-    return dict(initial_velocity_changes=rows, initial_kinetic_energy_given=float(given),
-                initial_kinetic_energy_used=float(kinetic))
-
-
-def energy_balance_check(res: Results) -> tuple[float, float]:
-    """The largest energy balance error of a run and the energy scale it compares with (J).
-
-    The error is the largest drift of kinetic + potential + elastic energy - work of actuators
-    and loads + dissipation from its initial value. The scale is the largest of the kinetic and
-    the elastic energy (absolute quantities) and of the changes of the gravity potential (its
-    zero is arbitrary), of the works and of the dissipation over the run: the energy in play (a
-    pendulum released from rest has no energy at t0, a free spinning body exchanges none).
-    """
-    if not len(res.t):
-        return 0.0, 0.0
-    c = energy_rows(res)
-    return _balance_and_scale(c, c[0])
-
-
-def _balance_and_scale(c: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
-    """(largest energy balance drift, energy in play) of scalar rows ``c`` (n, >= 6) in the
-    order of SCALARS (kinetic, potential, spring, actuator work, load work, dissipated),
-    measured from the first row of the run ``ref`` (6,); see :func:`energy_balance_check`."""
-    def bal(x):  # energy - works + dissipation
-        return x[..., 0] + x[..., 1] + x[..., 2] - x[..., 3] - x[..., 4] + x[..., 5]
-
-    err = float(np.abs(bal(c[:, :6]) - bal(ref)).max())
-    rel = [1, 3, 4, 5]  # the gravity potential's zero is arbitrary; works start at ref
-    scale = max(float(np.abs(c[:, 0]).max()), float(np.abs(c[:, 2]).max()),
-                float(np.abs(c[:, rel] - ref[rel]).max()))
-    return err, scale
-
-
-def energy_jump(t: np.ndarray, c: np.ndarray) -> dict | None:
-    """Where the energy balance changed most between two consecutive stored rows.
-
-    Parameters
+    Attributes
     ----------
-    t : ndarray, shape (n,)
-        Stored times.
-    c : ndarray, shape (n, >= 6)
-        Energies and works in the order of :data:`SCALARS` (kinetic, potential, spring,
-        actuator work, load work, dissipated).
-
-    Returns
-    -------
-    dict or None
-        ``t0``, ``t1`` (s): the rows around the largest change; ``jump`` (J): the change of
-        ``E - W_actuators - W_loads + dissipation`` between them; ``first``: whether they are the
-        run's first two rows. None with fewer than two rows.
+    adaptive : bool
+        Adaptive steps (``tol`` given).
+    compiled : bool
+        The whole fixed-step loop runs in the compiled engine (:func:`_fixed_compiled`);
+        otherwise step by step (:func:`_stepwise`).
+    grid : callable(j) -> float, or None
+        The output times ``t_start + j output_step``, the last moved to ``t_end``.
+    n_grid, gi : int
+        Grid times in all; the first one this run fills.
+    capacity : int
+        Rows expected (a first guess of 1024 for an adaptive run without a grid).
+    limit : int or None
+        Rows the recorder grows to at most (None: no limit known).
+    nsteps : int
+        Fixed steps of the whole run (0 when adaptive).
+    h0 : float
+        The first step.
+    cpe : int
+        Steps between checkpoints.
+    schedule : ndarray or None
+        Prescribed step times (the refined repetition of ``global_error="bound"``).
     """
-    c = np.asarray(c, dtype=float)
-    if len(c) < 2:
-        return None
-    b = c[:, 0] + c[:, 1] + c[:, 2] - c[:, 3] - c[:, 4] + c[:, 5]
-    d = np.diff(b)
-    k = int(np.argmax(np.abs(d)))
-    return dict(t0=float(t[k]), t1=float(t[k + 1]), jump=float(d[k]), first=k == 0)
+
+    adaptive: bool
+    compiled: bool
+    grid: Callable[[int], float] | None
+    n_grid: int
+    gi: int
+    capacity: int
+    limit: int | None
+    nsteps: int
+    h0: float
+    cpe: int
+    schedule: np.ndarray | None
 
 
-def energy_warning(err: float, scale: float, jump: dict | None = None) -> str | None:
-    """The warning on a large energy balance error (above 10 % of the energy in play), with
-    when and how large its largest jump between stored rows was (:func:`energy_jump`); None
-    when the balance is fine."""
-    if not (err > 0.1 * scale and err > 1e-12):
-        return None
-    return (f"energy balance error {err:.3g} J is {100 * err / max(scale, 1e-300):.3g} % of "
-            f"the energy in play in the run ({scale:.3g} J)" + energy_cause(err, jump))
+def _plan(cfg: RunSettings, schedule: np.ndarray | None) -> _Plan:
+    """The plan of a run with the settings ``cfg``."""
+    adaptive = cfg.adaptive
+    t_start, t_end, span = cfg.t_start, cfg.t_end, cfg.span
+    grid = None  # the output times t_start + j output_step, the last moved to t_end
+    gi = 1  # next grid time to fill
+    n_grid = 0
+    if cfg.output_step is not None:
+        k = max(1, math.ceil(span / cfg.output_step - 1e-9))
+        dt_out = cfg.output_step
 
+        def grid(j: int) -> float:  # computed when needed: nothing allocated per row
+            return t_end if j >= k else min(t_start + dt_out * j, t_end)
 
-def energy_cause(err: float, jump: dict | None) -> str:
-    """The end of :func:`energy_warning`: the largest jump (when known) and the likely cause,
-    starting with ``"; "`` or ``": "``."""
-    text = ""
-    if jump is not None:
-        share = abs(jump["jump"]) / max(err, 1e-300)
-        text = (f"; its largest jump, {jump['jump']:+.3g} J ({100 * share:.3g} % of the "
-                f"error), between t = {jump['t0']:.6g} and {jump['t1']:.6g} s")
-        if jump["first"] and share >= 0.5:
-            return text + (" (the first step): a start the step does not resolve, e.g. "
-                           "velocities or forces switched on at t0 (an impulsive start), rather "
-                           "than a step too large for the motion after it")
-    return text + (": the step is probably too large for the motion (the results may be far "
-                   "from the true motion; try a smaller step, or rho_inf < 1 with the index-3 "
-                   "form)")
-
-
-def energy_rows(res: Results) -> np.ndarray:
-    """The energies and works of a result's rows, (n, 6) in the order of :data:`SCALARS`."""
-    return np.stack([res.kinetic, res.potential, res.spring, res.work_actuators,
-                     res.work_loads, res.dissipation], axis=1)
-
-
-def _energy_check(res: Results) -> None:
-    import warnings
-
-    from se3dyn.errors import Se3dynWarning
-
-    if "energy_scale" in res.stats:  # over every row, streamed ones included (_Recorder)
-        err, scale = res.stats["energy_balance_error"], res.stats["energy_scale"]
+        n_grid = k + 1
+        capacity = n_grid
+        if cfg.initial_state is not None:
+            gi = min(n_grid, max(1, int((cfg.initial_state.t - t_start) / dt_out) - 1))
+            while gi < n_grid and grid(gi) <= cfg.initial_state.t + 1e-12 * span:
+                gi += 1
+            capacity = n_grid - gi + 1
+    elif adaptive:
+        capacity = 1024
     else:
-        err, scale = energy_balance_check(res)
-        res.stats.update(energy_balance_error=err, energy_scale=scale)
-    if energy_warning(err, scale) is None:
-        return
-    jump = None
-    if len(res.t) == res.stats.get("rows", len(res.t)):  # every row held (not streamed)
-        jump = energy_jump(res.t, energy_rows(res))
-        if jump is not None:
-            res.stats["energy_jump"] = jump
-    warnings.warn(Se3dynWarning(energy_warning(err, scale, jump)), stacklevel=3)
+        capacity = (max(1, math.ceil(span / cfg.step - 1e-9)) // cfg.output_every + 2
+                    - cfg.k0 // cfg.output_every)
+    h = min(cfg.step, cfg.h_max) if adaptive else cfg.step
+    if adaptive and cfg.first_step is not None:
+        h = min(cfg.first_step, cfg.h_max)
+    return _Plan(adaptive=adaptive, compiled=not adaptive and grid is None, grid=grid,
+                 n_grid=n_grid, gi=gi, capacity=capacity,
+                 limit=None if adaptive and grid is None else capacity,
+                 nsteps=0 if adaptive else max(1, math.ceil(span / cfg.step - 1e-9)), h0=h,
+                 cpe=checkpoint_interval(cfg.output_every), schedule=schedule)
 
 
-def _global_error_check(res: Results) -> None:
-    import warnings
+class _Run:
+    """One run as it goes: the system stepped (the reduced one while rigid joints are
+    condensed), its state, workspace and linear solver, the recorder, the stats, the global
+    error companion and the steps done (``i``, from the start of the whole run)."""
 
-    from se3dyn.errors import Se3dynWarning
+    def __init__(self, s: System, cfg: RunSettings, plan: _Plan):
+        self.cfg, self.plan = cfg, plan
+        integ = self.integ = cfg.integrator
+        initial = cfg.initial_state
+        self.wall0 = time.perf_counter()
+        ws = Workspace(s)  # this run's engine and steppers, shared with no other run
+        st = integ.init(s, cfg.t_start, ws=ws) if initial is None else initial
+        e = energies(s, st, step_inputs(s, st.t), ws)
+        # (a continued run starts from a state, not from the model's velocities)
+        v_report = ({} if initial is not None
+                    else _velocity_report(s, st, e["kinetic"], ws, stacklevel=4))
+        model_system, redundant_names = s, [equation_name(s, r) for r in st.dropped]
+        ws_full = ws  # the model's own system: its state at t0, the condensed rows expanded
+        # rigid joints condensed for the time loop (se3dyn.dynamics.condense): the steps run on
+        # the reduced system, the stored rows are the model's own
+        cond = condensation(s) if cfg.condense else None
+        if cond is not None:
+            reduced = cond.restrict(st if initial is not None
+                                    else dataclasses.replace(st, solver=None))
+            if reduced is None:  # a redundant equation of a rigid joint: kept as it is
+                cond = None
+            else:
+                s, st = cond.reduced, reduced
+                ws = Workspace(s)
+        self.run_ws = [ws_full] + ([ws] if ws is not ws_full else [])  # (steppers' counters)
+        # storage grows as the run goes (doubling, up to the rows expected)
+        rec = _Recorder(s, plan.capacity, cfg.on_output, plan.limit, store=cfg.store,
+                        on_rows=cfg.on_rows, cond=cond, full_ws=ws_full)
+        solver = integ.solver(s, st)
+        rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
+        stats = dict(steps=0, rejected=0, newton_iterations=0, rho_inf=cfg.rho_inf,
+                     step=cfg.step, t_start=cfg.t_start, t_end=cfg.t_end,
+                     tol_residual=cfg.tol_residual, tol_constraint=cfg.tol_constraint,
+                     unknowns=model_system.nq, multipliers=model_system.nm,
+                     matrix_size=solver.N, formulation=cfg.formulation,
+                     redundant=redundant_names,
+                     condensed=[] if cond is None else [model_system.joint_names[j]
+                                                         for j in cond.rigid],
+                     linear_solver="dense LU" if solver.dense else "sparse LU (SuperLU)",
+                     adaptive=plan.adaptive, tol=cfg.tol, h_min_used=math.inf,
+                     h_max_used=0.0, **v_report)
+        if initial is not None:
+            stats["resumed_at"] = st.t
+        self.gest = None  # the companion run of the global error estimate
+        self.step_times = [st.t]  # of an adaptive run: the times its accepted steps reached
+        self.c_st = None  # the error coefficient of the state st, once computed (stepcontrol)
+        self.norm = None
+        if plan.adaptive:
+            self.norm = stepcontrol.ErrorNorm(s)
+            stats["error_estimate"] = 0.0
+            if cfg.global_error:
+                self.gest = stepcontrol.GlobalEstimate(self.norm, st, _companion(integ, s))
+        self.i = cfg.k0
+        self.gi = plan.gi
+        if cfg.k0 % plan.cpe == 0:  # the start is a checkpoint too
+            rec.pending = Checkpoint(st, cfg.k0, plan.h0, 0, 0, 1)
+        stats["linear_solver"] = (
+            "sparse LU (se3dyn/_core/sparse_lu.hpp)"
+            + (" and LDL^T (sparse_ldlt.hpp) of the split index-2 iteration's xi block"
+               if integ.index2 and integ.newton == "modified" and s.nm else ""))
+        stats["engine"] = "compiled"
+        self.s, self.st, self.ws, self.solver, self.cond = s, st, ws, solver, cond
+        self.model_system, self.ws_full, self.rec, self.stats = model_system, ws_full, rec, stats
 
-    ge, tol = res.stats.get("global_error"), res.stats.get("tol")
-    if ge is not None and tol is not None and ge > tol:
-        warnings.warn(Se3dynWarning(
-            f"global error estimate {ge:.3g} m is {ge / tol:.3g} times tol = {tol:g} m (largest "
-            f"at t = {res.stats['global_error_at']:.6g} s): the motion amplifies the local "
-            "errors; a smaller tol brings it down (docs/accuracy.md)"), stacklevel=3)
+    def uncondense(self) -> None:
+        """A step of the reduced system failed: the run goes on with the rigid joints kept (a
+        condensed run never fails where the model itself goes on; stats say from when)."""
+        cond, ws_full, model_system = self.cond, self.ws_full, self.model_system
+        self.c_st = None  # (another norm from here)
+        self.stats["condensed_until"] = self.st.t
+        full = dataclasses.replace(cond.expand(self.st, ws_full), solver=None)
+        self.rec.uncondense()
+        if self.gest is not None:
+            self.gest.replace(stepcontrol.ErrorNorm(model_system),
+                              dataclasses.replace(cond.expand(self.gest.coarse, ws_full),
+                                                  solver=None),
+                              _companion(self.integ, model_system))
+        self.s, self.st, self.cond, self.ws = model_system, full, None, ws_full
+        self.solver = self.integ.solver(self.s, self.st)
+        if self.plan.adaptive:
+            self.norm = stepcontrol.ErrorNorm(self.s)
+
+    def final_stats(self, failed: bool) -> None:
+        """The stats of the run's end, or of where it failed."""
+        stats = self.stats
+        if self.gest is not None:
+            stats.update(self.gest.stats())
+        if self.plan.adaptive:
+            stats["step_times"] = np.asarray(self.step_times)
+        if self.integ.index2:  # (split index-2 steps that fell back to the full matrix)
+            stats["full_matrix_steps"] = sum(w.full_matrix_steps() for w in self.run_ws)
+        stats.update(steps=self.i - self.cfg.k0, failed=failed,
+                     wall_time=time.perf_counter() - self.wall0,
+                     final_state=self.st if self.cond is None
+                     else self.cond.expand(self.st, self.ws_full))
+
+    def fail(self, exc: SimulationError):
+        """Raise ``exc`` with the results up to the last converged step (``exc.result``)."""
+        self.final_stats(True)
+        rec, st = self.rec, self.st
+        if self.plan.grid is None and rec.n and rec.last_time() != st.t:
+            e = energies(self.s, st, step_inputs(self.s, st.t), self.ws)
+            rec.add(st, e["kinetic"], e["potential"], e["spring"], 0, 0.0, 0.0)
+        rec.emit()
+        exc.result = rec.results(self.stats)
+        raise exc
 
 
-def _available_memory() -> float | None:
-    """Available memory in bytes (Linux: MemAvailable), None when unknown."""
+def _fixed_compiled(run: _Run) -> None:
+    """The whole fixed-step loop in the compiled engine (:func:`_run_compiled`), in chunks
+    between which progress and streamed rows are reported; a failing step is repeated by
+    :meth:`GeneralizedAlpha.step`, which raises the error naming time, norms and item. A run
+    on condensed rigid joints whose step fails goes on with the joints kept."""
+    cfg, stats, nsteps = run.cfg, run.stats, run.plan.nsteps
+    t_start, step, t_end = cfg.t_start, cfg.step, cfg.t_end
+
+    def times(k0: int, k1: int) -> np.ndarray:  # the times of steps k0 <= k < k1
+        out = t_start + np.arange(k0 + 1, k1 + 1, dtype=np.int64).astype(float) * step
+        if k1 == nsteps:
+            out[-1] = t_end
+        return out
+
+    rest = (cfg.output_every, run.plan.cpe, run.rec, cfg.progress, stats)
+    run.st, run.i, fac, hs = _run_compiled(run.s, run.integ, run.st, times, cfg.k0, nsteps,
+                                           *rest, run.ws)
+    if run.i < nsteps and run.cond is not None:
+        run.uncondense()
+        run.st, run.i, fac2, hs2 = _run_compiled(run.s, run.integ, run.st, times, run.i,
+                                                 nsteps, *rest, run.ws)
+        fac += fac2
+        hs = (min(hs[0], hs2[0]), max(hs[1], hs2[1]))
+    stats["factorizations"] = fac
+    if run.i < nsteps:
+        try:
+            run.integ.step(run.s, run.st, float(times(run.i, run.i + 1)[0]) - run.st.t,
+                           run.solver, run.ws)
+        except SimulationError as exc:
+            run.fail(exc)
+        raise AssertionError("the compiled step failed but GeneralizedAlpha.step converged")
+    if nsteps > cfg.k0:
+        stats["h_min_used"], stats["h_max_used"] = hs
+
+
+def _stepwise(run: _Run) -> None:
+    """The step-by-step loop: adaptive steps (:func:`_adaptive_step`), or prescribed times
+    (:func:`_prescribed_step`: fixed steps with an output grid, or the refined repetition of
+    ``global_error="bound"``); the rows stored by :func:`_store`."""
+    cfg, plan, stats, rec = run.cfg, run.plan, run.stats, run.rec
+    t_end, adaptive = cfg.t_end, plan.adaptive
+    h, err, lim = plan.h0, None, None
+    while run.st.t < t_end and (adaptive or run.i < plan.nsteps):
+        if adaptive and plan.schedule is None:
+            new, info, h, err, lim = _adaptive_step(run, h)
+            if new is None:
+                continue
+            st = run.st
+            t1 = st.t + h if t_end - st.t - h > 1e-12 * cfg.span else t_end
+            regular = True  # (an adaptive run continues to its own t_end only)
+        else:
+            took = _prescribed_step(run)
+            if took is None:
+                continue
+            new, info, h, t1, regular = took
+        st = run.st
+        new = dataclasses.replace(new, t=t1)  # exact times, no drift
+        run.i += 1
+        i = run.i
+        if adaptive:
+            run.step_times.append(t1)
+        if run.gest is not None:
+            run.gest.accepted(new, final=t1 >= t_end)
+        stats["newton_iterations"] += info.iterations
+        stats["h_min_used"] = min(stats["h_min_used"], h)
+        stats["h_max_used"] = max(stats["h_max_used"], h)
+        stored, regular = _store(run, st, new, info, h, t1, regular)
+        prev, run.st = st, new
+        if cfg.progress is not None:
+            cfg.progress(new.t, i)
+        if adaptive and plan.schedule is None:
+            c0 = (run.c_st if run.c_st is not None
+                  else stepcontrol.coefficient(run.norm, prev, run.integ.params))
+            run.c_st = stepcontrol.coefficient(run.norm, new, run.integ.params)
+            cs = (c0, run.c_st)
+            h = min(cfg.h_max, stepcontrol.next_step(h, err, accepted=True, c=cs, limit=lim))
+        cp = None
+        if stored and regular and i % plan.cpe == 0:
+            cp = Checkpoint(new, i, h, stats["newton_iterations"], stats["rejected"], rec.total)
+        rec.emit(cp, force=new.t >= t_end or (not adaptive and i >= plan.nsteps))
+
+
+def _adaptive_step(run: _Run, h: float):
+    """One adaptive step of at most ``h`` from ``run.st``: ``(new, info, h, err, lim)`` when
+    accepted (``err``: the local error estimate over its share, ``lim``: the allowance,
+    :mod:`se3dyn.dynamics.stepcontrol`), ``(None, None, h_retry, None, None)`` when it is to be
+    retried with ``h_retry`` (a rejected step, a failed Newton iteration, or the rigid joints
+    kept from now on)."""
+    cfg, stats, st = run.cfg, run.stats, run.st
+    h = min(h, cfg.t_end - st.t)
+    if cfg.t_end - st.t - h < 1e-9 * h:
+        h = cfg.t_end - st.t
     try:
-        with open("/proc/meminfo", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return float(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
+        new, info = run.integ.step(run.s, st, h, run.solver, run.ws)
+    except SimulationError as exc:
+        if run.cond is not None and isinstance(exc, NewtonError):
+            run.uncondense()
+            return None, None, h, None, None
+        if not isinstance(exc, NewtonError):
+            run.fail(exc)
+        if h / 4 < cfg.h_min:
+            run.fail(NewtonError(f"{exc}; the step cannot be reduced below h_min="
+                                 f"{cfg.h_min:.3g}", **_err_kwargs(exc)))
+        stats["rejected"] += 1
+        return None, None, h / 4, None, None
+    tol_h = stepcontrol.share(cfg.tol, cfg.span, st.t, cfg.t_start, run.i, h)
+    est = run.norm(info.error)
+    err = est / tol_h
+    lim = stepcontrol.allowance(st.t, cfg.t_start, run.i, h)
+    if not err <= lim:
+        if h <= cfg.h_min * (1 + 1e-9):
+            worst = run.norm.worst(info.error)
+            run.fail(SimulationError(
+                f"t={st.t:.9g}: the local error estimate {est:.3e} m exceeds the step's "
+                f"share {tol_h:.3e} m of tol={cfg.tol:g} at the minimum step "
+                f"h_min={cfg.h_min:.3g}; worst: {run.s.labels[worst]} "
+                "(a discontinuous input, or a tolerance too tight for the model)"))
+        stats["rejected"] += 1
+        stats["newton_iterations"] += info.iterations
+        return None, None, max(cfg.h_min, stepcontrol.next_step(h, err, accepted=False)), \
+            None, None
+    stats["error_estimate"] += est
+    return new, info, h, err, lim
+
+
+def _prescribed_step(run: _Run):
+    """One step to a prescribed time (a fixed step, or a time of the refined repetition of
+    ``global_error="bound"``): ``(new, info, h, t1, regular)``, with ``regular`` whether
+    ``t1`` is its regular time ``t_start + k step``; None when the step is to be repeated with
+    the rigid joints kept."""
+    cfg, plan, st, i = run.cfg, run.plan, run.st, run.i
+    if plan.schedule is not None:
+        t1, regular = float(plan.schedule[i + 1]), True
+    else:
+        t1 = cfg.t_start + (i + 1) * cfg.step if i + 1 < plan.nsteps else cfg.t_end
+        regular = t1 == cfg.t_start + (i + 1) * cfg.step
+    h = t1 - st.t
+    try:
+        new, info = run.integ.step(run.s, st, h, run.solver, run.ws)
+    except SimulationError as exc:
+        if run.cond is not None and isinstance(exc, NewtonError):
+            run.uncondense()
+            return None
+        run.fail(exc)
+    if plan.schedule is not None:
+        run.stats["error_estimate"] += run.norm(info.error)
+    return new, info, h, t1, regular
+
+
+def _store(run: _Run, st: State, new: State, info, h: float, t1: float, regular: bool):
+    """Store the rows of the step from ``st`` to ``new`` (every ``output_every``-th step and
+    the last, or the grid times up to ``t1`` by dense output); ``(stored, regular)``: whether
+    the step's row is stored (a checkpoint may follow) and whether its time is regular (the
+    last grid time moved to ``t_end`` is not)."""
+    cfg, plan, rec = run.cfg, run.plan, run.rec
+    if plan.grid is None:
+        if run.i % cfg.output_every == 0 or t1 >= cfg.t_end:
+            e = info.energies
+            rec.add(new, e["kinetic"], e["potential"], e["spring"], info.iterations,
+                    info.residual, info.constraint)
+            return run.i % cfg.output_every == 0 or plan.adaptive, regular
+        return False, regular
+    span = cfg.span
+    while run.gi < plan.n_grid and plan.grid(run.gi) <= t1 + 1e-12 * span:  # every one to t1
+        tg = plan.grid(run.gi)
+        if abs(tg - t1) <= 1e-12 * span:
+            out = new
+        else:
+            out = dataclasses.replace(
+                interpolate(run.s, st, new, info.increment, (tg - st.t) / h, run.ws), t=tg)
+        ei = energies(run.s, out, step_inputs(run.s, tg), run.ws)
+        out = dataclasses.replace(out, power=ei["power"])
+        rec.add(out, ei["kinetic"], ei["potential"], ei["spring"], info.iterations,
+                info.residual, info.constraint)
+        if tg != cfg.t_start + cfg.output_step * run.gi:
+            regular = False  # the last grid time, moved to t_end
+        run.gi += 1
+    return True, regular
 
 
 def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int, nsteps: int,
@@ -1230,9 +742,94 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int,
     return state(), i, fac, (h_lo, h_hi)
 
 
+
 def _err_kwargs(exc) -> dict:
     if isinstance(exc, NewtonError):
         return dict(t=exc.t, h=exc.h, iterations=exc.iterations,
                     residual_norm=exc.residual_norm, constraint_norm=exc.constraint_norm,
                     item=exc.item)
     return {}
+
+
+#: Runs of ``simulate(..., global_error="bound")`` at most (the first and its refinements),
+#: and the fraction of ``tol`` a refinement aims at.
+BOUND_RUNS, BOUND_AIM = 3, 0.8
+
+
+def _bound(call: dict) -> Results:
+    """``simulate(..., global_error="bound")``: the run, repeated on its own steps refined
+    until the estimated global error is within ``tol`` (see :func:`simulate`)."""
+    import warnings
+
+    from se3dyn.errors import Se3dynWarning
+
+    why = None
+    if call["tol"] is None:
+        why = "an adaptive run (tol given)"
+    elif call["on_output"] is not None or call["on_rows"] is not None or call["store"] is not True:
+        why = ("results kept in memory (store=True, no on_output or on_rows): a run may be "
+               "repeated")
+    elif call["initial_state"] is not None:
+        why = "a run from the model's initial state (no initial_state)"
+    if why:
+        raise ModelError("simulate", "global_error", f"'bound' with {why}", "bound")
+    tol = float(call["tol"])
+    with warnings.catch_warnings():  # (the first run's estimate above tol is what follows)
+        warnings.filterwarnings("ignore", "global error estimate", Se3dynWarning)
+        res = simulate(**call, global_error=True)
+    est = res.stats["global_error"]
+    times = res.stats["step_times"]
+    runs = [dict(refine=1, steps=res.stats["steps"], rejected=res.stats["rejected"],
+                 global_error=est)]
+    norm = stepcontrol.ErrorNorm(system_of(call["model"]))
+    refine = 1
+    while (est is not None and est > tol and len(runs) < BOUND_RUNS
+           and res.stats.get("global_error_until") is None):
+        m = max(2, math.ceil(math.sqrt(est / (BOUND_AIM * tol))))
+        refine *= m
+        frac = np.arange(refine) / refine  # every step of the first run split in `refine`
+        sched = np.append((times[:-1, None] + frac * np.diff(times)[:, None]).ravel(),
+                          times[-1])
+        sched[::refine] = times  # (the first run's times exactly)
+        try:
+            new = simulate(**call, global_error=False, _schedule=sched)
+        except SimulationError as exc:  # the refined run failed: the last run is kept
+            runs.append(dict(refine=refine, steps=0, rejected=0, global_error=None,
+                             failure=str(exc).split(";")[0]))
+            break
+        common, ia, ib = np.intersect1d(res.t, new.t, return_indices=True)
+        est = float(norm.frames(new.H[ib], res.H[ia]).max(initial=0.0)) / (m * m - 1)
+        runs.append(dict(refine=refine, steps=new.stats["steps"], rejected=0,
+                         global_error=est))
+        res = new
+    if runs[-1].get("failure"):  # the results and estimate are the run before's
+        refine = runs[-2]["refine"]
+    res.stats.update(global_error=est, global_error_runs=runs, global_error_refine=refine)
+    if len(runs) > 1:
+        for k in ("global_error_at", "global_error_final", "global_error_history",
+                  "global_error_steps"):
+            res.stats.pop(k, None)
+    if est is not None and est > tol:
+        warnings.warn(Se3dynWarning(
+            f"global_error='bound': the estimated global error {est:.3g} m is still above "
+            f"tol = {tol:g} m after {len(runs)} runs (steps refined {refine} times)"
+            + (f"; the refinement of the last failed: {runs[-1]['failure']}"
+               if runs[-1].get("failure") else "")
+            + (f"; the estimate stopped at t = {res.stats['global_error_until']:.6g} s"
+               if res.stats.get("global_error_until") is not None else "")),
+            stacklevel=3)
+    return res
+
+
+
+def _companion(integ: GeneralizedAlpha, s: System):
+    """The step of the companion run of a global error estimate: from a state to a time, in a
+    workspace of its own (:class:`~se3dyn.dynamics.stepcontrol.GlobalEstimate`)."""
+    ws = Workspace(s)
+
+    def step(st: State, t: float) -> State:
+        new, _ = integ.step(s, st, t - st.t, None, ws)
+        return dataclasses.replace(new, t=t)
+
+    return step
+

@@ -250,7 +250,7 @@ class ResultsWriter:
         return cls(path, system, flush_interval=flush_interval, _resume=True)
 
     def _reopen(self, s) -> h5py.File:
-        from se3dyn.dynamics.run import Checkpoint
+        from se3dyn.dynamics.recorder import Checkpoint
 
         path = self.path
         if not os.path.isfile(path):
@@ -502,7 +502,7 @@ class ResultsWriter:
         its first row (:func:`se3dyn.dynamics.run.energy_balance_check`): a resumed run is
         measured as the one run it continues, not from the row it resumed at. The buffered
         rows are written first; the file is read ``chunk`` rows at a time."""
-        from se3dyn.dynamics.run import _balance_and_scale
+        from se3dyn.dynamics.reports import _balance_and_scale
 
         self.flush()
         n = self.rows
