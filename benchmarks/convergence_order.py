@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 import se3dyn
-from se3dyn.dynamics import run as simulate
+from se3dyn import simulate
 from se3dyn.model.examples import slider_crank
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -26,7 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _h(a) -> str:
-    return hashlib.sha256(np.ascontiguousarray(np.asarray(a, dtype=float)).tobytes()).hexdigest()[:16]
+    data = np.ascontiguousarray(np.asarray(a, dtype=float)).tobytes()
+    return hashlib.sha256(data).hexdigest()[:16]
 
 
 def _digest_results(r) -> dict:
@@ -39,8 +40,8 @@ def _digest_results(r) -> dict:
             out[k] = _h(v)
     state = r.stats.get("final_state")
     if state is not None:
-        out["final_state"] = _h(np.concatenate([np.ravel(getattr(state, f)) for f in
-                                                ("H", "HJ", "v", "vd", "a", "lam", "alpha", "power")]))
+        fields = ("H", "HJ", "v", "vd", "a", "lam", "alpha", "power")
+        out["final_state"] = _h(np.concatenate([np.ravel(getattr(state, f)) for f in fields]))
     return out
 
 

@@ -132,12 +132,12 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         :class:`~se3dyn.errors.SimulationError` naming the time and the cause.
     output_step : float, optional
         Store the results on the grid ``t_start + k output_step`` (and ``t_end``) by dense
-        output (:func:`~se3dyn.dynamics.integrator.interpolate`), whatever the internal steps; without
-        it every (``output_every``-th) step is stored.
+        output (:func:`~se3dyn.dynamics.integrator.interpolate`), whatever the internal steps;
+        without it every (``output_every``-th) step is stored.
     engine : {"auto", "compiled", "numpy"}
         Compiled kernels (:mod:`se3dyn.fast`) or the numpy implementation, see
-        :class:`~se3dyn.dynamics.integrator.GeneralizedAlpha`. With a fixed step and no ``progress``,
-        ``on_output`` or ``output_step``, the whole time loop runs compiled.
+        :class:`~se3dyn.dynamics.integrator.GeneralizedAlpha`. With a fixed step and no
+        ``progress``, ``on_output`` or ``output_step``, the whole time loop runs compiled.
     newton : {"modified", "full"}
         Reuse of the factorised iteration matrix by the compiled engine, see
         :class:`~se3dyn.dynamics.integrator.GeneralizedAlpha`.
