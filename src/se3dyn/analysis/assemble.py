@@ -17,11 +17,11 @@ import numpy as np
 from se3dyn import lie
 from se3dyn._lazy import LazyModule
 from se3dyn.analysis.common import (
-    _Accessors,
     _as_system,
     _Blocks,
     _joint_ids,
     _joint_item,
+    _OneConfiguration,
     _unknown_name,
     _zero_inputs,
 )
@@ -182,7 +182,7 @@ class AssemblyError(SimulationError):
 
 
 @dataclass(eq=False)
-class Assembly(_Accessors):
+class Assembly(_OneConfiguration):
     """Outcome of :func:`assemble`: a consistent configuration and what it took to get there.
 
     Attributes
@@ -232,14 +232,6 @@ class Assembly(_Accessors):
     model: Model = field(repr=False)
     speeds_kept: bool = True
     _squeeze: bool = field(default=True, repr=False)
-
-    @property
-    def _H(self):
-        return self.H[None]
-
-    @property
-    def _alpha(self):
-        return self.alpha[None]
 
     @property
     def _v(self):

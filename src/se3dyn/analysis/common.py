@@ -140,3 +140,16 @@ class _Accessors:
         lam = self._lam
         return self._out(np.concatenate([lam[:, s.joint_multadr[j]:s.joint_multadr[j] + 6]
                                          for j in self._jids(name)], axis=1))
+
+
+class _OneConfiguration(_Accessors):
+    """The accessors of one configuration (``H`` (M, 4, 4), ``alpha`` (nq,)): its arrays seen
+    with a leading axis of one, dropped again on output (``_squeeze``)."""
+
+    @property
+    def _H(self):
+        return self.H[None]
+
+    @property
+    def _alpha(self):
+        return self.alpha[None]

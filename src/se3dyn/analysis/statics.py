@@ -33,7 +33,7 @@ import numpy as np
 
 from se3dyn._lazy import LazyModule
 from se3dyn.analysis.assemble import _model_at
-from se3dyn.analysis.common import _Accessors, _as_system, _Blocks
+from se3dyn.analysis.common import _as_system, _Blocks, _OneConfiguration
 from se3dyn.engine.evaluate import evaluate
 from se3dyn.engine.inputs import step_inputs
 from se3dyn.engine.scaling import (
@@ -57,7 +57,7 @@ __all__ = ["StaticResult", "static_equilibrium"]
 
 
 @dataclass(eq=False)
-class StaticResult(_Accessors):
+class StaticResult(_OneConfiguration):
     """Outcome of :func:`static_equilibrium`.
 
     Attributes
@@ -97,14 +97,6 @@ class StaticResult(_Accessors):
     min_stiffness: float | None
     stable: bool | None
     _squeeze: bool = field(default=True, repr=False)
-
-    @property
-    def _H(self):
-        return self.H[None]
-
-    @property
-    def _alpha(self):
-        return self.alpha[None]
 
     @property
     def _lam(self):
