@@ -119,6 +119,10 @@ def _check_one(path: str, rank_max: int) -> None:
         n_in = sum(len(b.nodes) - 2 for b in model.beams)
         print(f"  beams: {len(model.beams)} with {n_el} elements in all ({n_in} of the nodes "
               "created by them)")
+    if model.markers:
+        print(f"  markers: {len(model.markers)} (outputs only: "
+              + ", ".join(f"{mk.name} on {mk.node}" for mk in model.markers[:8])
+              + (", ..." if len(model.markers) > 8 else "") + ")")
     kinds: dict[str, int] = {}
     for j in model.joints:
         kinds[j.type] = kinds.get(j.type, 0) + 1

@@ -94,6 +94,34 @@ class ResultsLayout(LayoutCounts):
         return int(np.sum(self.joint_k))
 
     @functools.cached_property
+    def stored_model(self):
+        """The model stored with the results (:class:`~se3dyn.model.specs.Model`), or None
+        when there is none, it does not load or its nodes differ from this layout's (loaded
+        once)."""
+        if not self.model_text:
+            return None
+        from se3dyn.io.modelfile import loads_model
+
+        try:
+            model = loads_model(self.model_text)[0]
+        except Exception:  # noqa: BLE001 - a model text that does not load: no model
+            return None
+        return model if tuple(model.node_names) == tuple(self.node_names) else None
+
+    @property
+    def markers(self) -> tuple:
+        """The markers of the stored model (read by the marker accessors of :class:`Results`
+        and the ``marker/...`` channels); empty without a stored model."""
+        m = self.stored_model
+        return tuple(m.markers) if m is not None else ()
+
+    @property
+    def gravity(self) -> np.ndarray:
+        """Gravity of the stored model (3,) (the accelerometers need it); zeros without one."""
+        m = self.stored_model
+        return np.array(m.gravity, dtype=float) if m is not None else np.zeros(3)
+
+    @functools.cached_property
     def beam_system(self):
         """The compiled system of the stored model when it has beams and its nodes and unknowns
         match this layout, else None (compiled once; the beam channels of

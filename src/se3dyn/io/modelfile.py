@@ -733,6 +733,9 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         *(Field(es.key, Named(es.kind), {}, es.doc) for es in ELEMENT_SECTIONS),
         Field("visuals", Named("visual"), {}, "Shapes drawn by the viewer, by name (pictures "
               "only, no effect on the motion)."),
+        Field("markers", Named("marker"), {}, "Frames fixed on nodes, by name: where the "
+              "results read positions, velocities, accelerations, an accelerometer and a "
+              "gyroscope (outputs only, no effect on the motion)."),
         Field("simulation", Section("simulation"), {}, "Simulation settings, returned by "
               "`load_model` as a dict for `se3dyn.simulate(model, **settings)`."),
     ),
@@ -775,6 +778,17 @@ FIELDS: dict[str, tuple[Field, ...]] = {
               "the node (rows of the matrix; its columns are the shape's axes)."),
         Field("file", Str(), None, "Mesh file (STL, OBJ, glTF/GLB) for `shape: mesh`; a "
               "relative path is looked up next to the model file."),
+    ),
+    "marker": (
+        Field("node", Str(ref="node"), None, "The node (body) the marker moves with; a fixed "
+              "node is allowed (required).", True),
+        Field("at", _V3, None, "Origin of the marker as a point in the inertial frame of the "
+              "initial configuration (m). Absent (and no `offset`): at the node."),
+        Field("offset", _V3, None, "Instead of `at`: the origin in the material frame of the "
+              "node (m)."),
+        Field("orientation", _M33, "the node's", "Rotation of the marker in the initial "
+              "configuration (rows of the matrix; its columns are the marker axes in the "
+              "inertial frame)."),
     ),
     "simulation": (
         Field("t_end", Num(), None, "Final time (s)."),
@@ -851,6 +865,11 @@ _SECTION_DOC = {
               "`se3dyn view` and `se3dyn export --gltf`, placed in the material frame of the "
               "node; it has no mass and no effect on the motion. A node with visuals is drawn "
               "by them instead of the default solid sized from its inertia.",
+    "marker": "An entry of `markers:` (key: the marker name). A frame fixed on a node; the "
+              "results give its position, rotation, velocity and acceleration (material and "
+              "inertial), an accelerometer (specific force R_m^T (a - g) in the marker axes: "
+              "-g at rest) and a gyroscope (angular velocity in the marker axes), as methods of "
+              "`Results` and as `marker/<name>/...` channels.",
     "simulation": "The `simulation:` mapping: keyword arguments of `se3dyn.simulate`.",
     "constant": "Time function `{constant: {...}}`.",
     "step": "Time function `{step: {...}}`.",
@@ -1094,6 +1113,7 @@ def _build(ctx: _Ctx, top: _Obj) -> tuple[Model, dict]:
           for es in ELEMENT_SECTIONS),
         ("visuals", "visual",
          lambda name, kw: mb.visual(name, kw.pop("node"), kw.pop("shape"), **kw)),
+        ("markers", "marker", lambda name, kw: mb.marker(name, kw.pop("node"), **kw)),
     )
     for sec, kind, add in sections:
         for obj in v.get(sec, []):
@@ -1201,6 +1221,14 @@ def _node_out(n) -> dict:
     return d
 
 
+def _marker_out(mk) -> dict:
+    d: dict[str, Any] = {"node": mk.node}
+    for fld in ("at", "offset", "orientation"):
+        if getattr(mk, fld) is not None:
+            d[fld] = plain(getattr(mk, fld))
+    return d
+
+
 class _Dumper(yaml.SafeDumper):
     pass
 
@@ -1233,6 +1261,8 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
             doc[es.key] = entries
     if model.visuals:
         doc["visuals"] = {v.name: visual_to_dict(v) for v in model.visuals}
+    if model.markers:
+        doc["markers"] = {mk.name: _marker_out(mk) for mk in model.markers}
     if settings:
         known = {f.name: f for f in FIELDS["simulation"]}
         sim = {}

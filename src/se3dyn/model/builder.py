@@ -21,6 +21,7 @@ from se3dyn.model.specs import (
     BushingSpec,
     JointSpec,
     LoadSpec,
+    MarkerSpec,
     Model,
     NodeSpec,
     SpringDamperSpec,
@@ -66,6 +67,7 @@ class ModelBuilder:
         self._composites: dict[str, tuple[str, ...]] = {}
         self._visuals: dict[str, VisualSpec] = {}
         self._beams: dict[str, BeamSpec] = {}
+        self._markers: dict[str, MarkerSpec] = {}
 
     # -----------------------------------------------------------------------------------------
     def node(self, name: str, position: Any = (0.0, 0.0, 0.0), *, orientation: Any = None,
@@ -702,6 +704,58 @@ class ModelBuilder:
         self._visuals[name] = v
 
     # -----------------------------------------------------------------------------------------
+    def marker(self, name: str, node: str, *, at: Any = None, offset: Any = None,
+               orientation: Any = None) -> None:
+        """Add a marker: a frame fixed on a node, where the results read positions,
+        velocities, accelerations and an IMU (outputs only: no effect on the motion).
+
+        Parameters
+        ----------
+        name : str
+            Unique marker name.
+        node : str
+            The node (body) the marker moves with; a fixed node is allowed.
+        at : array_like (3,), optional
+            Origin of the marker as a point in the inertial frame of the initial configuration
+            (the convention of joints' ``at``).
+        offset : array_like (3,), optional
+            Instead of ``at``: the origin in the material frame of the node (m). Neither: the
+            marker's origin is the node.
+        orientation : array_like (3, 3), optional
+            Rotation of the marker in the initial configuration (columns: its axes in the
+            inertial frame); the node's orientation by default.
+
+        Examples
+        --------
+        >>> mb.marker("imu", "body", at=(0.1, 0, 0.05))  # doctest: +SKIP
+        >>> r.accelerometer("imu")  # (n, 3) specific force in the marker frame  # doctest: +SKIP
+        """
+        _check_name("marker", name)
+        item = f"marker {name!r}"
+        if name in self._markers:
+            raise ModelError(item, "name", "a unique marker name", name, "defined twice")
+        if not isinstance(node, str) or node not in self._nodes:
+            raise ModelError(item, "node", "the name of a defined node", node,
+                             _unknown("node", node, list(self._nodes))
+                             if isinstance(node, str) else None)
+        if at is not None and offset is not None:
+            raise ModelError(item, "offset", "either 'at' or 'offset', not both", offset,
+                             "'at' is a point in the inertial frame, 'offset' the same point "
+                             "in the node's material frame")
+        nd = self._nodes[node]
+        p = None if at is None else _vec(at, 3, item, "at")
+        c = None if offset is None else _vec(offset, 3, item, "offset")
+        Rm = None if orientation is None else _rotation(orientation, item, "orientation")
+        X = np.eye(4)
+        if p is not None:
+            X[:3, 3] = nd.orientation.T @ (p - nd.position)
+        elif c is not None:
+            X[:3, 3] = c
+        if Rm is not None:
+            X[:3, :3] = nd.orientation.T @ Rm
+        self._markers[name] = MarkerSpec(name, node, X, p, c, Rm)
+
+    # -----------------------------------------------------------------------------------------
     def build(self) -> Model:
         """Validate the whole model and return the immutable :class:`Model`."""
         if not self._nodes:
@@ -725,7 +779,8 @@ class ModelBuilder:
                      tuple(self._loads.values()), self._gravity.copy(), dict(self._composites),
                      self._name, tuple(self._springs.values()),
                      visuals=tuple(self._visuals.values()),
-                     bushings=tuple(self._bushings.values()), beams=tuple(self._beams.values()))
+                     bushings=tuple(self._bushings.values()), beams=tuple(self._beams.values()),
+                     markers=tuple(self._markers.values()))
 
 
 # ---------------------------------------------------------------------------------------------

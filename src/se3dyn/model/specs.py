@@ -279,6 +279,37 @@ class BeamSpec:
 
 
 @dataclass(frozen=True)
+class MarkerSpec:
+    """A marker: a frame fixed on a node, an output only (never part of the compiled system).
+
+    The marker frame is ``H_m = H X`` (``H`` the node frame, Eq. (1)), with the constant offset
+    ``X`` in the node's material frame; its kinematics and the sensors on it (accelerometer,
+    gyroscope) are accessors of :class:`~se3dyn.results.results.Results`.
+
+    Attributes
+    ----------
+    name, node : str
+    X : ndarray, shape (4, 4)
+        Offset of the marker frame in the material frame of the node: origin ``X[:3, 3]``,
+        axes the columns of ``X[:3, :3]``.
+    at, offset : ndarray (3,) or None
+        As given to :meth:`ModelBuilder.marker` (kept to write the model file back): the origin
+        as a point in the inertial frame of the initial configuration, or in the node's material
+        frame; both None: at the node.
+    orientation : ndarray (3, 3) or None
+        As given: the marker axes in the inertial frame of the initial configuration; None: the
+        node's axes.
+    """
+
+    name: str
+    node: str
+    X: np.ndarray
+    at: np.ndarray | None = None
+    offset: np.ndarray | None = None
+    orientation: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
 class Model:
     """A validated, immutable model. Build it with :class:`ModelBuilder`."""
 
@@ -293,13 +324,15 @@ class Model:
     visuals: tuple[VisualSpec, ...] = ()
     beams: tuple[BeamSpec, ...] = ()
     bushings: tuple[BushingSpec, ...] = ()
+    #: frames fixed on nodes, read by the results (never used by the physics)
+    markers: tuple[MarkerSpec, ...] = ()
 
     def __post_init__(self):
         # immutable for good: the arrays of every spec are read-only (a model compiles once,
         # :func:`se3dyn.engine.system.system_of`, so a change in place would go unseen)
         _read_only(self.gravity)
         for spec in (*self.nodes, *self.joints, *self.loads, *self.springs, *self.beams,
-                     *self.bushings, *self.visuals):
+                     *self.bushings, *self.visuals, *self.markers):
             for value in vars(spec).values():
                 _read_only(value)
 
@@ -324,6 +357,13 @@ class Model:
             if j.name == name:
                 return j
         raise UnknownNameError(_unknown("joint", name, [j.name for j in self.joints]))
+
+    def marker(self, name: str) -> MarkerSpec:
+        """The marker called ``name``."""
+        for mk in self.markers:
+            if mk.name == name:
+                return mk
+        raise UnknownNameError(_unknown("marker", name, [mk.name for mk in self.markers]))
 
     @property
     def node_names(self) -> list[str]:

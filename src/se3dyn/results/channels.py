@@ -12,16 +12,27 @@ A channel is one scalar time history, shape (n,), named by a path (see ``docs/re
     joint/<joint>/alpha/<i>                         rad or m (per coordinate)
     joint/<joint>/velocity/<i>                      rad/s or m/s
     joint/<joint>/multiplier/<i>                    N (i mod 6 < 3), N m (otherwise)
+    marker/<marker>/position/x|y|z                  m
+    marker/<marker>/rotation/R11 .. R33             -   (marker axes in the inertial frame)
+    marker/<marker>/velocity/material|inertial/x|y|z|wx|wy|wz      m/s, rad/s
+    marker/<marker>/acceleration/material|inertial/x|y|z|wx|wy|wz  m/s^2, rad/s^2
+    marker/<marker>/accelerometer/x|y|z             m/s^2   (specific force, marker axes)
+    marker/<marker>/gyroscope/x|y|z                 rad/s   (angular velocity, marker axes)
     beam/<beam>/<e>/force/N|V2|V3|T|M2|M3           N, N m  (section forces of element e)
     beam/<beam>/<e>/strain/e1|g2|g3|k1|k2|k3        -, 1/m  (eps - eps0, section frame)
     beam/<beam>/<e>/energy                          J       (elastic energy of element e)
     energy/kinetic|potential|spring|total|balance|work_actuators|work_loads|dissipation   J
     solver/iterations|residual|constraint           -
 
-Escaping: a node or joint name is written with ``%`` replaced by ``%25`` and ``/`` by ``%2F``
-(in this order), so ``node/a%2Fb/position/x`` is the x position of node ``a/b``. Composite joints
-(e.g. a universal joint) are listed under their own name, with the coordinates of their parts
-side by side as :meth:`Results.joint_coordinates` gives them.
+Markers (``ModelBuilder.marker``, ``markers:`` in model files) are frames fixed on nodes; their
+channels are :meth:`Results.marker_velocity`, :meth:`Results.accelerometer` and the others
+(material = the marker's own axes). Results read from a file take them from the model stored
+in it.
+
+Escaping: a node, joint or marker name is written with ``%`` replaced by ``%25`` and ``/`` by
+``%2F`` (in this order), so ``node/a%2Fb/position/x`` is the x position of node ``a/b``.
+Composite joints (e.g. a universal joint) are listed under their own name, with the
+coordinates of their parts side by side as :meth:`Results.joint_coordinates` gives them.
 """
 
 from __future__ import annotations
@@ -32,6 +43,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from se3dyn.errors import UnknownNameError, close_matches
+from se3dyn.results.results import marker_specs
 
 if TYPE_CHECKING:
     from se3dyn.results.results import Results
@@ -44,6 +56,7 @@ _ENERGY = ("kinetic", "potential", "spring", "total", "balance", "work_actuators
            "work_loads", "dissipation")
 _SOLVER = ("iterations", "residual", "constraint")
 _ROT = tuple(f"R{i}{j}" for i in (1, 2, 3) for j in (1, 2, 3))
+_SENSORS = ("accelerometer", "gyroscope")
 _BEAM = {"force": ("N", "V2", "V3", "T", "M2", "M3"),
          "strain": ("e1", "g2", "g3", "k1", "k2", "k3")}
 
@@ -104,6 +117,8 @@ def list_channels(res: Results) -> list[str]:
         out += [f"{e}/alpha/{c}" for c in range(k)]
         out += [f"{e}/velocity/{c}" for c in range(k)]
         out += [f"{e}/multiplier/{c}" for c in range(nmult)]
+    for mk in marker_specs(s):
+        out += _marker_entries(f"marker/{escape_name(mk.name)}")
     bsys = _beam_system(res)
     for b in getattr(bsys, "beams", ()):
         e = f"beam/{escape_name(b['beam'])}/{b['index']}"
@@ -113,6 +128,34 @@ def list_channels(res: Results) -> list[str]:
     out += [f"energy/{x}" for x in _ENERGY]
     out += [f"solver/{x}" for x in _SOLVER]
     return out
+
+
+def _marker_entries(e: str) -> list[str]:
+    out = [f"{e}/position/{a}" for a in _AXES[:3]]
+    out += [f"{e}/rotation/{r}" for r in _ROT]
+    for q in ("velocity", "acceleration"):
+        for frame in ("material", "inertial"):
+            out += [f"{e}/{q}/{frame}/{a}" for a in _AXES]
+    out += [f"{e}/{q}/{a}" for q in _SENSORS for a in _AXES[:3]]
+    return out
+
+
+def _marker_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
+    marker = unescape_name(parts[1])
+    if marker not in [mk.name for mk in marker_specs(res.system)]:
+        raise _unknown(res, name, f"no marker {marker!r}")
+    q, rest = parts[2], parts[3:]
+    if q == "position" and rest in [[a] for a in _AXES[:3]]:
+        return res.marker_position(marker)[:, _AXES.index(rest[0])]
+    if q == "rotation" and len(rest) == 1 and rest[0] in _ROT:
+        return res.marker_rotation(marker)[:, int(rest[0][1]) - 1, int(rest[0][2]) - 1]
+    if (q in ("velocity", "acceleration") and len(rest) == 2
+            and rest[0] in ("material", "inertial") and rest[1] in _AXES):
+        f = res.marker_velocity if q == "velocity" else res.marker_acceleration
+        return f(marker, frame=rest[0])[:, _AXES.index(rest[1])]
+    if q in _SENSORS and rest in [[a] for a in _AXES[:3]]:
+        return getattr(res, q)(marker)[:, _AXES.index(rest[0])]
+    raise _unknown(res, name)
 
 
 def _beam_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
@@ -187,6 +230,8 @@ def get_channel(res: Results, name: str) -> np.ndarray:
                     and rest[0] in ("material", "inertial") and rest[1] in _AXES):
                 f = res.node_velocity if q == "velocity" else res.node_acceleration
                 return f(node, frame=rest[0])[:, _AXES.index(rest[1])]
+        if len(parts) in (4, 5) and parts[0] == "marker":
+            return np.array(_marker_channel(res, name, parts), dtype=float)
         if len(parts) in (4, 5) and parts[0] == "beam":
             return _beam_channel(res, name, parts)
         if len(parts) == 4 and parts[0] == "joint":
@@ -208,9 +253,9 @@ def get_channel(res: Results, name: str) -> np.ndarray:
 
 
 def channel_unit(name: str, res: Results | None = None) -> str:
-    """Unit of a channel for axis labels: "m", "m/s", "rad", "rad/s", "J", "N", "N m", "s", or
-    "" (counts, dimensionless). Joint coordinates are "rad" or "m" when ``res`` is given (from
-    the joint axes), otherwise "rad | m"."""
+    """Unit of a channel for axis labels: "m", "m/s", "m/s^2", "rad", "rad/s", "rad/s^2", "J",
+    "N", "N m", "s", or "" (counts, dimensionless). Joint coordinates are "rad" or "m" when
+    ``res`` is given (from the joint axes), otherwise "rad | m"."""
     parts = str(name).split("/")
     if parts == ["time"]:
         return "s"
@@ -218,7 +263,12 @@ def channel_unit(name: str, res: Results | None = None) -> str:
         return "J"
     if parts[0] == "solver":
         return ""
-    if parts[0] == "node" and len(parts) >= 4:
+    if parts[0] == "marker" and len(parts) >= 4:
+        if parts[2] == "accelerometer":
+            return "m/s^2"
+        if parts[2] == "gyroscope":
+            return "rad/s"
+    if parts[0] in ("node", "marker") and len(parts) >= 4:
         q, last = parts[2], parts[-1]
         if q in ("position", "displacement"):
             return "m"

@@ -15,7 +15,8 @@ from se3dyn.errors import ModelError, UnknownNameError, close_matches
 if TYPE_CHECKING:
     from se3dyn.engine.system import System
 
-__all__ = ["Results"]
+__all__ = ["Results", "node_dofs", "node_accelerations", "inertial_acceleration",
+           "marker_specs"]
 
 
 def node_dofs(s, H: np.ndarray, arr: np.ndarray, i: int, frame: str) -> np.ndarray:
@@ -46,10 +47,47 @@ def node_accelerations(s, H: np.ndarray, v: np.ndarray, vd: np.ndarray, i: int,
     if frame != "inertial":
         return node_dofs(s, H, vd, i, frame)  # (checks frame)
     w = node_dofs(s, H, v, i, "material")
-    R = H[:, i, :3, :3]
+    return inertial_acceleration(H[:, i, :3, :3], w, a)
+
+
+def inertial_acceleration(R: np.ndarray, w: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """The inertial acceleration ``(R (dU/dt + Omega x U), R dOmega/dt)``, shape (n, 6), of a
+    frame with rotation R (n, 3, 3), material velocity ``w = (U, Omega)`` (n, 6) and its time
+    derivative ``a`` (n, 6): the acceleration of the frame's origin and the angular
+    acceleration, both in the inertial frame (the derivative of dx/dt = R U with
+    dR/dt = R hat(Omega), Eqs. (3)-(4))."""
     lin = a[:, :3] + np.cross(w[:, 3:], w[:, :3])
     return np.concatenate([np.einsum("nij,nj->ni", R, lin),
                            np.einsum("nij,nj->ni", R, a[:, 3:])], axis=1)
+
+
+def marker_specs(system) -> tuple:
+    """The markers (:class:`~se3dyn.model.specs.MarkerSpec`) of the model of ``system``: a
+    compiled System's ``model.markers``, or the ``markers`` of a layout read from a file."""
+    mk = getattr(system, "markers", None)
+    if mk is None:
+        mk = getattr(getattr(system, "model", None), "markers", ())
+    return tuple(mk or ())
+
+
+def _to_marker(X: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """A twist of the node frame (material, (n, 6)) as the twist of the marker frame ``H X``
+    in its own material frame, ``Ad(X^-1) w`` (n, 6): ``(Rx^T (U + Omega x c), Rx^T Omega)``
+    with ``X = H(Rx, c)`` constant (so it maps accelerations the same way)."""
+    Rx, c = X[:3, :3], X[:3, 3]
+    lin = w[:, :3] + np.cross(w[:, 3:], c)
+    return np.concatenate([lin @ Rx, w[:, 3:] @ Rx], axis=1)
+
+
+def _check_frame(frame: str) -> None:
+    if frame not in ("material", "inertial"):
+        raise ModelError("results", "frame", "'material' or 'inertial'", frame)
+
+
+def _rotate(R: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Both parts of twists w (n, 6) rotated by R (n, 3, 3)."""
+    return np.concatenate([np.einsum("nij,nj->ni", R, w[:, :3]),
+                           np.einsum("nij,nj->ni", R, w[:, 3:])], axis=1)
 
 
 @dataclass
@@ -72,6 +110,11 @@ class Results:
     iterations : ndarray (n,) int   Newton iterations of the step ending at t (0 at t0)
     residual, constraint : ndarray (n,)   final relative residual and constraint violation
     stats : dict                    steps, total iterations, wall time, settings
+
+    Markers of the model (:meth:`~se3dyn.model.builder.ModelBuilder.marker`) are read through
+    :meth:`marker_frame`, :meth:`marker_velocity`, :meth:`marker_acceleration`,
+    :meth:`accelerometer` and :meth:`gyroscope`; they need ``system.model.markers`` (a
+    compiled System) or ``system.markers`` and ``system.gravity`` (a layout read from a file).
     """
 
     system: System
@@ -179,6 +222,87 @@ class Results:
         s = self.system
         return np.concatenate([self.lam[:, s.joint_multadr[j]:s.joint_multadr[j] + 6]
                                for j in self._joints(name)], axis=1)
+
+    # ------------------------------------------------------------------------------------------
+    # Markers and sensors: frames fixed on nodes (ModelBuilder.marker), H_m = H X
+    def _marker(self, name: str):
+        """(spec, node index) of a marker; UnknownNameError listing the valid names."""
+        specs = marker_specs(self.system)
+        for mk in specs:
+            if mk.name == name:
+                return mk, self._node(mk.node)
+        valid = [mk.name for mk in specs]
+        close = close_matches(str(name), valid, n=1)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        shown = ", ".join(valid) if valid else "none: the model has no markers"
+        raise UnknownNameError(f"unknown marker {name!r}{hint} (valid: {shown})")
+
+    def _marker_twists(self, name: str, arr: np.ndarray):
+        """Marker frame (n, 4, 4) and the node twists ``arr`` (v or vd) as marker twists."""
+        mk, i = self._marker(name)
+        X = np.asarray(mk.X, dtype=float)
+        Hm = self.H[:, i] @ X
+        return Hm, _to_marker(X, node_dofs(self.system, self.H, arr, i, "material"))
+
+    def marker_frame(self, name: str) -> np.ndarray:
+        """Homogeneous frame ``H_m = H X`` of a marker (inertial frame), shape (n, 4, 4)."""
+        mk, i = self._marker(name)
+        return self.H[:, i] @ np.asarray(mk.X, dtype=float)
+
+    def marker_position(self, name: str) -> np.ndarray:
+        """Position of a marker's origin in the inertial frame, shape (n, 3)."""
+        return self.marker_frame(name)[:, :3, 3].copy()
+
+    def marker_rotation(self, name: str) -> np.ndarray:
+        """Rotation of a marker (its axes in the inertial frame), shape (n, 3, 3)."""
+        return self.marker_frame(name)[:, :3, :3].copy()
+
+    def marker_velocity(self, name: str, frame: str = "material") -> np.ndarray:
+        """Velocity ``(U, Omega)`` of a marker frame, shape (n, 6).
+
+        ``frame="material"``: in the marker's own axes (Eq. (4) for the marker frame,
+        ``Ad(X^-1) v`` of its node); ``frame="inertial"``: ``(R_m U, R_m Omega)``, the time
+        derivative of the marker's position and the angular velocity in the inertial frame.
+        Zeros on a fixed node.
+        """
+        _check_frame(frame)
+        Hm, w = self._marker_twists(name, self.v)
+        return w if frame == "material" else _rotate(Hm[:, :3, :3], w)
+
+    def marker_acceleration(self, name: str, frame: str = "material") -> np.ndarray:
+        """Acceleration of a marker frame, shape (n, 6).
+
+        ``frame="material"``: the time derivative of the material velocity of the marker,
+        ``(dU/dt, dOmega/dt)`` (the node-level convention of :meth:`node_acceleration`);
+        ``frame="inertial"``: the acceleration of the marker's origin (tangential, centripetal
+        and Coriolis terms included: ``R (dU/dt + Omega x U)``) and the angular acceleration,
+        in the inertial frame (:func:`inertial_acceleration`).
+        """
+        _check_frame(frame)
+        Hm, a = self._marker_twists(name, self.vd)
+        if frame == "material":
+            return a
+        w = self._marker_twists(name, self.v)[1]
+        return inertial_acceleration(Hm[:, :3, :3], w, a)
+
+    def accelerometer(self, name: str) -> np.ndarray:
+        """Specific force at a marker in the marker's axes, as a real accelerometer reports
+        it, shape (n, 3) (m/s^2): ``R_m^T (a - g)``, with ``a`` the inertial acceleration of
+        the marker's origin and ``g`` the model's gravity.
+
+        Sign convention: an accelerometer at rest reads ``-g`` in its own axes, i.e. +9.81
+        along the upward vertical for gravity ``(0, 0, -9.81)``; in free fall it reads zero.
+        """
+        Hm, a = self._marker_twists(name, self.vd)
+        w = self._marker_twists(name, self.v)[1]
+        g = np.asarray(self.system.gravity, dtype=float)
+        return (a[:, :3] + np.cross(w[:, 3:], w[:, :3])
+                - np.einsum("nji,j->ni", Hm[:, :3, :3], g))
+
+    def gyroscope(self, name: str) -> np.ndarray:
+        """Angular velocity of a marker in the marker's own axes (a rate gyroscope), shape
+        (n, 3) (rad/s): ``R_m^T omega``, ``omega`` the inertial angular velocity."""
+        return self.marker_velocity(name, "material")[:, 3:].copy()
 
     @property
     def total_energy(self) -> np.ndarray:
