@@ -326,3 +326,18 @@ def test_marker_errors_in_a_model_file_name_the_line():
     assert e.value.item == "marker 'imu'" and e.value.field == "node"
     assert e.value.line == bad.splitlines().index("    node: tpo") + 1
     assert "valid:" in str(e.value)
+
+
+def test_markers_of_a_moved_node_save_their_offset():
+    # a model whose node frames changed after the markers were added (what assemble returns):
+    # the file keeps each marker where it sits on its body (its X), not its old point
+    import dataclasses
+
+    m = _top()
+    top = m.node("top")
+    R = _rot((1, 0, 0), 0.2)
+    moved = dataclasses.replace(top, position=np.array([0.0, 0.0, 0.01]), orientation=R)
+    m2 = dataclasses.replace(m, nodes=(m.nodes[0], moved))
+    back, _ = loads_model(save_model(m2))
+    for x, y in zip(m2.markers, back.markers, strict=True):
+        np.testing.assert_allclose(y.X, x.X, rtol=0, atol=1e-15)

@@ -51,7 +51,7 @@ import yaml
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from se3dyn.errors import ModelError, close_matches
-from se3dyn.model.builder import ModelBuilder
+from se3dyn.model.builder import ModelBuilder, marker_offset
 from se3dyn.model.joint_types import JOINT_TYPES
 from se3dyn.model.specs import Model
 from se3dyn.model.timefunc import Constant, Ramp, Sine, Step, Table
@@ -1221,11 +1221,19 @@ def _node_out(n) -> dict:
     return d
 
 
-def _marker_out(mk) -> dict:
+def _marker_out(model: Model, mk) -> dict:
+    """A marker as given to the builder; as its offset X (origin in the node frame, axes at
+    t0) when its node's initial frame has changed since (a model from ``assemble``)."""
     d: dict[str, Any] = {"node": mk.node}
-    for fld in ("at", "offset", "orientation"):
-        if getattr(mk, fld) is not None:
-            d[fld] = plain(getattr(mk, fld))
+    node = model.node(mk.node)
+    if np.array_equal(marker_offset(node, mk.at, mk.offset, mk.orientation), mk.X):
+        for fld in ("at", "offset", "orientation"):
+            if getattr(mk, fld) is not None:
+                d[fld] = plain(getattr(mk, fld))
+        return d
+    d["offset"] = plain(mk.X[:3, 3])
+    if not np.array_equal(mk.X[:3, :3], np.eye(3)):
+        d["orientation"] = plain(node.orientation @ mk.X[:3, :3])
     return d
 
 
@@ -1262,7 +1270,7 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
     if model.visuals:
         doc["visuals"] = {v.name: visual_to_dict(v) for v in model.visuals}
     if model.markers:
-        doc["markers"] = {mk.name: _marker_out(mk) for mk in model.markers}
+        doc["markers"] = {mk.name: _marker_out(model, mk) for mk in model.markers}
     if settings:
         known = {f.name: f for f in FIELDS["simulation"]}
         sim = {}

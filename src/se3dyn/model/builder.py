@@ -742,17 +742,10 @@ class ModelBuilder:
             raise ModelError(item, "offset", "either 'at' or 'offset', not both", offset,
                              "'at' is a point in the inertial frame, 'offset' the same point "
                              "in the node's material frame")
-        nd = self._nodes[node]
         p = None if at is None else _vec(at, 3, item, "at")
         c = None if offset is None else _vec(offset, 3, item, "offset")
         Rm = None if orientation is None else _rotation(orientation, item, "orientation")
-        X = np.eye(4)
-        if p is not None:
-            X[:3, 3] = nd.orientation.T @ (p - nd.position)
-        elif c is not None:
-            X[:3, 3] = c
-        if Rm is not None:
-            X[:3, :3] = nd.orientation.T @ Rm
+        X = marker_offset(self._nodes[node], p, c, Rm)
         self._markers[name] = MarkerSpec(name, node, X, p, c, Rm)
 
     # -----------------------------------------------------------------------------------------
@@ -781,6 +774,21 @@ class ModelBuilder:
                      visuals=tuple(self._visuals.values()),
                      bushings=tuple(self._bushings.values()), beams=tuple(self._beams.values()),
                      markers=tuple(self._markers.values()))
+
+
+def marker_offset(node: NodeSpec, at: np.ndarray | None, offset: np.ndarray | None,
+                  orientation: np.ndarray | None) -> np.ndarray:
+    """The constant frame X (4, 4) of a marker in the material frame of ``node`` (its initial
+    frame ``H(R0, x0)``): origin ``R0^T (at - x0)``, or ``offset``, or the node; axes
+    ``R0^T orientation`` or the node's."""
+    X = np.eye(4)
+    if at is not None:
+        X[:3, 3] = node.orientation.T @ (at - node.position)
+    elif offset is not None:
+        X[:3, 3] = offset
+    if orientation is not None:
+        X[:3, :3] = node.orientation.T @ orientation
+    return X
 
 
 # ---------------------------------------------------------------------------------------------
