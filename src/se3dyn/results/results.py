@@ -15,8 +15,7 @@ from se3dyn.errors import ModelError, UnknownNameError, close_matches
 if TYPE_CHECKING:
     from se3dyn.engine.system import System
 
-__all__ = ["Results", "node_dofs", "node_accelerations", "inertial_acceleration",
-           "marker_specs"]
+__all__ = ["Results"]
 
 
 def node_dofs(s, H: np.ndarray, arr: np.ndarray, i: int, frame: str) -> np.ndarray:
