@@ -268,3 +268,19 @@ def test_the_command_lets_idle_blas_threads_sleep_and_skips_the_exit_collections
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, env=env).stdout.strip()
     assert out == expect
+
+
+def test_a_reader_that_goes_away_stops_the_command_quietly():
+    # `se3dyn types | head -0`: the command's stdout is a pipe whose reader has closed; it
+    # stops with 141 (128 + SIGPIPE), as command-line tools do, with no traceback
+    import os
+
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        p = subprocess.run([sys.executable, "-m", "se3dyn.cli", "types"], stdout=w,
+                           stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(w)
+    assert p.returncode == 141, p.stderr
+    assert "Traceback" not in p.stderr and p.stderr == "", p.stderr

@@ -2,7 +2,8 @@
 
 Exit codes: 0 success, 1 simulation failure (results computed so far are kept in the results
 file), 2 bad input or usage, 130 / 143 interrupted by Ctrl-C / SIGTERM (the results file is
-closed; ``--resume`` continues it). Errors are one clear line on stderr, never a Python
+closed; ``--resume`` continues it), 141 when the reader of the output went away
+(``se3dyn check ... | head``). Errors are one clear line on stderr, never a Python
 traceback.
 
     se3dyn check MODEL...
@@ -1079,7 +1080,7 @@ def main(argv: list[str] | None = None) -> int:
 
     saved = None
     if threading.current_thread() is threading.main_thread():
-        # se3dyn/__init__.py made Ctrl-C during start-up quiet; from here on it raises
+        # se3dyn/cli/startup.py made Ctrl-C during start-up quiet; from here on it raises
         # KeyboardInterrupt, and SIGTERM _Terminated, handled below and by `run` (results file
         # closed); the caller's handlers are restored on return
         saved = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
@@ -1113,6 +1114,17 @@ def _main(argv: list[str] | None) -> int:
     except _Usage as exc:
         _err(str(exc))
         return 2
+    except BrokenPipeError:
+        # the reader of the output went away (`se3dyn check ... | head`): stop quietly, as
+        # command-line tools do (128 + SIGPIPE); the rest of the output goes to /dev/null so
+        # that the interpreter's last flush of stdout does not fail again
+        import os
+
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 141
     except Exception as exc:
         from se3dyn.errors import Se3dynError
 
@@ -1126,14 +1138,6 @@ def _main(argv: list[str] | None) -> int:
     except _Terminated:
         _err("terminated")
         return 143
-    except BrokenPipeError:  # output piped into a command that stopped reading (e.g. head)
-        import os
-
-        try:
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        except (OSError, ValueError):
-            pass
-        return 1
 
 
 if __name__ == "__main__":
