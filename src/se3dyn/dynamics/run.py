@@ -135,8 +135,9 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         output (:func:`~se3dyn.dynamics.integrator.interpolate`), whatever the internal steps;
         without it every (``output_every``-th) step is stored.
     engine : {"auto", "compiled", "numpy"}
-        Compiled kernels (:mod:`se3dyn.fast`) or the numpy implementation, see
-        :class:`~se3dyn.dynamics.integrator.GeneralizedAlpha`. With a fixed step and no
+        Kept for compatibility: every step runs in the compiled engine (``se3dyn/_core``, C++
+        built at install; there is no second implementation, see
+        :class:`~se3dyn.dynamics.integrator.GeneralizedAlpha`). With a fixed step and no
         ``progress``, ``on_output`` or ``output_step``, the whole time loop runs compiled.
     newton : {"modified", "full"}
         Reuse of the factorised iteration matrix by the compiled engine, see
