@@ -255,7 +255,7 @@ def test_marker_channels_equal_in_memory_and_from_a_results_file(tmp_path):
     back = read_results(path)
     names = [c for c in list_channels(res) if c.startswith("marker/")]
     assert names == [c for c in list_channels(back) if c.startswith("marker/")]
-    assert len(names) == 2 * (3 + 9 + 24 + 6)
+    assert len(names) == 2 * (3 + 9 + 24 + 6) + 2  # + distance and its rate for the pair
     for c in names:
         np.testing.assert_array_equal(get_channel(res, c), get_channel(back, c), err_msg=c)
     np.testing.assert_array_equal(res.marker_frame("imu"), back.marker_frame("imu"))
@@ -341,3 +341,222 @@ def test_markers_of_a_moved_node_save_their_offset():
     back, _ = loads_model(save_model(m2))
     for x, y in zip(m2.markers, back.markers, strict=True):
         np.testing.assert_allclose(y.X, x.X, rtol=0, atol=1e-15)
+
+
+# -------------------------------------------------------------------------------------------------
+# distance between two markers
+# -------------------------------------------------------------------------------------------------
+def test_marker_distance_on_a_spinning_body_and_to_the_ground():
+    a = np.array([1.0, 2.0, 2.0]) / 3.0
+    p0 = np.array([0.3, -0.2, 0.5])
+    w = 7.0
+    mb = sd.ModelBuilder(gravity=9.81 * a)
+    mb.node("ground", p0, fixed=True)
+    mb.node("rotor", p0, mass=3.0, inertia=(0.1, 0.2, 0.3), principal_axes=_rot((1, 1, 0), 0.5),
+            angular_velocity=w * a)
+    mb.joint("axle", "hinge", "ground", "rotor", axis=a)
+    x, y = np.array([0.8, 0.4, -0.3]), np.array([-0.2, 0.5, 0.9])
+    q = np.array([1.5, -1.0, 0.2])  # a marker on the ground
+    mb.marker("m1", "rotor", at=x)
+    mb.marker("m2", "rotor", at=y, orientation=Q)
+    mb.marker("g", "ground", at=q)
+    h = 1e-3
+    r = sd.simulate(mb.build(), t_end=0.5, step=h, tol_residual=1e-13)
+    # two points of one rigid body keep their distance, its rate is zero
+    d12 = r.marker_distance("m1", "m2")
+    assert d12.shape == (len(r),)
+    np.testing.assert_allclose(d12, np.linalg.norm(y - x), rtol=0, atol=1e3 * EPS)
+    np.testing.assert_array_equal(d12, r.marker_distance("m2", "m1"))
+    assert np.abs(r.marker_distance_rate("m1", "m2")).max() <= 1e3 * EPS * w
+    # a point of the rotor and a point of the ground: closed form p(t) = p0 + R(t) (x - p0)
+    R = exp_so3(np.outer(r.t * w, a))
+    rel = np.einsum("nij,j->ni", R, x - p0)
+    d = p0 + rel - q
+    dist = np.linalg.norm(d, axis=1)
+    rate = np.einsum("ni,ni->n", d, np.cross(w * a, rel)) / dist
+    assert np.ptp(dist) > 0.1 and np.abs(rate).max() > 1.0
+    np.testing.assert_allclose(r.marker_distance("g", "m1"), dist, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(r.marker_distance_rate("g", "m1"), rate, rtol=0, atol=1e-10 * w)
+    np.testing.assert_allclose(r.marker_distance_rate("m1", "g"), rate, rtol=0, atol=1e-10 * w)
+    # and the rate is the time derivative of the distance (central differences, O(h^2))
+    D = r.marker_distance("g", "m1")
+    fd = (D[2:] - D[:-2]) / (2 * h)
+    assert np.abs(fd - r.marker_distance_rate("g", "m1")[1:-1]).max() <= (h * w) ** 2 * w
+
+
+def test_marker_pair_channels_and_units():
+    r = sd.simulate(_top(), t_end=0.05, step=1e-2)
+    names = list_channels(r)
+    assert "marker/imu/distance/base" in names and "marker/imu/distance_rate/base" in names
+    assert "marker/base/distance/imu" not in names  # listed once per pair
+    np.testing.assert_array_equal(get_channel(r, "marker/base/distance/imu"),
+                                  r.marker_distance("imu", "base"))
+    np.testing.assert_array_equal(get_channel(r, "marker/imu/distance_rate/base"),
+                                  r.marker_distance_rate("imu", "base"))
+    assert channel_unit("marker/imu/distance/base") == "m"
+    assert channel_unit("marker/imu/distance_rate/base") == "m/s"
+    with pytest.raises(KeyError, match="no marker 'bsae'"):
+        get_channel(r, "marker/imu/distance/bsae")
+
+
+# -------------------------------------------------------------------------------------------------
+# joint reaction and joint torque from the multipliers
+# -------------------------------------------------------------------------------------------------
+M_BOB, L_ROD, GZ = 2.0, 0.8, 9.81
+
+
+def _hanging_pendulum(at: bool) -> sd.Model:
+    """A point mass m on a massless rod of length L, hanging at rest below a hinge."""
+    mb = sd.ModelBuilder(gravity=(0, 0, -GZ))
+    mb.node("ground", (0.1, 0.2, 1.0), fixed=True)
+    mb.node("bob", (0.1, 0.2, 1.0 - L_ROD), orientation=_rot((1, 2, 3), 0.7), mass=M_BOB,
+            inertia=(1e-4, 1e-4, 1e-4))
+    if at:  # the hinge at the pivot, attached to the bob
+        mb.joint("hinge", "hinge", "ground", "bob", axis=(0, 1, 0), at=(0.1, 0.2, 1.0))
+    else:  # the hinge's frame at the bob's node (a joint without ``at``)
+        mb.joint("hinge", "hinge", "ground", "bob", axis=(0, 1, 0))
+    return mb.build()
+
+
+@pytest.mark.parametrize("at", [True, False])
+def test_reaction_of_a_hanging_pendulum(at):
+    r = sd.simulate(_hanging_pendulum(at), t_end=0.2, step=1e-2, tol_residual=1e-13)
+    w = r.joint_reaction("hinge", frame="inertial")
+    assert w.shape == (len(r), 6)
+    # the joint holds the bob up: m g upward on the body B; no moment about the hinge point
+    # (or about the bob itself, where the joint sits without ``at``)
+    expected = np.array([0.0, 0.0, M_BOB * GZ, 0.0, 0.0, 0.0])
+    np.testing.assert_allclose(w, np.broadcast_to(expected, w.shape), rtol=0, atol=1e-10)
+    # joint axes: with ``at`` those of the inertial frame at t0 carried by the bob (at rest:
+    # the inertial ones); without, the bob's own axes
+    Rb = r.node_rotation("bob")[0]
+    wj = r.joint_reaction("hinge")
+    exp_j = expected if at else np.concatenate([Rb.T @ expected[:3], Rb.T @ expected[3:]])
+    np.testing.assert_allclose(wj, np.broadcast_to(exp_j, wj.shape), rtol=0, atol=1e-10)
+    np.testing.assert_array_equal(wj, r.joint_multipliers("hinge"))
+    np.testing.assert_allclose(r.joint_torque("hinge"), 0.0, atol=1e-10)
+
+
+@pytest.mark.parametrize("hold", ["actuator", "spring", "pd"])
+def test_joint_torque_sensor_in_a_static_hold(hold):
+    # a uniform rod of mass m and length L on a hinge at one end, held horizontal by a torque
+    # about the axis -y; its centre of mass also sits c off the rod's line along the axis, so
+    # that gravity has a moment perpendicular to the axis too (taken by the bearing)
+    from se3dyn.model.specs import PD
+
+    m, L, c = M_BOB, L_ROD, 0.1
+    tau = m * GZ * L / 2
+    mb = sd.ModelBuilder(gravity=(0, 0, -GZ))
+    mb.node("ground", (0, 0, 0), fixed=True)
+    mb.node("rod", (0, 0, 0), mass=m, inertia=(1e-3, m * L**2 / 12, m * L**2 / 12),
+            com=(L / 2, -c, 0))
+    kw = {"actuator": dict(actuator=tau),
+          "spring": dict(stiffness=50.0, reference=tau / 50.0, damping=1.0),
+          "pd": dict(control=PD(kp=80.0, kd=4.0, target=tau / 80.0))}[hold]
+    mb.joint("hinge", "hinge", "ground", "rod", axis=(0, -1, 0), **kw)
+    r = sd.simulate(mb.build(), t_end=0.3, step=1e-2, tol_residual=1e-13)
+    assert np.abs(r.joint_coordinates("hinge")).max() <= 1e-12  # held: at rest
+    # what a torque sensor in the joint reads: the torque that holds the rod, m g L / 2
+    T = r.joint_torque("hinge")
+    assert T.shape == (len(r), 1)
+    np.testing.assert_allclose(T, tau, rtol=1e-12)
+    # the load cell: force m g up; moments about the hinge (inertial axes) balance gravity's
+    # (L/2, -c, 0) x (0, 0, -m g) = (c m g, m g L/2, 0)
+    w = r.joint_reaction("hinge", frame="inertial")
+    np.testing.assert_allclose(w, np.broadcast_to([0, 0, m * GZ, -c * m * GZ, -tau, 0], w.shape),
+                               rtol=0, atol=1e-10)
+    # its constraint part: zero moment about the axis, the perpendicular moment unchanged
+    wc = r.joint_reaction("hinge", frame="inertial", part="constraint")
+    np.testing.assert_allclose(wc, np.broadcast_to([0, 0, m * GZ, -c * m * GZ, 0, 0], w.shape),
+                               rtol=0, atol=1e-10)
+
+
+def _conical(theta=0.5, at=True) -> tuple[sd.Model, float]:
+    """A conical pendulum: a point mass (isotropic inertia) on a massless rod of length L from a
+    spherical joint, in steady rotation at the rate Omega^2 = g / (L cos theta)."""
+    Om = np.sqrt(GZ / (L_ROD * np.cos(theta)))
+    r0 = L_ROD * np.array([np.sin(theta), 0.0, -np.cos(theta)])
+    mb = sd.ModelBuilder(gravity=(0, 0, -GZ))
+    mb.node("ground", (0, 0, 0), fixed=True)
+    mb.node("bob", r0, mass=M_BOB, inertia=(1e-3, 1e-3, 1e-3),
+            velocity=np.cross([0, 0, Om], r0), angular_velocity=(0, 0, Om))
+    mb.joint("pivot", "spherical", "ground", "bob", at=(0, 0, 0))
+    mb.marker("bob", "bob")
+    mb.marker("pivot", "ground")
+    return mb.build(), Om
+
+
+def test_reaction_of_a_conical_pendulum():
+    theta = 0.5
+    model, Om = _conical(theta)
+    r = sd.simulate(model, t_end=1.0, step=1e-3, tol_residual=1e-13)
+    # closed form: the bob turns about z at the rate Omega; the rod pulls it with
+    # F = m (a - g), a = -Omega^2 r_perp the centripetal acceleration
+    ang = Om * r.t
+    r_perp = L_ROD * np.sin(theta) * np.stack([np.cos(ang), np.sin(ang), 0 * ang], axis=1)
+    F = M_BOB * (-Om**2 * r_perp - np.array([0, 0, -GZ]))
+    w = r.joint_reaction("pivot", frame="inertial")
+    scale = M_BOB * GZ
+    tol = 30 * (1e-3 * Om) ** 2 * scale  # the alpha method's O(h^2) error on the motion
+    np.testing.assert_allclose(w[:, :3], F, rtol=0, atol=tol)
+    np.testing.assert_allclose(np.linalg.norm(w[:, :3], axis=1), scale / np.cos(theta), rtol=1e-4)
+    # the force is along the rod (tension), no moment about the pivot (a spherical joint)
+    rod = r.marker_position("bob") / L_ROD
+    np.testing.assert_allclose(np.cross(rod, w[:, :3]), 0.0, atol=tol)
+    np.testing.assert_allclose(w[:, 3:], 0.0, atol=1e-9 * scale)
+    # Newton's law for the bob with the stored accelerations, to round-off
+    acc = r.node_acceleration("bob", "inertial")[:, :3]
+    np.testing.assert_allclose(w[:, :3], M_BOB * (acc - [0, 0, -GZ]), rtol=0, atol=1e-9 * scale)
+    # its torque along the three rotation coordinates: nothing drives them
+    np.testing.assert_allclose(r.joint_torque("pivot"), 0.0, atol=1e-9 * scale)
+    # distance to the pivot: the rod's length
+    np.testing.assert_allclose(r.marker_distance("pivot", "bob"), L_ROD, rtol=1e-9)
+
+
+def test_joint_sensor_channels_equal_in_memory_and_from_a_results_file(tmp_path):
+    model, _ = _conical()
+    path = tmp_path / "res.h5"
+    s = sd.compile_model(model)
+    with ResultsWriter(path, s, settings={"t_end": 0.05, "step": 1e-2}) as w:
+        res = sd.simulate(s, 0.05, 1e-2, on_output=w.append)
+        w.close(res.stats)
+    back = read_results(path)
+    names = [c for c in list_channels(res)
+             if "/reaction/" in c or "/torque/" in c or "/distance" in c]
+    assert names == [c for c in list_channels(back)
+                     if "/reaction/" in c or "/torque/" in c or "/distance" in c]
+    assert len(names) == 12 + 3 + 2
+    for c in names:
+        np.testing.assert_array_equal(get_channel(res, c), get_channel(back, c), err_msg=c)
+    for frame in ("joint", "inertial"):
+        np.testing.assert_array_equal(res.joint_reaction("pivot", frame),
+                                      back.joint_reaction("pivot", frame))
+    np.testing.assert_array_equal(res.joint_torque("pivot"), back.joint_torque("pivot"))
+    assert channel_unit("joint/pivot/reaction/inertial/fz") == "N"
+    assert channel_unit("joint/pivot/reaction/joint/mx") == "N m"
+    assert channel_unit("joint/pivot/torque/0", res) == "N m"
+    assert channel_unit("joint/pivot/torque/0") == "N m | N"
+
+
+def test_joint_torque_units_and_composites():
+    # a prismatic joint's sensor is a force (N); a universal joint gives both hinges' torques
+    mb = sd.ModelBuilder(gravity=(0, 0, -GZ))
+    mb.node("ground", (0, 0, 0), fixed=True)
+    mb.node("slider", (0, 0, 0), mass=M_BOB, inertia=(1, 1, 1))
+    mb.joint("rail", "prismatic", "ground", "slider", axis=(0, 0, 1), actuator=M_BOB * GZ)
+    mb.node("arm", (0, 0, -L_ROD), mass=M_BOB, inertia=(1e-3, 1e-3, 1e-3))
+    mb.joint("u", "universal", "slider", "arm", axes=((1, 0, 0), (0, 1, 0)), at=(0, 0, 0),
+             actuator=(0.0, 0.0))
+    r = sd.simulate(mb.build(), t_end=0.05, step=1e-2, tol_residual=1e-13)
+    assert channel_unit("joint/rail/torque/0", r) == "N"
+    assert channel_unit("joint/u/torque/1", r) == "N m"
+    assert r.joint_torque("u").shape == (len(r), 2)
+    # the actuator pushes the slider (and the arm hanging below it, 2 m in all) up with m g:
+    # both fall with g/2, and the rail's sensor reads what the actuator applies, m g
+    np.testing.assert_allclose(r.joint_torque("rail"), M_BOB * GZ, rtol=1e-12)
+    # the arm hangs from the cross: the universal joint pulls it up with m (g + a), a = -g/2
+    w = r.joint_reaction("u", frame="inertial")
+    np.testing.assert_allclose(w, np.broadcast_to([0, 0, M_BOB * GZ / 2, 0, 0, 0], w.shape),
+                               rtol=0, atol=1e-10)
+    with pytest.raises(ModelError, match="'joint' or 'inertial'"):
+        r.joint_reaction("u", frame="body")

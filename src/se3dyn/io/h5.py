@@ -122,6 +122,46 @@ class ResultsLayout(LayoutCounts):
         return np.array(m.gravity, dtype=float) if m is not None else np.zeros(3)
 
     @functools.cached_property
+    def stored_system(self):
+        """The compiled stored model when its nodes, joints and unknowns match this layout, else
+        None (compiled once; the joint sensors of :class:`Results` take the joints' node B,
+        attachment frames and axes from it)."""
+        m = self.stored_model
+        if m is None:
+            return None
+        try:
+            cand = compile_model(m)
+        except Exception:  # noqa: BLE001 - a stored model that does not compile: no geometry
+            return None
+        if (tuple(cand.node_names) == tuple(self.node_names)
+                and tuple(cand.joint_names) == tuple(self.joint_names)
+                and int(cand.nq) == int(self.nq) and int(cand.nm) == int(self.nm)):
+            return cand
+        return None
+
+    @property
+    def joint_b(self):
+        """Node B of each joint (m,), from the stored model; None without one."""
+        s = self.stored_system
+        return None if s is None else s.joint_b
+
+    @property
+    def joint_XB(self):
+        """Attachment frame ``X_B`` of each joint on its node B (m, 4, 4), from the stored
+        model; None without one."""
+        s = self.stored_system
+        return None if s is None else s.joint_XB
+
+    @property
+    def joint_A(self):
+        """The basis ``A`` (6, k) of each joint (Eq. (9)), from the stored model; None without
+        one."""
+        s = self.stored_system
+        if s is None:
+            return None
+        return [np.asarray(j.A, dtype=float).reshape(6, -1) for j in s.model.joints]
+
+    @functools.cached_property
     def beam_system(self):
         """The compiled system of the stored model when it has beams and its nodes and unknowns
         match this layout, else None (compiled once; the beam channels of

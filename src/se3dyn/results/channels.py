@@ -12,12 +12,16 @@ A channel is one scalar time history, shape (n,), named by a path (see ``docs/re
     joint/<joint>/alpha/<i>                         rad or m (per coordinate)
     joint/<joint>/velocity/<i>                      rad/s or m/s
     joint/<joint>/multiplier/<i>                    N (i mod 6 < 3), N m (otherwise)
+    joint/<joint>/reaction/joint|inertial/fx|fy|fz|mx|my|mz    N, N m  (wrench on body B)
+    joint/<joint>/torque/<i>                        N m or N (per coordinate)
     marker/<marker>/position/x|y|z                  m
     marker/<marker>/rotation/R11 .. R33             -   (marker axes in the inertial frame)
     marker/<marker>/velocity/material|inertial/x|y|z|wx|wy|wz      m/s, rad/s
     marker/<marker>/acceleration/material|inertial/x|y|z|wx|wy|wz  m/s^2, rad/s^2
     marker/<marker>/accelerometer/x|y|z             m/s^2   (specific force, marker axes)
     marker/<marker>/gyroscope/x|y|z                 rad/s   (angular velocity, marker axes)
+    marker/<a>/distance/<b>                         m       (|p_b - p_a|, a listed before b)
+    marker/<a>/distance_rate/<b>                    m/s     (its time derivative)
     beam/<beam>/<e>/force/N|V2|V3|T|M2|M3           N, N m  (section forces of element e)
     beam/<beam>/<e>/strain/e1|g2|g3|k1|k2|k3        -, 1/m  (eps - eps0, section frame)
     beam/<beam>/<e>/energy                          J       (elastic energy of element e)
@@ -26,8 +30,16 @@ A channel is one scalar time history, shape (n,), named by a path (see ``docs/re
 
 Markers (``ModelBuilder.marker``, ``markers:`` in model files) are frames fixed on nodes; their
 channels are :meth:`Results.marker_velocity`, :meth:`Results.accelerometer` and the others
-(material = the marker's own axes). Results read from a file take them from the model stored
-in it.
+(material = the marker's own axes); the distance between two markers is listed once per pair,
+under the marker that comes first in the model, and read in either order. Results read from a
+file take them from the model stored in it.
+
+Joint sensors (:meth:`Results.joint_reaction`, :meth:`Results.joint_torque`) come from the
+multipliers: the reaction wrench of the joint on its body B about the joint point (components
+in the joint frame or the inertial frame) and the generalized force of the joint's force
+elements along its coordinates. The inertial components and the torque need the joint's
+attachment frame and axes: results read from a file list them only when the file stores its
+model.
 
 Escaping: a node, joint or marker name is written with ``%`` replaced by ``%25`` and ``/`` by
 ``%2F`` (in this order), so ``node/a%2Fb/position/x`` is the x position of node ``a/b``.
@@ -57,6 +69,8 @@ _ENERGY = ("kinetic", "potential", "spring", "total", "balance", "work_actuators
 _SOLVER = ("iterations", "residual", "constraint")
 _ROT = tuple(f"R{i}{j}" for i in (1, 2, 3) for j in (1, 2, 3))
 _SENSORS = ("accelerometer", "gyroscope")
+_PAIR = ("distance", "distance_rate")
+_WRENCH = ("fx", "fy", "fz", "mx", "my", "mz")
 _BEAM = {"force": ("N", "V2", "V3", "T", "M2", "M3"),
          "strain": ("e1", "g2", "g3", "k1", "k2", "k3")}
 
@@ -102,6 +116,7 @@ def _beam_system(res: Results):
 def list_channels(res: Results) -> list[str]:
     """Every channel name of ``res``, in a stable order."""
     s = res.system
+    geom = _joint_geometry_known(s)
     out = ["time"]
     for name in s.node_names:
         e = f"node/{escape_name(name)}"
@@ -117,8 +132,14 @@ def list_channels(res: Results) -> list[str]:
         out += [f"{e}/alpha/{c}" for c in range(k)]
         out += [f"{e}/velocity/{c}" for c in range(k)]
         out += [f"{e}/multiplier/{c}" for c in range(nmult)]
-    for mk in marker_specs(s):
-        out += _marker_entries(f"marker/{escape_name(mk.name)}")
+        for frame in ("joint", "inertial") if geom else ("joint",):
+            out += [f"{e}/reaction/{frame}/{c}" for c in _WRENCH]
+        if geom:
+            out += [f"{e}/torque/{c}" for c in range(k)]
+    mks = [escape_name(mk.name) for mk in marker_specs(s)]
+    for i, mk in enumerate(mks):
+        out += _marker_entries(f"marker/{mk}")
+        out += [f"marker/{mk}/{q}/{other}" for other in mks[i + 1:] for q in _PAIR]
     bsys = _beam_system(res)
     for b in getattr(bsys, "beams", ()):
         e = f"beam/{escape_name(b['beam'])}/{b['index']}"
@@ -128,6 +149,15 @@ def list_channels(res: Results) -> list[str]:
     out += [f"energy/{x}" for x in _ENERGY]
     out += [f"solver/{x}" for x in _SOLVER]
     return out
+
+
+def _joint_geometry_known(system) -> bool:
+    """Whether the joints' node B, attachment frames and axes are known (a compiled System, or
+    a layout read from a file that stores its model)."""
+    return (getattr(system, "joint_XB", None) is not None
+            and getattr(system, "joint_b", None) is not None
+            and (getattr(system, "joint_A", None) is not None
+                 or getattr(system, "model", None) is not None))
 
 
 def _marker_entries(e: str) -> list[str]:
@@ -142,9 +172,16 @@ def _marker_entries(e: str) -> list[str]:
 
 def _marker_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
     marker = unescape_name(parts[1])
-    if marker not in [mk.name for mk in marker_specs(res.system)]:
+    names = [mk.name for mk in marker_specs(res.system)]
+    if marker not in names:
         raise _unknown(res, name, f"no marker {marker!r}")
     q, rest = parts[2], parts[3:]
+    if q in _PAIR and len(rest) == 1:
+        other = unescape_name(rest[0])
+        if other not in names:
+            raise _unknown(res, name, f"no marker {other!r}")
+        f = res.marker_distance if q == "distance" else res.marker_distance_rate
+        return f(marker, other)
     if q == "position" and rest in [[a] for a in _AXES[:3]]:
         return res.marker_position(marker)[:, _AXES.index(rest[0])]
     if q == "rotation" and len(rest) == 1 and rest[0] in _ROT:
@@ -234,19 +271,25 @@ def get_channel(res: Results, name: str) -> np.ndarray:
             return np.array(_marker_channel(res, name, parts), dtype=float)
         if len(parts) in (4, 5) and parts[0] == "beam":
             return _beam_channel(res, name, parts)
-        if len(parts) == 4 and parts[0] == "joint":
+        if len(parts) in (4, 5) and parts[0] == "joint":
             joint = unescape_name(parts[1])
             try:
                 k, nmult = _joint_size(res, joint)
             except KeyError:
                 raise _unknown(res, name, f"no joint {joint!r}") from None
-            if parts[2] in ("alpha", "velocity"):
+            if parts[2] in ("alpha", "velocity") and len(parts) == 4:
                 c = _index(res, name, parts[3], k)
                 f = res.joint_coordinates if parts[2] == "alpha" else res.joint_velocities
                 return f(joint)[:, c]
-            if parts[2] == "multiplier":
+            if parts[2] == "multiplier" and len(parts) == 4:
                 c = _index(res, name, parts[3], nmult)
                 return res.joint_multipliers(joint)[:, c]
+            if (parts[2] == "reaction" and len(parts) == 5 and parts[3] in ("joint", "inertial")
+                    and parts[4] in _WRENCH):
+                return res.joint_reaction(joint, frame=parts[3])[:, _WRENCH.index(parts[4])]
+            if parts[2] == "torque" and len(parts) == 4:
+                c = _index(res, name, parts[3], k)
+                return res.joint_torque(joint)[:, c]
     except (ValueError, IndexError) as e:
         raise _unknown(res, name, str(e)) from None
     raise _unknown(res, name)
@@ -255,7 +298,8 @@ def get_channel(res: Results, name: str) -> np.ndarray:
 def channel_unit(name: str, res: Results | None = None) -> str:
     """Unit of a channel for axis labels: "m", "m/s", "m/s^2", "rad", "rad/s", "rad/s^2", "J",
     "N", "N m", "s", or "" (counts, dimensionless). Joint coordinates are "rad" or "m" when
-    ``res`` is given (from the joint axes), otherwise "rad | m"."""
+    ``res`` is given (from the joint axes), otherwise "rad | m"; joint torques "N m" or "N"
+    likewise (otherwise "N m | N")."""
     parts = str(name).split("/")
     if parts == ["time"]:
         return "s"
@@ -264,6 +308,8 @@ def channel_unit(name: str, res: Results | None = None) -> str:
     if parts[0] == "solver":
         return ""
     if parts[0] == "marker" and len(parts) >= 4:
+        if parts[2] in _PAIR:
+            return "m" if parts[2] == "distance" else "m/s"
         if parts[2] == "accelerometer":
             return "m/s^2"
         if parts[2] == "gyroscope":
@@ -287,8 +333,15 @@ def channel_unit(name: str, res: Results | None = None) -> str:
             return "N m" if last in ("T", "M2", "M3") else "N"
         if parts[3] == "strain":
             return "1/m" if last.startswith("k") else ""
+    if parts[0] == "joint" and len(parts) == 5 and parts[2] == "reaction":
+        return "N" if parts[4].startswith("f") else "N m"
     if parts[0] == "joint" and len(parts) == 4:
         q = parts[2]
+        if q == "torque":
+            unit = "rad | m"
+            if res is not None and parts[3].isdigit():
+                unit = _joint_unit(res, unescape_name(parts[1]), int(parts[3])) or unit
+            return " | ".join({"rad": "N m", "m": "N"}[u] for u in unit.split(" | "))
         if q == "multiplier":
             return "N" if parts[3].isdigit() and int(parts[3]) % 6 < 3 else "N m"
         unit = "rad | m"

@@ -223,6 +223,94 @@ class Results:
                                for j in self._joints(name)], axis=1)
 
     # ------------------------------------------------------------------------------------------
+    # Joint sensors: reaction wrench and transmitted generalized force, from the multipliers
+    def _joint_geometry(self, j: int):
+        """(node B index, X_B (4, 4), A (6, k)) of joint j; a System carries them, a layout
+        read from a file takes them from its stored model (None there without one)."""
+        s = self.system
+        XB, b = getattr(s, "joint_XB", None), getattr(s, "joint_b", None)
+        A = getattr(s, "joint_A", None)
+        if A is None and getattr(s, "model", None) is not None:
+            A = [np.asarray(jt.A, dtype=float).reshape(6, -1) for jt in s.model.joints]
+        if XB is None or b is None or A is None:
+            raise ModelError("results", "joint", "results with their model (a compiled System, "
+                             "or a results file that stores its model) for the joint's "
+                             "attachment frame and axes", s.joint_names[j])
+        return int(b[j]), np.asarray(XB[j], dtype=float), np.asarray(A[j], dtype=float)
+
+    def joint_reaction(self, name: str, frame: str = "joint", part: str = "total"
+                       ) -> np.ndarray:
+        """Reaction wrench of a joint on its body B, shape (n, 6): ``(force, moment)``.
+
+        Exact from the multipliers (no dummy body): by Eq. (36) with the gradient of Eq. (58)
+        (column ``-I`` for node B), the multipliers ``lambda`` of the joint are the force and
+        moment the joint applies to node B, in the joint frame ``H_B X_B`` (the attachment
+        frame for a joint with ``at``, node B's own frame otherwise; Eqs. (55)-(57)). The
+        moment is about the origin of that frame: the joint point ``at`` (node B's origin
+        without ``at``). The body A receives the opposite wrench about the same point.
+
+        Parameters
+        ----------
+        name : str
+            Joint name; for a composite joint (universal) the reaction on its body B (that of
+            its last part).
+        frame : {"joint", "inertial"}
+            ``"joint"``: components in the axes of ``H_B X_B`` (those of the inertial frame at
+            t0 carried along with node B for a joint with ``at``); ``"inertial"``: the same
+            force and moment (same point) in the inertial axes, ``R_B R_XB`` applied to both.
+        part : {"total", "constraint"}
+            ``"total"``: everything the joint transmits to B, its force elements (springs,
+            dampers, actuators, PD laws) included: what a six-axis load cell between the joint
+            and body B reads; its components along the joint's free directions are
+            :meth:`joint_torque` (``A^T lambda``). ``"constraint"``: the part that does no work
+            on the joint's motion, ``lambda - A^+T A^T lambda`` (``A^+`` the pseudo-inverse of
+            the joint basis A of Eq. (9)): e.g. zero moment about a hinge's axis.
+
+        Returns
+        -------
+        ndarray (n, 6)
+            ``(fx, fy, fz, mx, my, mz)`` in N and N m.
+        """
+        if frame not in ("joint", "inertial"):
+            raise ModelError("results", "frame", "'joint' or 'inertial'", frame)
+        if part not in ("total", "constraint"):
+            raise ModelError("results", "part", "'total' or 'constraint'", part)
+        j = self._joints(name)[-1]
+        s = self.system
+        a = s.joint_multadr[j]
+        w = np.array(self.lam[:, a:a + 6], dtype=float)
+        if part == "constraint" and s.joint_k[j]:
+            A = self._joint_geometry(j)[2][:, :s.joint_k[j]]
+            w -= (w @ A) @ np.linalg.pinv(A)
+        if frame == "joint":
+            return w
+        b, XB, _ = self._joint_geometry(j)
+        return _rotate(self.H[:, b, :3, :3] @ XB[:3, :3], w)
+
+    def joint_torque(self, name: str) -> np.ndarray:
+        """Generalized force along the joint's own coordinates, shape (n, k): what a torque (or
+        force) sensor in the joint measures, the sum of its springs, dampers, actuators and PD
+        laws acting on body B in the sense of increasing coordinates (N m for an angle, N for
+        a translation).
+
+        The joint frame carries no inertia, so its rows of Eq. (36) read ``A^T lambda +
+        g_int,j = 0`` (column ``A`` of Eq. (58)): the force elements' generalized force
+        ``-g_int,j`` (Eqs. (62), (64), (66)) is ``A^T lambda``, exact from the stored
+        multipliers to the Newton tolerance of the step. For a composite joint, the values of
+        its parts side by side (as :meth:`joint_coordinates`); zero columns for a joint
+        without coordinates (k = 0).
+        """
+        s = self.system
+        cols = []
+        for j in self._joints(name):
+            if not s.joint_k[j]:
+                continue
+            _, _, A = self._joint_geometry(j)
+            a = s.joint_multadr[j]
+            cols.append(np.asarray(self.lam[:, a:a + 6], dtype=float) @ A[:, :s.joint_k[j]])
+        return np.concatenate(cols, axis=1) if cols else np.zeros((len(self.t), 0))
+
+    # ------------------------------------------------------------------------------------------
     # Markers and sensors: frames fixed on nodes (ModelBuilder.marker), H_m = H X
     def _marker(self, name: str):
         """(spec, node index) of a marker; UnknownNameError listing the valid names."""
@@ -302,6 +390,21 @@ class Results:
         """Angular velocity of a marker in the marker's own axes (a rate gyroscope), shape
         (n, 3) (rad/s): ``R_m^T omega``, ``omega`` the inertial angular velocity."""
         return self.marker_velocity(name, "material")[:, 3:].copy()
+
+    def marker_distance(self, a: str, b: str) -> np.ndarray:
+        """Distance between the origins of two markers, shape (n,) (m): ``|p_b - p_a|``."""
+        return np.linalg.norm(self.marker_position(b) - self.marker_position(a), axis=1)
+
+    def marker_distance_rate(self, a: str, b: str) -> np.ndarray:
+        """Time derivative of :meth:`marker_distance`, shape (n,) (m/s): ``(p_b - p_a) .
+        (dp_b/dt - dp_a/dt) / |p_b - p_a|``, from the exact marker velocities (positive when
+        the markers move apart); zero where the two origins coincide (the rate is undefined)."""
+        d = self.marker_position(b) - self.marker_position(a)
+        dv = (self.marker_velocity(b, "inertial")[:, :3]
+              - self.marker_velocity(a, "inertial")[:, :3])
+        dist = np.linalg.norm(d, axis=1)
+        num = np.einsum("ni,ni->n", d, dv)
+        return np.divide(num, dist, out=np.zeros_like(num), where=dist > 0)
 
     @property
     def total_energy(self) -> np.ndarray:
