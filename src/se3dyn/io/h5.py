@@ -161,24 +161,13 @@ class ResultsLayout(LayoutCounts):
             return None
         return [np.asarray(j.A, dtype=float).reshape(6, -1) for j in s.model.joints]
 
-    @functools.cached_property
+    @property
     def beam_system(self):
-        """The compiled system of the stored model when it has beams and its nodes and unknowns
-        match this layout, else None (compiled once; the beam channels of
+        """:attr:`stored_system` when it has beams, else None (the beam channels of
         :mod:`se3dyn.results.channels` are the element's
         :func:`~se3dyn.elements.beam.section_forces` of the stored motion)."""
-        if "beams:" not in self.model_text:
-            return None
-        from se3dyn.io.modelfile import loads_model
-
-        try:
-            cand = compile_model(loads_model(self.model_text)[0])
-        except Exception:  # noqa: BLE001 - a model text that does not load: no beam channels
-            return None
-        if (tuple(cand.node_names) == tuple(self.node_names) and int(cand.nq) == int(self.nq)
-                and len(getattr(cand, "beams", ()))):
-            return cand
-        return None
+        s = self.stored_system
+        return s if s is not None and len(getattr(s, "beams", ())) else None
 
 
 def _joint_columns(system) -> tuple[np.ndarray, np.ndarray]:
