@@ -139,36 +139,6 @@ class ResultsLayout(LayoutCounts):
             return cand
         return None
 
-    @property
-    def joint_b(self):
-        """Node B of each joint (m,), from the stored model; None without one."""
-        s = self.stored_system
-        return None if s is None else s.joint_b
-
-    @property
-    def joint_XB(self):
-        """Attachment frame ``X_B`` of each joint on its node B (m, 4, 4), from the stored
-        model; None without one."""
-        s = self.stored_system
-        return None if s is None else s.joint_XB
-
-    @property
-    def joint_A(self):
-        """The basis ``A`` (6, k) of each joint (Eq. (9)), from the stored model; None without
-        one."""
-        s = self.stored_system
-        if s is None:
-            return None
-        return [np.asarray(j.A, dtype=float).reshape(6, -1) for j in s.model.joints]
-
-    @property
-    def beam_system(self):
-        """:attr:`stored_system` when it has beams, else None (the beam channels of
-        :mod:`se3dyn.results.channels` are the element's
-        :func:`~se3dyn.elements.beam.section_forces` of the stored motion)."""
-        s = self.stored_system
-        return s if s is not None and len(getattr(s, "beams", ())) else None
-
 
 def _joint_columns(system) -> tuple[np.ndarray, np.ndarray]:
     """k per joint and the first column of each joint in the nk joint-unknown columns."""

@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from se3dyn.errors import UnknownNameError, close_matches
-from se3dyn.results.results import marker_specs
+from se3dyn.results.results import marker_specs, model_system
 
 if TYPE_CHECKING:
     from se3dyn.results.results import Results
@@ -102,21 +102,17 @@ def _joint_size(res: Results, name: str) -> tuple[int, int]:
 
 
 def _beam_system(res: Results):
-    """The compiled system that holds the beams of ``res``, or None when it has none.
-
-    In-memory results carry their compiled system. Results read from a file carry only its
-    layout (:class:`se3dyn.io.h5.ResultsLayout`), which compiles the model stored in the file
-    when it has beams (its ``beam_system``: the io layer reads model files, not this one)."""
-    s = res.system
-    if getattr(s, "beams", None) is not None:
-        return s if len(s.beams) else None
-    return getattr(s, "beam_system", None)
+    """The compiled system that holds the beams of ``res`` (:func:`model_system`: in-memory
+    results carry theirs, a results file's layout compiles the model stored in the file), or
+    None when it has no beams."""
+    s = model_system(res.system)
+    return s if s is not None and len(s.beams) else None
 
 
 def list_channels(res: Results) -> list[str]:
     """Every channel name of ``res``, in a stable order."""
     s = res.system
-    geom = _joint_geometry_known(s)
+    geom = model_system(s) is not None
     out = ["time"]
     for name in s.node_names:
         e = f"node/{escape_name(name)}"
@@ -149,15 +145,6 @@ def list_channels(res: Results) -> list[str]:
     out += [f"energy/{x}" for x in _ENERGY]
     out += [f"solver/{x}" for x in _SOLVER]
     return out
-
-
-def _joint_geometry_known(system) -> bool:
-    """Whether the joints' node B, attachment frames and axes are known (a compiled System, or
-    a layout read from a file that stores its model)."""
-    return (getattr(system, "joint_XB", None) is not None
-            and getattr(system, "joint_b", None) is not None
-            and (getattr(system, "joint_A", None) is not None
-                 or getattr(system, "model", None) is not None))
 
 
 def _marker_entries(e: str) -> list[str]:

@@ -22,17 +22,12 @@ def node_dofs(s, H: np.ndarray, arr: np.ndarray, i: int, frame: str) -> np.ndarr
     """The 6 unknowns of node i in every row of ``arr`` (n, nq), shape (n, 6); ``frame=
     "inertial"`` rotates both parts by the node rotation of ``H`` (n, M, 4, 4) (Eq. (4));
     zeros for a clamped node."""
-    if frame not in ("material", "inertial"):
-        raise ModelError("results", "frame", "'material' or 'inertial'", frame)
+    _check_frame(frame)
     if s.node_fixed[i]:
         return np.zeros((len(arr), 6))
     d = s.node_dofadr[i]
     out = arr[:, d:d + 6].copy()
-    if frame == "inertial":
-        R = H[:, i, :3, :3]
-        out[:, :3] = np.einsum("nij,nj->ni", R, out[:, :3])
-        out[:, 3:] = np.einsum("nij,nj->ni", R, out[:, 3:])
-    return out
+    return _rotate(H[:, i, :3, :3], out) if frame == "inertial" else out
 
 
 def node_accelerations(s, H: np.ndarray, v: np.ndarray, vd: np.ndarray, i: int,
@@ -42,9 +37,9 @@ def node_accelerations(s, H: np.ndarray, v: np.ndarray, vd: np.ndarray, i: int,
     dOmega/dt)``, the unknowns of Eq. (39); ``frame="inertial"``: the acceleration of the node's
     origin and the angular acceleration in the inertial frame, ``(R (dU/dt + Omega x U),
     R dOmega/dt)`` (the derivative of dx/dt = R U with dR/dt = R hat(Omega), Eqs. (3)-(4))."""
-    a = node_dofs(s, H, vd, i, "material")
+    a = node_dofs(s, H, vd, i, frame if frame != "inertial" else "material")  # (checks frame)
     if frame != "inertial":
-        return node_dofs(s, H, vd, i, frame)  # (checks frame)
+        return a
     w = node_dofs(s, H, v, i, "material")
     return inertial_acceleration(H[:, i, :3, :3], w, a)
 
@@ -55,9 +50,13 @@ def inertial_acceleration(R: np.ndarray, w: np.ndarray, a: np.ndarray) -> np.nda
     derivative ``a`` (n, 6): the acceleration of the frame's origin and the angular
     acceleration, both in the inertial frame (the derivative of dx/dt = R U with
     dR/dt = R hat(Omega), Eqs. (3)-(4))."""
-    lin = a[:, :3] + np.cross(w[:, 3:], w[:, :3])
-    return np.concatenate([np.einsum("nij,nj->ni", R, lin),
-                           np.einsum("nij,nj->ni", R, a[:, 3:])], axis=1)
+    return _rotate(R, np.concatenate([_origin_acceleration(w, a), a[:, 3:]], axis=1))
+
+
+def _origin_acceleration(w: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """The acceleration of a frame's origin in the frame's own axes, ``dU/dt + Omega x U``
+    (n, 3), from its material velocity ``w`` and ``a = dw/dt`` (n, 6)."""
+    return a[:, :3] + np.cross(w[:, 3:], w[:, :3])
 
 
 def marker_specs(system) -> tuple:
@@ -67,6 +66,16 @@ def marker_specs(system) -> tuple:
     if mk is None:
         mk = getattr(getattr(system, "model", None), "markers", ())
     return tuple(mk or ())
+
+
+def model_system(system):
+    """The compiled System behind results: ``system`` itself when it is one (it carries its
+    model), else the ``stored_system`` of a layout read from a file (the model stored in the
+    file, compiled there by the io layer); None when there is none. The joint sensors take the
+    joints' node B, attachment frames and axes from it, the beam channels its beams."""
+    if getattr(system, "model", None) is not None and hasattr(system, "joint_XB"):
+        return system
+    return getattr(system, "stored_system", None)
 
 
 def _to_marker(X: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -225,18 +234,14 @@ class Results:
     # ------------------------------------------------------------------------------------------
     # Joint sensors: reaction wrench and transmitted generalized force, from the multipliers
     def _joint_geometry(self, j: int):
-        """(node B index, X_B (4, 4), A (6, k)) of joint j; a System carries them, a layout
-        read from a file takes them from its stored model (None there without one)."""
-        s = self.system
-        XB, b = getattr(s, "joint_XB", None), getattr(s, "joint_b", None)
-        A = getattr(s, "joint_A", None)
-        if A is None and getattr(s, "model", None) is not None:
-            A = [np.asarray(jt.A, dtype=float).reshape(6, -1) for jt in s.model.joints]
-        if XB is None or b is None or A is None:
+        """(node B index, X_B (4, 4), A (6, k)) of joint j, from :func:`model_system`."""
+        ms = model_system(self.system)
+        if ms is None:
             raise ModelError("results", "joint", "results with their model (a compiled System, "
                              "or a results file that stores its model) for the joint's "
-                             "attachment frame and axes", s.joint_names[j])
-        return int(b[j]), np.asarray(XB[j], dtype=float), np.asarray(A[j], dtype=float)
+                             "attachment frame and axes", self.system.joint_names[j])
+        A = np.asarray(ms.model.joints[j].A, dtype=float).reshape(6, -1)
+        return int(ms.joint_b[j]), np.asarray(ms.joint_XB[j], dtype=float), A
 
     def joint_reaction(self, name: str, frame: str = "joint", part: str = "total"
                        ) -> np.ndarray:
@@ -279,13 +284,13 @@ class Results:
         s = self.system
         a = s.joint_multadr[j]
         w = np.array(self.lam[:, a:a + 6], dtype=float)
-        if part == "constraint" and s.joint_k[j]:
-            A = self._joint_geometry(j)[2][:, :s.joint_k[j]]
-            w -= (w @ A) @ np.linalg.pinv(A)
-        if frame == "joint":
+        if frame == "joint" and (part == "total" or not s.joint_k[j]):
             return w
-        b, XB, _ = self._joint_geometry(j)
-        return _rotate(self.H[:, b, :3, :3] @ XB[:3, :3], w)
+        b, XB, A = self._joint_geometry(j)
+        if part == "constraint" and s.joint_k[j]:
+            A = A[:, :s.joint_k[j]]
+            w -= (w @ A) @ np.linalg.pinv(A)
+        return w if frame == "joint" else _rotate(self.H[:, b, :3, :3] @ XB[:3, :3], w)
 
     def joint_torque(self, name: str) -> np.ndarray:
         """Generalized force along the joint's own coordinates, shape (n, k): what a torque (or
@@ -324,12 +329,13 @@ class Results:
         shown = ", ".join(valid) if valid else "none: the model has no markers"
         raise UnknownNameError(f"unknown marker {name!r}{hint} (valid: {shown})")
 
-    def _marker_twists(self, name: str, arr: np.ndarray):
-        """Marker frame (n, 4, 4) and the node twists ``arr`` (v or vd) as marker twists."""
+    def _marker_twists(self, name: str, *arrs: np.ndarray):
+        """Marker frame (n, 4, 4), then the node twists of each of ``arrs`` (v, vd) as twists
+        of the marker frame (n, 6)."""
         mk, i = self._marker(name)
         X = np.asarray(mk.X, dtype=float)
-        Hm = self.H[:, i] @ X
-        return Hm, _to_marker(X, node_dofs(self.system, self.H, arr, i, "material"))
+        return (self.H[:, i] @ X, *(_to_marker(X, node_dofs(self.system, self.H, arr, i,
+                                                             "material")) for arr in arrs))
 
     def marker_frame(self, name: str) -> np.ndarray:
         """Homogeneous frame ``H_m = H X`` of a marker (inertial frame), shape (n, 4, 4)."""
@@ -366,10 +372,9 @@ class Results:
         in the inertial frame (:func:`inertial_acceleration`).
         """
         _check_frame(frame)
-        Hm, a = self._marker_twists(name, self.vd)
         if frame == "material":
-            return a
-        w = self._marker_twists(name, self.v)[1]
+            return self._marker_twists(name, self.vd)[1]
+        Hm, w, a = self._marker_twists(name, self.v, self.vd)
         return inertial_acceleration(Hm[:, :3, :3], w, a)
 
     def accelerometer(self, name: str) -> np.ndarray:
@@ -380,11 +385,9 @@ class Results:
         Sign convention: an accelerometer at rest reads ``-g`` in its own axes, i.e. +9.81
         along the upward vertical for gravity ``(0, 0, -9.81)``; in free fall it reads zero.
         """
-        Hm, a = self._marker_twists(name, self.vd)
-        w = self._marker_twists(name, self.v)[1]
+        Hm, w, a = self._marker_twists(name, self.v, self.vd)
         g = np.asarray(self.system.gravity, dtype=float)
-        return (a[:, :3] + np.cross(w[:, 3:], w[:, :3])
-                - np.einsum("nji,j->ni", Hm[:, :3, :3], g))
+        return _origin_acceleration(w, a) - np.einsum("nji,j->ni", Hm[:, :3, :3], g)
 
     def gyroscope(self, name: str) -> np.ndarray:
         """Angular velocity of a marker in the marker's own axes (a rate gyroscope), shape
