@@ -87,6 +87,14 @@ def _to_marker(X: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.concatenate([lin @ Rx, w[:, 3:] @ Rx], axis=1)
 
 
+def _unknown(kind: str, name, valid, empty: str = "") -> UnknownNameError:
+    """The error for an unknown node, joint or marker name: a hint and the valid names."""
+    close = close_matches(str(name), list(valid), n=1)
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    shown = ", ".join(valid) if len(valid) or not empty else empty
+    return UnknownNameError(f"unknown {kind} {name!r}{hint} (valid: {shown})")
+
+
 def _check_frame(frame: str) -> None:
     if frame not in ("material", "inertial"):
         raise ModelError("results", "frame", "'material' or 'inertial'", frame)
@@ -146,15 +154,9 @@ class Results:
     # ------------------------------------------------------------------------------------------
     def _node(self, name: str) -> int:
         names = self.system.node_names
-        try:
-            if not isinstance(name, str):
-                raise ValueError(name)
+        if isinstance(name, str) and name in names:
             return names.index(name)
-        except ValueError:
-            close = close_matches(str(name), names, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise UnknownNameError(
-                f"unknown node {name!r}{hint} (valid: {', '.join(names)})") from None
+        raise _unknown("node", name, names)
 
     def _joints(self, name: str) -> list[int]:
         s = self.system
@@ -166,10 +168,7 @@ class Results:
             return [names.index(n) for n in comp[name]]
         if name in names:
             return [names.index(name)]
-        valid = [n for n in names if ":" not in n] + list(comp)
-        close = close_matches(str(name), valid, n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
-        raise UnknownNameError(f"unknown joint {name!r}{hint} (valid: {', '.join(valid)})")
+        raise _unknown("joint", name, [n for n in names if ":" not in n] + list(comp))
 
     def node_position(self, name: str) -> np.ndarray:
         """Position of a node in the inertial frame, shape (n, 3)."""
@@ -323,11 +322,8 @@ class Results:
         for mk in specs:
             if mk.name == name:
                 return mk, self._node(mk.node)
-        valid = [mk.name for mk in specs]
-        close = close_matches(str(name), valid, n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
-        shown = ", ".join(valid) if valid else "none: the model has no markers"
-        raise UnknownNameError(f"unknown marker {name!r}{hint} (valid: {shown})")
+        raise _unknown("marker", name, [mk.name for mk in specs],
+                       "none: the model has no markers")
 
     def _marker_twists(self, name: str, *arrs: np.ndarray):
         """Marker frame (n, 4, 4), then the node twists of each of ``arrs`` (v, vd) as twists
