@@ -64,14 +64,17 @@ def energy_balance_check(res: Results) -> tuple[float, float]:
     return _balance_and_scale(c, c[0])
 
 
+def _balance(x: np.ndarray) -> np.ndarray:
+    """``E - W_actuators - W_loads + dissipation`` of scalar rows in the order of SCALARS
+    (kinetic, potential, spring, actuator work, load work, dissipated), shape (...,)."""
+    return x[..., 0] + x[..., 1] + x[..., 2] - x[..., 3] - x[..., 4] + x[..., 5]
+
+
 def _balance_and_scale(c: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
     """(largest energy balance drift, energy in play) of scalar rows ``c`` (n, >= 6) in the
-    order of SCALARS (kinetic, potential, spring, actuator work, load work, dissipated),
-    measured from the first row of the run ``ref`` (6,); see :func:`energy_balance_check`."""
-    def bal(x):  # energy - works + dissipation
-        return x[..., 0] + x[..., 1] + x[..., 2] - x[..., 3] - x[..., 4] + x[..., 5]
-
-    err = float(np.abs(bal(c[:, :6]) - bal(ref)).max())
+    order of SCALARS, measured from the first row of the run ``ref`` (6,); see
+    :func:`energy_balance_check`."""
+    err = float(np.abs(_balance(c[:, :6]) - _balance(ref)).max())
     rel = [1, 3, 4, 5]  # the gravity potential's zero is arbitrary; works start at ref
     scale = max(float(np.abs(c[:, 0]).max()), float(np.abs(c[:, 2]).max()),
                 float(np.abs(c[:, rel] - ref[rel]).max()))
@@ -99,8 +102,7 @@ def energy_jump(t: np.ndarray, c: np.ndarray) -> dict | None:
     c = np.asarray(c, dtype=float)
     if len(c) < 2:
         return None
-    b = c[:, 0] + c[:, 1] + c[:, 2] - c[:, 3] - c[:, 4] + c[:, 5]
-    d = np.diff(b)
+    d = np.diff(_balance(c))
     k = int(np.argmax(np.abs(d)))
     return dict(t0=float(t[k]), t1=float(t[k + 1]), jump=float(d[k]), first=k == 0)
 
