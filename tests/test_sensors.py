@@ -245,14 +245,18 @@ def test_markers_round_trip_through_a_model_file():
     assert save_model(back) == text
 
 
+def _run_and_read(model, t_end: float, path):
+    """A run at h = 1e-2 streamed into a results file: (results in memory, read back)."""
+    s = sd.compile_model(model)
+    with ResultsWriter(path, s, settings={"t_end": t_end, "step": 1e-2}) as w:
+        res = sd.simulate(s, t_end, 1e-2, on_output=w.append)
+        w.close(res.stats)
+    return res, read_results(path)
+
+
 def test_marker_channels_equal_in_memory_and_from_a_results_file(tmp_path):
     model = _top()
-    path = tmp_path / "res.h5"
-    s = sd.compile_model(model)
-    with ResultsWriter(path, s, settings={"t_end": 0.1, "step": 1e-2}) as w:
-        res = sd.simulate(s, 0.1, 1e-2, on_output=w.append)
-        w.close(res.stats)
-    back = read_results(path)
+    res, back = _run_and_read(model, 0.1, tmp_path / "res.h5")
     names = [c for c in list_channels(res) if c.startswith("marker/")]
     assert names == [c for c in list_channels(back) if c.startswith("marker/")]
     assert len(names) == 2 * (3 + 9 + 24 + 6) + 2  # + distance and its rate for the pair
@@ -515,12 +519,7 @@ def test_reaction_of_a_conical_pendulum():
 
 def test_joint_sensor_channels_equal_in_memory_and_from_a_results_file(tmp_path):
     model, _ = _conical()
-    path = tmp_path / "res.h5"
-    s = sd.compile_model(model)
-    with ResultsWriter(path, s, settings={"t_end": 0.05, "step": 1e-2}) as w:
-        res = sd.simulate(s, 0.05, 1e-2, on_output=w.append)
-        w.close(res.stats)
-    back = read_results(path)
+    res, back = _run_and_read(model, 0.05, tmp_path / "res.h5")
     names = [c for c in list_channels(res)
              if "/reaction/" in c or "/torque/" in c or "/distance" in c]
     assert names == [c for c in list_channels(back)
