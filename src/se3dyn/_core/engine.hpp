@@ -81,6 +81,10 @@ struct Engine {
   // rows' blocks and the dynamic rows' xi blocks, which it leaves alone (and zero: Stepper)
   std::vector<std::pair<long, long>> split_ranges;
   std::vector<char> is_joint_frame;    // (F,)
+  // driven coordinates (nd, 4): unknown, kind (0 position, 1 velocity), input slots of the
+  // position (-1 for a velocity driver) and of the rate (se3dyn.engine.layout._drive_table)
+  std::vector<int> drive;
+  int ndrive() const { return int(drive.size() / 4); }
   // the velocity-level blocks the products use (Context::vel): offsets in the values,
   // increasing, and in velv
   std::vector<long> vel_off, vel_at;
@@ -518,7 +522,7 @@ struct Engine {
         int f = fr[s], d = T.dof[f];
         if (d < 0) continue;
         const int k = T.k[f];
-        if (s == 2 && T.select[f]) {  // (B_n A of the joint frame: A, a selection)
+        if (s == 2 && T.select[f] && !T.pframe[f]) {  // (B_n A of the joint frame: A, a selection)
           for (int c = 0; c < k; ++c) out[d + c] -= x[T.sel[6 * f + c]];
           continue;
         }

@@ -27,6 +27,13 @@ struct FrameTables {
   // sel[6 f + c] the row of column c's 1 (the same numbers as the products)
   std::vector<char> select;
   std::vector<signed char> sel;  // (F, 6)
+  // prescribed (driven) unknowns (se3dyn.ModelBuilder.drive): (nq,) flags and (F,) frames with
+  // one; B_n of such a frame has the driven columns zero (Joints::constant_slots), so that the
+  // index-2 correction B_n^T xi leaves a prescribed coordinate where its driver puts it
+  std::vector<char> prescribed, pframe;
+  bool driven(int f, int c) const {
+    return !prescribed.empty() && dof[f] >= 0 && prescribed[dof[f] + c];
+  }
   void classify() {
     select.assign(F, 0);
     sel.assign(6L * F, -1);

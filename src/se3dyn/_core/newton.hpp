@@ -119,6 +119,7 @@ struct Stepper {
   SparseLU lu;                       // reads vals in place (its value map)
   std::vector<double> vals, rhs, r, phi, psi;
   std::vector<double> energy = std::vector<double>(N_ENERGY);  // (N_ENERGY,) of the last iterate
+  std::vector<double> effort;  // (nd,) the drivers' forces of the last iterate (take_efforts)
   // solver memory (see the header): the matrix values of the last full factorisation, the
   // reference of the refactorisations' pivot sequence (none kept while it is the generic
   // matrix's, ref_probe), and a serial number of it (Python side). Never changed once made:
@@ -150,6 +151,9 @@ struct Stepper {
         dropped[E->nq + i] = 1;
         if (index2) dropped[E->nq + E->nm + i] = 1;
       }
+    // a driven unknown: its row and column the identity's (its value is the driver's: step())
+    for (int i = 0; i < E->ndrive(); ++i) dropped[E->drive[4 * i]] = 1;
+    effort.assign(E->ndrive(), 0.0);
     for (int c = 0; c < N; ++c)
       for (int p = colptr[c]; p < colptr[c + 1]; ++p) {
         int rw = rowind[p];
@@ -413,6 +417,46 @@ struct Stepper {
                           std::memcmp(ref, ref_vals->data(), memory_size() * sizeof(double)) == 0);
   }
 
+  // Driven unknowns at the predictor (ModelBuilder.drive): a position driver sets the
+  // increment to f(t_{n+1}) - alpha_n (abelian joints: alpha = alpha_n + n), a velocity driver
+  // the rate to g(t_{n+1}); the rest follows the scheme's recurrences as one Newton update
+  // of that unknown alone would (dv = gamma' dm, dvd = beta' dm, Eqs. (41)-(43)): with index 3
+  // the velocity and acceleration of the increment, with index 2 (velocities follow m) the
+  // rate f'(t_{n+1}) of a position driver too, as the velocity constraint of a rheonomic
+  // joint would. The identity rows and columns (init) keep these values over the iterations.
+  void prescribe(const double* alpha_n, const double* u, bool stab, double gp, double bp,
+                 double* n, double* v, double* vd) const {
+    const int nd = E->ndrive();
+    const int* dr = E->drive.data();
+    for (int i = 0; i < nd; ++i) {
+      const int d = dr[4 * i], pos = dr[4 * i + 2], rate = dr[4 * i + 3];
+      if (dr[4 * i + 1] == 0) {  // position
+        const double dn = (u[pos] - alpha_n[d]) - n[d];
+        const double dm = stab ? (u[rate] - v[d]) / gp : dn;
+        n[d] = u[pos] - alpha_n[d];
+        v[d] = stab ? u[rate] : v[d] + gp * dm;
+        vd[d] += bp * dm;
+      } else {  // velocity
+        const double dm = (u[rate] - v[d]) / gp;
+        n[d] += dm;
+        v[d] = u[rate];
+        vd[d] += bp * dm;
+      }
+    }
+  }
+
+  // The driven unknowns' residuals (the drivers' forces: Eq. (36) holds with the driver's
+  // force added, effort = r_d) are taken out of the residual, whose rows there are the
+  // identity's (init); the convergence test sees the others only.
+  void take_efforts() {
+    const int nd = E->ndrive();
+    for (int i = 0; i < nd; ++i) {
+      const int d = E->drive[4 * i];
+      effort[i] = r[d];
+      r[d] = 0.0;
+    }
+  }
+
   struct Params {
     double h, am, af, g, b, tol_r, ltol, lscale, kmax;
     int max_iter;
@@ -437,6 +481,7 @@ struct Stepper {
     for (int i = 0; i < nm; ++i) lam[i] = lam_n[i];
     double bp = (1 - am) / (b * h * h * (1 - af));
     double gp = g / (b * h);
+    prescribe(alpha_n, u, stab, gp, bp, n, v, vd);
     double cM = 1.0, cC = gp / bp, cK = 1.0 / bp, cv = 1.0 / gp;
     StepInfo info;
     int it = 0;
@@ -470,6 +515,7 @@ struct Stepper {
       bool with_matrix = refac || !P.reuse;  // the matrix is evaluated with the residual
       o.vals = with_matrix ? vals.data() : nullptr;
       double fs = G.evaluate(alpha_n, n, v, vd, lam, u, cM, cC, cK, stab, cv, false, o);
+      take_efforts();
       o.vals = nullptr;
       measure(fs);
       if (!(std::isfinite(er) && std::isfinite(ep))) { info.status = NONFINITE; break; }
@@ -488,6 +534,7 @@ struct Stepper {
         if (!with_matrix) {
           o.vals = vals.data();
           G.evaluate(alpha_n, n, v, vd, lam, u, cM, cC, cK, stab, cv, false, o);
+          take_efforts();
           o.vals = nullptr;
         }
         info.factorisations++;
@@ -530,11 +577,14 @@ struct Stepper {
       // motion has come to rest and the forces with it)
       if (ep <= P.ltol && dnmax <= 4e-16 * std::fmax(nmax, P.lscale)) {
         double fs2 = G.evaluate(alpha_n, n, v, vd, lam, u, cM, cC, cK, stab, cv, false, o);
+        take_efforts();
         measure(fs2);
         break;
       }
     }
     if (full_mode) ++full_steps;
+    for (int i = 0; i < G.ndrive(); ++i)  // the drivers' power (their forces' work: reports)
+      energy[P_ACTUATOR] += effort[i] * v[G.drive[4 * i]];
     info.iterations = it;
     info.residual = er;
     info.constraint = ep;

@@ -24,7 +24,6 @@ centroid of all nodes), rotations are left in radians.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -56,11 +55,6 @@ from se3dyn.errors import ModelError, SimulationError
 from se3dyn.model.timefunc import (
     Callable,
     Component,
-    Constant,
-    Ramp,
-    Sine,
-    Step,
-    Table,
     TimeFunction,
     as_timefunc,
 )
@@ -93,34 +87,18 @@ def time_derivatives(f: TimeFunction, t: float) -> tuple[np.ndarray, np.ndarray,
     (value, rate, acceleration) : ndarrays, shape of ``f(t)`` (at least 1-D)
     """
     val = np.atleast_1d(np.asarray(f(t), dtype=float))
-    if isinstance(f, Constant | Step | Ramp | Table):
-        return val, np.atleast_1d(np.asarray(f.rate(t), dtype=float)), np.zeros_like(val)
-    if isinstance(f, Sine):
-        w = 2 * math.pi * f.frequency
-        amp = np.asarray(f.amplitude, dtype=float)
-        rate = np.atleast_1d(amp * w * math.cos(w * t + f.phase))
-        acc = np.atleast_1d(-amp * w * w * math.sin(w * t + f.phase))
-        return val, rate * np.ones_like(val), acc * np.ones_like(val)
     if isinstance(f, Component):
         _, r, a = time_derivatives(f.base, t)
         i = f.index if r.size > 1 else 0
         return val, r[i:i + 1], a[i:i + 1]
-    scale = max(1.0, abs(t))
-    if isinstance(f, Callable):
-        fn = f.fn
-        h1 = 1e-3 * scale
-        p = [np.asarray(fn(t + c * h1), dtype=float) for c in (-2, -1, 1, 2)]
+    if isinstance(f, Callable):  # (Callable.rate is second order, for the time loop's inputs)
+        h1 = 1e-3 * max(1.0, abs(t))
+        p = [np.asarray(f.fn(t + c * h1), dtype=float) for c in (-2, -1, 1, 2)]
         rate = (p[0] - 8 * p[1] + 8 * p[2] - p[3]) / (12 * h1)
-        h2 = 2e-3 * scale
-        q = [np.asarray(fn(t + c * h2), dtype=float) for c in (-2, -1, 0, 1, 2)]
-        acc = (-q[0] + 16 * q[1] - 30 * q[2] + 16 * q[3] - q[4]) / (12 * h2 * h2)
-        return val, np.atleast_1d(rate) * np.ones_like(val), np.atleast_1d(acc) * \
-            np.ones_like(val)
-    h1 = 1e-3 * scale
-    rate = np.atleast_1d(np.asarray(f.rate(t), dtype=float))
-    p = [np.asarray(f.rate(t + c * h1), dtype=float) for c in (-2, -1, 1, 2)]
-    acc = (p[0] - 8 * p[1] + 8 * p[2] - p[3]) / (12 * h1)
-    return val, rate * np.ones_like(val), np.atleast_1d(acc) * np.ones_like(val)
+    else:
+        rate = np.asarray(f.rate(t), dtype=float)
+    acc = np.asarray(f.accel(t), dtype=float)
+    return val, np.atleast_1d(rate) * np.ones_like(val), np.atleast_1d(acc) * np.ones_like(val)
 
 
 # =============================================================================================

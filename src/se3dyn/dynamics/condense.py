@@ -54,6 +54,7 @@ import math
 import numpy as np
 
 from se3dyn import lie
+from se3dyn.engine.system import joint_frames
 from se3dyn.model.specs import Model
 
 __all__ = ["Condensation", "condensation"]
@@ -227,11 +228,8 @@ class Condensation:
     def joint_frames(self, H: np.ndarray) -> np.ndarray:
         """(n, m, 4, 4) joint transformations of rows of full frames (n, M, 4, 4): the
         condensed ones constant, the others ``H_J = (H_A X_A)^-1 H_B X_B`` (Eq. (7))."""
-        f = self.full
-        HA = H[:, f.joint_a] @ f.joint_XA
-        HB = H[:, f.joint_b] @ f.joint_XB
-        HJ = lie.inverse(HA) @ HB
-        HJ[:, self.rigid] = f.joint_H0[self.rigid]
+        HJ = joint_frames(self.full, H)
+        HJ[:, self.rigid] = self.full.joint_H0[self.rigid]
         return HJ
 
     def fill_multipliers(self, res) -> None:
@@ -418,7 +416,8 @@ def _reduced_model(s, nidx: dict, root: np.ndarray, roots: list, rigid: np.ndarr
                      for b in model.bushings)
     return Model(nodes=tuple(nodes), joints=tuple(joints), loads=tuple(loads),
                  gravity=model.gravity, composites=model.composites, name=model.name,
-                 springs=springs, visuals=(), beams=model.beams, bushings=bushings)
+                 springs=springs, visuals=(), beams=model.beams, bushings=bushings,
+                 drives=model.drives)
 
 
 def _maps(s, r, roots: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

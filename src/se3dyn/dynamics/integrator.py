@@ -61,6 +61,60 @@ def _singular_start_cause(s: System) -> str:
             "determines, or a non-finite state")
 
 
+def _drive_start(s: System, t0: float, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rates and accelerations (nd,) of the driven coordinates at t0, after checking that the
+    position drivers start where the model's joints are (``System.alpha0``)."""
+    k = 0
+    vel, acc = np.zeros(len(s.drive_dof)), np.zeros(len(s.drive_dof))
+    for dr in s.model.drives:
+        for (jname, i, kind), f in zip(dr.targets, dr.functions, strict=True):
+            pos, rate = s.inputs.drive_slots[k]
+            vel[k] = u[rate]
+            try:
+                acc[k] = float(f.accel(t0) if kind == "position" else f.rate(t0))
+            except Exception as exc:  # user callables may raise anything
+                raise SimulationError(f"t={t0:.9g}: drive '{dr.name}' coordinate {i}: its "
+                                      f"acceleration could not be evaluated: "
+                                      f"{type(exc).__name__}: {exc}") from None
+            a0 = float(s.alpha0[s.drive_dof[k]])
+            if pos >= 0 and abs(u[pos] - a0) > 1e-9 * max(1.0, abs(a0)):
+                raise ModelError(
+                    f"drive '{dr.name}'", "position",
+                    f"{a0:.9g}, the initial coordinate {i} of joint '{jname}', at t0 = {t0:g}",
+                    f"{u[pos]:.9g}",
+                    hint="start the function there (add an offset), or give the joint that "
+                         "initial value (ModelBuilder.joint initial=) with the bodies placed "
+                         "accordingly (se3dyn.assemble(model, coordinates=...) finds them)")
+            if not np.isfinite(acc[k]):
+                raise SimulationError(f"t={t0:.9g}: drive '{dr.name}' coordinate {i}: a "
+                                      f"non-finite acceleration {acc[k]}")
+            k += 1
+    return vel, acc
+
+
+def _check_drive_velocities(s: System, v: np.ndarray, values: np.ndarray, dropped) -> None:
+    """The projected initial velocities must satisfy the velocity constraints with the driven
+    rates kept: else the drivers ask for a motion the joints do not allow (a coordinate a
+    closed loop locks, or two drivers in conflict)."""
+    from se3dyn.engine.rank import equation_name
+
+    if not s.drive_dof.size:
+        return
+    A = LinearSolver(s, drop=dropped).matrix(values)
+    rows = np.setdiff1d(np.arange(s.nm), dropped)
+    res = np.abs(np.asarray(A[s.nq:][:, :s.nq] @ v).ravel()[rows])
+    scale = np.abs(A[s.nq:][:, :s.nq]) @ np.abs(v)
+    scale = np.asarray(scale).ravel()[rows]
+    bad = np.flatnonzero(res > 1e-8 * scale + 1e-9 * float(scale.max(initial=0.0)))
+    if bad.size:
+        names = sorted({s.model.drives[i].name for i in s.drive_of})
+        raise ModelError("drives " + ", ".join(repr(n) for n in names), "velocity",
+                         "initial rates the joints allow", f"velocity constraint "
+                         f"{equation_name(s, int(rows[bad[0]]))} violated by "
+                         f"{res[bad[0]]:.3g}", hint="a closed loop locks the driven "
+                         "coordinate, or two drivers ask for motions in conflict")
+
+
 def _velocity_changes(s: System, v: np.ndarray) -> list[dict]:
     """The free nodes with mass whose velocities in ``v`` (nq,) differ from the model's initial
     ones by more than round-off (1e-9 of the largest velocity, linear and angular apart)."""
@@ -267,12 +321,16 @@ class GeneralizedAlpha:
         v[s.node_dofidx] = s.node_v0[s.node_free]
         H, HJ = s.node_H0.copy(), s.joint_H0.copy()
         inputs = step_inputs(s, t0)
+        dd = s.drive_dof
+        vd0 = np.zeros(nq)
+        v[dd], vd0[dd] = _drive_start(s, t0, inputs["u"])
         zero = np.zeros(nq)
         lam0 = np.zeros(nm)
-        ev = evaluate(s, H, HJ, s.alpha0, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0), accel=True,
-                      ws=ws)
+        ev = evaluate(s, H, HJ, s.alpha0, zero, v, vd0, lam0, inputs, (1.0, 0.0, 0.0),
+                      accel=True, ws=ws)
         if nm and np.any(v != 0):
             v = self._project_velocity(s, LinearSolver(s, drop=dropped), ev.values, v)
+            _check_drive_velocities(s, v, ev.values, dropped)
             if self.initial_velocities == "strict":
                 changed = _velocity_changes(s, v)
                 if changed:
@@ -285,11 +343,17 @@ class GeneralizedAlpha:
                         + (f" ({len(changed) - 1} more nodes)" if len(changed) > 1 else ""),
                         hint="give consistent velocities, or initial_velocities='project' "
                              "to have them projected (reported)")
-            ev = evaluate(s, H, HJ, s.alpha0, zero, v, zero, lam0, inputs, (1.0, 0.0, 0.0),
+            ev = evaluate(s, H, HJ, s.alpha0, zero, v, vd0, lam0, inputs, (1.0, 0.0, 0.0),
                           accel=True, ws=ws)
         # [M Phi_q^T; Phi_q 0][vd; lam] = [-r; arhs] with the acceleration-level constraints
-        # Phi_q vd = arhs (the time derivative of Phi_q v = 0), by the compiled sparse LU
+        # Phi_q vd = arhs (the time derivative of Phi_q v = 0), by the compiled sparse LU; the
+        # driven accelerations given (vd0: their rows and columns the identity's, their terms
+        # in the residual and on the right-hand side)
         rhs = np.concatenate([-ev.r, ev.arhs])
+        if dd.size:
+            A0 = LinearSolver(s, drop=dropped).matrix(ev.values)
+            rhs[nq:] -= np.asarray(A0[nq:][:, dd] @ vd0[dd]).ravel()
+            rhs[dd] = 0.0
         rhs[nq + dropped] = 0.0
         # the index-3 layout; kept only when the steps use it too
         keep = not self.index2
@@ -298,9 +362,13 @@ class GeneralizedAlpha:
         if code != 0 or not np.all(np.isfinite(rhs)):
             raise SimulationError(f"t={t0:.6g} (initial accelerations): the iteration matrix "
                                   f"is singular: {_singular_start_cause(s)}")
-        # powers at t0 (velocity-level: vd does not enter)
-        return State(t=t0, H=H, HJ=HJ, v=v, vd=rhs[:nq].copy(), a=rhs[:nq].copy(),
-                     lam=rhs[nq:].copy(), alpha=s.alpha0.copy(), power=ev.energy[3:6].copy(),
+        vd = rhs[:nq] + vd0 if dd.size else rhs[:nq].copy()  # (-0.0 stays -0.0 without drives)
+        power = ev.energy[3:6].copy()  # powers at t0 (velocity-level: vd does not enter)
+        if dd.size:  # and the drivers' (their forces at the consistent state, as newton.hpp)
+            ev1 = evaluate(s, H, HJ, s.alpha0, zero, v, vd, rhs[nq:], inputs, ws=ws)
+            power[0] += float(ev1.r[dd] @ v[dd])
+        return State(t=t0, H=H, HJ=HJ, v=v, vd=vd, a=vd.copy(),
+                     lam=rhs[nq:].copy(), alpha=s.alpha0.copy(), power=power,
                      dropped=dropped, solver=_ws(s, ws).memory(stp) if keep else None)
 
     @staticmethod
@@ -316,7 +384,8 @@ class GeneralizedAlpha:
         A = solver.matrix(values)
         A = sp.csr_matrix(A) if sp.issparse(A) else A
         nq = s.nq
-        return project_velocities(s, A[:nq, :nq], A[nq:, :nq], v0, dropped=solver.drop)[0]
+        return project_velocities(s, A[:nq, :nq], A[nq:, :nq], v0, dropped=solver.drop,
+                                  prescribed=s.drive_dof)[0]
 
     # -----------------------------------------------------------------------------------------
     def step(self, s: System, st: State, h: float, solver: LinearSolver | None = None,

@@ -39,8 +39,11 @@ def _velocity_report(s: System, st: State, kinetic: float, ws, stacklevel: int =
     if max(worst["dv"], worst["dw"]) > 1e-6 * scale:
         names = ", ".join(repr(c["node"]) for c in changes[:5]) + (
             f" and {len(changes) - 5} more" if len(changes) > 5 else "")
+        drives = sorted({s.model.drives[i].name for i in s.drive_of})
+        by = (" and the rates of drive " + ", ".join(repr(d) for d in drives) + " at t0"
+              if drives else "")
         warnings.warn(Se3dynWarning(
-            f"initial velocities projected onto the joints' velocity constraints: {names} "
+            f"initial velocities projected onto the joints' velocity constraints{by}: {names} "
             f"changed (largest: node {worst['node']!r}, velocity by {worst['dv']:.3g} m/s, "
             f"angular velocity by {worst['dw']:.3g} rad/s); kinetic energy {given:.6g} J "
             f"given, {kinetic:.6g} J used (stats['initial_velocity_changes']; "

@@ -25,9 +25,10 @@ class _Inputs:
     """Slots of the time-dependent inputs ``u`` (nu,) handed to the element kernels.
 
     ``u[0:3]`` is gravity; then per load its force (3) and torque (3) components, per actuated
-    joint its k actuator values, per controlled joint its k PD targets and k target rates.
-    ``kind`` (nu,) tells each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD
-    target rate), for load stepping in statics.
+    joint its k actuator values, per controlled joint its k PD targets and k target rates, per
+    driven coordinate its prescribed position (position drivers) and rate. ``kind`` (nu,) tells
+    each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD target rate, 5 driven
+    position, 6 driven rate), for load stepping in statics.
     """
 
     def __init__(self, d: dict, model: Model):
@@ -70,6 +71,20 @@ class _Inputs:
                 else:
                     self.sources.append((len(kind), k, rt, item, "target_rate", False))
                 kind += [4] * k
+        # per driven coordinate (System.drive_dof): the slots of its position and of its rate
+        # (-1: none), kinds 5 and 6
+        self.drive_slots = []
+        for dr in model.drives:
+            for (_, i, what), f in zip(dr.targets, dr.functions, strict=True):
+                item = f"drive '{dr.name}' coordinate {i}"
+                pos = -1
+                if what == "position":
+                    pos = len(kind)
+                    self.sources.append((pos, 1, f, item, "position", False))
+                    kind.append(5)
+                self.sources.append((len(kind), 1, f, item, "velocity", what == "position"))
+                self.drive_slots.append((pos, len(kind)))
+                kind.append(6)
         self.kind = np.array(kind, np.int64)
         self.nu = len(kind)
         self.gravity = np.asarray(model.gravity, float)

@@ -201,6 +201,7 @@ class Layout:
                       for key, t in elements],
             velprod=np.ascontiguousarray(velprod, np.int64).reshape(-1, 6),
             xiprod=np.ascontiguousarray(xiprod, np.int64).reshape(-1, 6),
+            drive=_drive_table(s),
             **_log_tables(s, self.frame_A, self.F, self._logs))
         rg = self._blocks_in_value_order()
         self.groups2, self.groups3 = self._lu_groups(rg, con_c, con_f)
@@ -490,3 +491,11 @@ def _by_shape(b: np.ndarray):
 def layout(s) -> Layout:
     """The :class:`Layout` of a compiled system (see the module docstring)."""
     return Layout(s)
+
+
+def _drive_table(s) -> np.ndarray:
+    """(nd, 4) per driven coordinate: its unknown, its kind (0 position, 1 velocity) and the
+    input slots of its position (-1 for a velocity driver) and of its rate (newton.hpp)."""
+    slots = np.array(s.inputs.drive_slots, np.int64).reshape(-1, 2)
+    return np.ascontiguousarray(np.column_stack([s.drive_dof, s.drive_kind, slots]),
+                                np.int64).reshape(-1, 4)

@@ -37,7 +37,7 @@ def _held_rows(s: System, v0: np.ndarray) -> np.ndarray:
 
 
 def project_velocities(s: System, Wm, B, v0: np.ndarray, *, L: float | None = None,
-                       dropped=()) -> tuple[np.ndarray, bool]:
+                       dropped=(), prescribed=()) -> tuple[np.ndarray, bool]:
     """Initial velocities satisfying the velocity constraints ``B v = 0``, keeping the given
     speeds.
 
@@ -73,6 +73,9 @@ def project_velocities(s: System, Wm, B, v0: np.ndarray, *, L: float | None = No
         Characteristic length (default ``s.length_scale``).
     dropped : sequence of int
         Redundant constraint equations (indices into the nm rows).
+    prescribed : sequence of int
+        Unknowns whose given velocities are kept exactly, never released (driven joint
+        coordinates, :meth:`se3dyn.ModelBuilder.drive`).
 
     Returns
     -------
@@ -90,8 +93,12 @@ def project_velocities(s: System, Wm, B, v0: np.ndarray, *, L: float | None = No
     nq, nm = s.nq, s.nm
     L = float(s.length_scale if L is None else L)
     v0 = np.asarray(v0, dtype=float).copy()
-    v0[s.dof_is_joint] = 0.0
-    E = _held_rows(s, v0)
+    fixed = np.zeros(nq, bool)
+    fixed[np.asarray(prescribed, np.int64)] = True
+    v0[s.dof_is_joint & ~fixed] = 0.0
+    Ep = np.zeros((int(fixed.sum()), nq))
+    Ep[np.arange(len(Ep)), np.flatnonzero(fixed)] = 1.0
+    E = np.vstack([_held_rows(s, v0), Ep])
     if nm == 0:
         return v0, True
     rows = np.setdiff1d(np.arange(nm), np.asarray(dropped, dtype=np.int64))
@@ -104,20 +111,22 @@ def project_velocities(s: System, Wm, B, v0: np.ndarray, *, L: float | None = No
     if v is not None:
         return v, True
     if nq > 3000:
-        v = _project_sparse(s, Wm, Bs, v0, E[:0])
+        v = _project_sparse(s, Wm, Bs, v0, Ep)
         if v is None:
             raise SimulationError("initial velocities: the velocity constraints of the joints "
                                   "have no solution (check 'se3dyn check' for singular "
                                   "configurations)")
         return v, False
-    return _project_dense(s, Wm.toarray() if sp.issparse(Wm) else np.asarray(Wm), Bs, v0, E, L)
+    return _project_dense(s, Wm.toarray() if sp.issparse(Wm) else np.asarray(Wm), Bs, v0,
+                          E[:len(E) - len(Ep)], L, fixed)
 
 
 def _project_dense(s: System, Wd: np.ndarray, Bs: np.ndarray, v0: np.ndarray, E: np.ndarray,
-                   L: float) -> tuple[np.ndarray, bool]:
+                   L: float, fixed: np.ndarray) -> tuple[np.ndarray, bool]:
     """The problem of :func:`project_velocities` by rank-revealing dense factorisations (SVD of
     the massless columns, least squares on the body velocities in ``M^-1/2`` coordinates), with
-    the held parts ``E`` first and without them when they conflict with the joints."""
+    the held parts ``E`` first and without them when they conflict with the joints; the
+    ``fixed`` (nq,) unknowns keep their values (no column of theirs is solved for)."""
     import scipy.sparse as sp
 
     nq = s.nq
@@ -140,7 +149,7 @@ def _project_dense(s: System, Wd: np.ndarray, Bs: np.ndarray, v0: np.ndarray, E:
                 uj += [len(uj) // 6] * 6
                 uv += list(Q[:, k] * cs[idx])
     kb, ku0 = len(bj) // 6, len(uj) // 6
-    rest = np.flatnonzero(~nodal)
+    rest = np.flatnonzero(~nodal & ~fixed)
     Tb = sp.csc_matrix((bv, (bi, bj)), shape=(nq, kb))
     Tu = sp.hstack([sp.csc_matrix((uv, (ui, uj)), shape=(nq, ku0)),
                     sp.csc_matrix((cs[rest], (rest, np.arange(len(rest)))),

@@ -146,6 +146,11 @@ class System(LayoutCounts):
     springs: tuple = ()  # point spring-dampers (node a, node b, c_a, c_b, k, d, L0)
     beams: tuple = ()  # beam elements, see _beams
     inputs: object = None  # _Inputs: slots of the time-dependent inputs u
+    #: driven coordinates (ModelBuilder.drive), one entry each: the unknown, 0 for a position
+    #: driver or 1 for a velocity one, and the index of its drive in ``model.drives``
+    drive_dof: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    drive_kind: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    drive_of: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def N(self) -> int:
@@ -156,6 +161,36 @@ class System(LayoutCounts):
         """Composite joints (e.g. universal): name -> names of their parts."""
         return self.model.composites
 
+
+
+def joint_frames(s: System, H: np.ndarray) -> np.ndarray:
+    """The joint transformations ``H_J = (H_A X_A)^-1 H_B X_B`` (Eq. (7) between the attachment
+    frames), shape (n, m, 4, 4), of rows of node frames ``H`` (n, M, 4, 4)."""
+    HA = H[:, s.joint_a] @ s.joint_XA
+    HB = H[:, s.joint_b] @ s.joint_XB
+    return lie.inverse(HA) @ HB
+
+
+def residual_rows(s: System, t: np.ndarray, H: np.ndarray, HJ: np.ndarray, alpha: np.ndarray,
+                  v: np.ndarray, vd: np.ndarray, lam: np.ndarray, ws=None) -> np.ndarray:
+    """The residual ``r`` (n, nq) of the equations of motion (Eq. (36)) at stored rows (no
+    increment): times (n,), node frames (n, M, 4, 4), joint frames (n, m, 4, 4), coordinates,
+    velocities, accelerations (n, nq) and multipliers (n, nm), with the inputs at the rows'
+    times; by the compiled element kernels, in blocks of 4096 rows. ``ws``: the workspace
+    to evaluate in (a new one by default: never the system's shared one)."""
+    from se3dyn.engine.inputs import input_table
+    from se3dyn.engine.workspace import Workspace, engine_of
+
+    eng, _ = engine_of(s, ws or Workspace(s))
+    c = lambda x: np.ascontiguousarray(x, float)  # noqa: E731
+    r = np.empty((len(t), s.nq))
+    for lo in range(0, len(t), 4096):
+        sl = slice(lo, lo + 4096)
+        U, _ = input_table(s, np.asarray(t[sl], float))
+        F = np.concatenate([H[sl], HJ[sl]], axis=1)
+        n = len(U)
+        eng.residual_rows(c(F), c(alpha[sl]), c(v[sl]), c(vd[sl]), c(lam[sl]), c(U), r[sl], n)
+    return r
 
 
 # ---------------------------------------------------------------------------------------------
@@ -200,8 +235,23 @@ def compile_model(model: Model) -> System:
         length_scale=max(L, 1.0), pattern={}, node_com=_node_com(nodes, H0),
         springs=_springs(model, nidx, H0), beams=_beams(model, nidx))
     _lump_beam_masses(sysd, model, nidx)
+    sysd.update(_drive_tables(model, joint["joint_dofadr"]))
     sysd["inputs"] = _Inputs(sysd, model)
     return System(**sysd)
+
+
+def _drive_tables(model: Model, joint_dofadr: np.ndarray) -> dict:
+    """``drive_dof``, ``drive_kind`` and ``drive_of`` of the driven coordinates, drive by drive
+    (:class:`~se3dyn.model.specs.DriveSpec`)."""
+    jidx = {j.name: i for i, j in enumerate(model.joints)}
+    dof, kind, of = [], [], []
+    for d, dr in enumerate(model.drives):
+        for jname, i, k in dr.targets:
+            dof.append(int(joint_dofadr[jidx[jname]]) + i)
+            kind.append(0 if k == "position" else 1)
+            of.append(d)
+    return dict(drive_dof=np.array(dof, np.int64), drive_kind=np.array(kind, np.int64),
+                drive_of=np.array(of, np.int64))
 
 
 def _number_nodes(nodes, labels: list, items: list) -> dict:

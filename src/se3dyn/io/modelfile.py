@@ -635,6 +635,28 @@ class TimeFunc(_Type):
                                  f"{fld}.{kind}.{e.field}", e.expected, e.got) from None
 
 
+class ByIndex(_Type):
+    """A time function, or a mapping ``{coordinate index: time function}`` (a drive of a
+    joint with several coordinates)."""
+
+    text = "time function, or {index: time function} by coordinate index"
+
+    def schema(self) -> dict:
+        return {"oneOf": [{"$ref": "#/$defs/time_function"},
+                          {"type": "object", "minProperties": 1,
+                           "patternProperties": {"^[0-9]+$": {"$ref": "#/$defs/time_function"}},
+                           "additionalProperties": False}]}
+
+    def convert(self, ctx, node, item, fld):
+        tf = TimeFunc()
+        keys = [k for k, _ in node.value] if isinstance(node, MappingNode) else []
+        if not keys or not all(isinstance(k, ScalarNode) and str(k.value).isdigit()
+                               for k in keys):
+            return tf.convert(ctx, node, item, fld)
+        return {int(k.value): tf.convert(ctx, v, item, f"{fld}.{k.value}")
+                for k, v in node.value}
+
+
 class Color(_Type):
     """A colour: a string (``#rrggbb``, ``#rgb`` or a name, checked by the builder) or 3
     numbers in [0, 1]."""
@@ -736,6 +758,8 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("markers", Named("marker"), {}, "Frames fixed on nodes, by name: where the "
               "results read positions, velocities, accelerations, an accelerometer and a "
               "gyroscope (outputs only, no effect on the motion)."),
+        Field("drives", Named("drive"), {}, "Prescribed motion of joint coordinates, by "
+              "name (rheonomic drivers; the force or torque they supply is an output)."),
         Field("simulation", Section("simulation"), {}, "Simulation settings, returned by "
               "`load_model` as a dict for `se3dyn.simulate(model, **settings)`."),
     ),
@@ -789,6 +813,15 @@ FIELDS: dict[str, tuple[Field, ...]] = {
         Field("orientation", _M33, "the node's", "Rotation of the marker in the initial "
               "configuration (rows of the matrix; its columns are the marker axes in the "
               "inertial frame)."),
+    ),
+    "drive": (
+        Field("joint", Str(ref="joint"), None, "The driven joint: abelian (hinge, prismatic, "
+              "cylindrical, screw, universal; required).", True),
+        Field("position", ByIndex(), None, "Its coordinate alpha(t) (absolute: zero in the "
+              "initial configuration, or the joint's `initial` there); `{index: ...}` for a "
+              "joint with several coordinates."),
+        Field("velocity", ByIndex(), None, "Instead of `position` (per coordinate): its rate "
+              "v(t), the position integrated by the time loop."),
     ),
     "simulation": (
         Field("t_end", Num(), None, "Final time (s)."),
@@ -870,6 +903,10 @@ _SECTION_DOC = {
               "inertial), an accelerometer (specific force R_m^T (a - g) in the marker axes: "
               "-g at rest) and a gyroscope (angular velocity in the marker axes), as methods of "
               "`Results` and as `marker/<name>/...` channels.",
+    "drive": "An entry of `drives:` (key: the drive name). Coordinates of an abelian joint "
+             "follow the given functions of time exactly, beside the free motion of the rest; "
+             "the driving force or torque is `Results.drive_effort(name)` and the channel "
+             "`drive/<name>/effort` (see `ModelBuilder.drive`).",
     "simulation": "The `simulation:` mapping: keyword arguments of `se3dyn.simulate`.",
     "constant": "Time function `{constant: {...}}`.",
     "step": "Time function `{step: {...}}`.",
@@ -1114,6 +1151,7 @@ def _build(ctx: _Ctx, top: _Obj) -> tuple[Model, dict]:
         ("visuals", "visual",
          lambda name, kw: mb.visual(name, kw.pop("node"), kw.pop("shape"), **kw)),
         ("markers", "marker", lambda name, kw: mb.marker(name, kw.pop("node"), **kw)),
+        ("drives", "drive", lambda name, kw: mb.drive(name, kw.pop("joint"), **kw)),
     )
     for sec, kind, add in sections:
         for obj in v.get(sec, []):
@@ -1237,6 +1275,20 @@ def _marker_out(model: Model, mk) -> dict:
     return d
 
 
+def _drive_out(model: Model, d) -> dict:
+    """A drive as given to the builder (a dict by index for a joint of several coordinates)."""
+    out: dict[str, Any] = {"joint": d.joint}
+    many = len(model.composites.get(d.joint, ())) > 1 or (
+        d.joint not in model.composites and model.joint(d.joint).k > 1)
+    for fld in ("position", "velocity"):
+        given = getattr(d, fld)
+        data = {i: time_function_data(f, f"drive {d.name!r}", f"{fld}[{i}]")
+                for i, f in given.items()}
+        if data:
+            out[fld] = data if many else data[0]
+    return out
+
+
 class _Dumper(yaml.SafeDumper):
     pass
 
@@ -1271,6 +1323,8 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
         doc["visuals"] = {v.name: visual_to_dict(v) for v in model.visuals}
     if model.markers:
         doc["markers"] = {mk.name: _marker_out(model, mk) for mk in model.markers}
+    if model.drives:
+        doc["drives"] = {d.name: _drive_out(model, d) for d in model.drives}
     if settings:
         known = {f.name: f for f in FIELDS["simulation"]}
         sim = {}

@@ -19,6 +19,7 @@ from se3dyn.model.specs import (
     PD,
     BeamSpec,
     BushingSpec,
+    DriveSpec,
     JointSpec,
     LoadSpec,
     MarkerSpec,
@@ -68,6 +69,7 @@ class ModelBuilder:
         self._visuals: dict[str, VisualSpec] = {}
         self._beams: dict[str, BeamSpec] = {}
         self._markers: dict[str, MarkerSpec] = {}
+        self._drives: dict[str, DriveSpec] = {}
 
     # -----------------------------------------------------------------------------------------
     def node(self, name: str, position: Any = (0.0, 0.0, 0.0), *, orientation: Any = None,
@@ -749,6 +751,112 @@ class ModelBuilder:
         self._markers[name] = MarkerSpec(name, node, X, p, c, Rm)
 
     # -----------------------------------------------------------------------------------------
+    def drive(self, name: str, joint: str, *, position: Any = None,
+              velocity: Any = None) -> None:
+        """Prescribe the motion of coordinates of an abelian joint (a rheonomic driver).
+
+        A driven coordinate follows the given function of time exactly at every step, beside
+        the free motion of the rest of the model; the force or torque the driver supplies is an
+        output (:meth:`Results.drive_effort`, channel ``drive/<name>/effort``), exact at every
+        step: the residual of the coordinate's equation of motion (Eq. (36)) at the converged
+        state. A joint may have some coordinates driven by motion and the others by forces
+        (springs, actuators, PD laws: "motion provided, force computed" per coordinate).
+
+        Parameters
+        ----------
+        name : str
+            Unique driver name.
+        joint : str
+            An abelian joint defined before (hinge, prismatic, cylindrical, screw, universal,
+            or a general joint with an abelian subalgebra).
+        position : number, TimeFunction, callable of t, or dict {index: ...}
+            The coordinate's value ``alpha(t)`` (absolute: zero in the initial configuration,
+            or the joint's ``initial`` value there). A dict by coordinate index for a joint
+            with several coordinates.
+        velocity : as ``position``
+            The coordinate's rate ``v(t)``; the position is integrated by the time loop. Only
+            coordinates not given a position.
+
+        Notes
+        -----
+        At the start of a run the driver must agree with the model: ``f(t0)`` with the joint's
+        initial coordinate (an error says by how much and how to fix it otherwise); the
+        initial velocities are made consistent with ``f'(t0)`` (or ``g(t0)``) like given node
+        velocities, with a report of what changed (``initial_velocities``).
+
+        Examples
+        --------
+        >>> mb.drive("motor", joint="crank", velocity=2 * math.pi)  # doctest: +SKIP
+        >>> mb.drive("lift", joint="slide", position=sd.Ramp(0.2, duration=2.0))  # doctest: +SKIP
+        """
+        _check_name("drive", name)
+        item = f"drive {name!r}"
+        if name in self._drives:
+            raise ModelError(item, "name", "a unique drive name", name, "defined twice")
+        parts = self._drive_parts(item, joint)
+        given = {}
+        for fld, val in (("position", position), ("velocity", velocity)):
+            given[fld] = self._drive_functions(item, fld, val, len(parts))
+        if not given["position"] and not given["velocity"]:
+            raise ModelError(item, "position", "a position or a velocity to prescribe", None)
+        both = sorted(set(given["position"]) & set(given["velocity"]))
+        if both:
+            raise ModelError(item, "velocity", "coordinates not given a position", both,
+                             f"coordinate {both[0]} has both a position and a velocity")
+        taken = {t[:2]: d.name for d in self._drives.values() for t in d.targets}
+        targets, functions = [], []
+        for i in sorted(set(given["position"]) | set(given["velocity"])):
+            kind = "position" if i in given["position"] else "velocity"
+            tgt = (parts[i][0], parts[i][1], kind)
+            if tgt[:2] in taken:
+                raise ModelError(item, kind, "a coordinate no other drive prescribes",
+                                 f"coordinate {i} of joint {joint!r}",
+                                 f"drive {taken[tgt[:2]]!r} prescribes it already")
+            targets.append(tgt)
+            functions.append(given[kind][i])
+        self._drives[name] = DriveSpec(name, joint, given["position"], given["velocity"],
+                                       tuple(targets), tuple(functions))
+
+    def _drive_parts(self, item: str, joint: Any) -> list[tuple[str, int]]:
+        """The (joint, index) of every coordinate of a driven joint (the hinges of a
+        universal joint), checking it exists and is abelian."""
+        names = list(self._joints) + list(self._composites)
+        if not isinstance(joint, str) or joint not in names:
+            raise ModelError(item, "joint", "the name of a joint defined before the drive",
+                             joint, _unknown("joint", joint, names)
+                             if isinstance(joint, str) else None)
+        if joint in self._composites:
+            return [(p, 0) for p in self._composites[joint]]
+        js = self._joints[joint]
+        if js.k == 0 or not is_abelian(js.A):
+            raise ModelError(item, "joint", "an abelian joint with coordinates (hinge, "
+                             "prismatic, cylindrical, screw, universal)",
+                             f"{joint!r} ({js.type})",
+                             "a rigid joint has no coordinate" if js.k == 0 else
+                             "its coordinates are log coordinates, which do not add up")
+        return [(joint, i) for i in range(js.k)]
+
+    @staticmethod
+    def _drive_functions(item: str, fld: str, val: Any, k: int) -> dict:
+        """``{index: TimeFunction}`` of a drive's ``position`` or ``velocity``."""
+        if val is None:
+            return {}
+        if not isinstance(val, dict):
+            if k != 1:
+                raise ModelError(item, fld, f"a dict {{coordinate index: function}} (the joint "
+                                 f"has {k} coordinates)", val)
+            val = {0: val}
+        out = {}
+        for i, f in val.items():
+            if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= i < k:
+                raise ModelError(item, fld, f"coordinate indices 0 to {k - 1}", i)
+            tf = as_timefunc(f, item, f"{fld}[{i}]", size=1)
+            if np.asarray(tf(0.0)).size != 1:
+                raise ModelError(item, f"{fld}[{i}]", "a scalar function of t", tf(0.0))
+            out[int(i)] = tf
+        return out
+
+    # -----------------------------------------------------------------------------------------
     def build(self) -> Model:
         """Validate the whole model and return the immutable :class:`Model`."""
         if not self._nodes:
@@ -773,7 +881,8 @@ class ModelBuilder:
                      self._name, tuple(self._springs.values()),
                      visuals=tuple(self._visuals.values()),
                      bushings=tuple(self._bushings.values()), beams=tuple(self._beams.values()),
-                     markers=tuple(self._markers.values()))
+                     markers=tuple(self._markers.values()),
+                     drives=tuple(self._drives.values()))
 
 
 def marker_offset(node: NodeSpec, at: np.ndarray | None, offset: np.ndarray | None,

@@ -310,6 +310,38 @@ class MarkerSpec:
 
 
 @dataclass(frozen=True)
+class DriveSpec:
+    """Prescribed motion of joint coordinates (a rheonomic driver, issue 30).
+
+    Each driven coordinate of an abelian joint follows a function of time: its position
+    ``alpha(t) = f(t)`` (absolute coordinates, as :attr:`JointSpec.initial` counts them), or its
+    rate ``v(t) = g(t)`` with the position integrated by the time loop. The coordinate stays an
+    unknown of the step whose value the driver sets (:mod:`se3dyn.engine.system`); the force or
+    torque the driver supplies is the residual of its equation of motion (Eq. (36)), an exact
+    output (:meth:`se3dyn.results.results.Results.drive_effort`).
+
+    Attributes
+    ----------
+    name, joint : str
+        The driver and the joint as given (a composite joint such as a universal joint too).
+    position, velocity : dict[int, TimeFunction]
+        As given, by coordinate index of ``joint``.
+    targets : tuple of (str, int, str)
+        Per driven coordinate, in order of the coordinate index: the joint it belongs to (a
+        part of a composite joint), its index there, and ``"position"`` or ``"velocity"``.
+    functions : tuple of TimeFunction
+        The function of each target.
+    """
+
+    name: str
+    joint: str
+    position: dict
+    velocity: dict
+    targets: tuple
+    functions: tuple
+
+
+@dataclass(frozen=True)
 class Model:
     """A validated, immutable model. Build it with :class:`ModelBuilder`."""
 
@@ -326,6 +358,8 @@ class Model:
     bushings: tuple[BushingSpec, ...] = ()
     #: frames fixed on nodes, read by the results (never used by the physics)
     markers: tuple[MarkerSpec, ...] = ()
+    #: prescribed motion of joint coordinates
+    drives: tuple[DriveSpec, ...] = ()
 
     def __post_init__(self):
         # immutable for good: the arrays of every spec are read-only (a model compiles once,
@@ -357,6 +391,13 @@ class Model:
             if j.name == name:
                 return j
         raise UnknownNameError(_unknown("joint", name, [j.name for j in self.joints]))
+
+    def drive(self, name: str) -> DriveSpec:
+        """The driver called ``name``."""
+        for dr in self.drives:
+            if dr.name == name:
+                return dr
+        raise UnknownNameError(_unknown("drive", name, [dr.name for dr in self.drives]))
 
     def marker(self, name: str) -> MarkerSpec:
         """The marker called ``name``."""

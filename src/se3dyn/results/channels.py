@@ -14,6 +14,9 @@ A channel is one scalar time history, shape (n,), named by a path (see ``docs/re
     joint/<joint>/multiplier/<i>                    N (i mod 6 < 3), N m (otherwise)
     joint/<joint>/reaction/joint|inertial/fx|fy|fz|mx|my|mz    N, N m  (wrench on body B)
     joint/<joint>/torque/<i>                        N m or N (per coordinate)
+    drive/<drive>/effort                            N m or N (a drive of one coordinate)
+    drive/<drive>/effort/<i>                        N m or N (per driven coordinate, several)
+    drive/<drive>/power                             W   (sum of effort * rate)
     marker/<marker>/position/x|y|z                  m
     marker/<marker>/rotation/R11 .. R33             -   (marker axes in the inertial frame)
     marker/<marker>/velocity/material|inertial/x|y|z|wx|wy|wz      m/s, rad/s
@@ -40,6 +43,10 @@ in the joint frame or the inertial frame) and the generalized force of the joint
 elements along its coordinates. The inertial components and the torque need the joint's
 attachment frame and axes: results read from a file list them only when the file stores its
 model.
+
+Drivers (``ModelBuilder.drive``) give the force or torque they supply
+(:meth:`Results.drive_effort`: exact, from the residual of the driven coordinates' equations of
+motion) and its power; results read from a file list them when the file stores its model.
 
 Escaping: a node, joint or marker name is written with ``%`` replaced by ``%25`` and ``/`` by
 ``%2F`` (in this order), so ``node/a%2Fb/position/x`` is the x position of node ``a/b``.
@@ -132,6 +139,10 @@ def list_channels(res: Results) -> list[str]:
             out += [f"{e}/reaction/{frame}/{c}" for c in _WRENCH]
         if geom:
             out += [f"{e}/torque/{c}" for c in range(k)]
+    for name, count in _drive_entries(res):
+        e = f"drive/{escape_name(name)}"
+        out += [f"{e}/effort"] if count == 1 else [f"{e}/effort/{c}" for c in range(count)]
+        out.append(f"{e}/power")
     mks = [escape_name(mk.name) for mk in marker_specs(s)]
     for i, mk in enumerate(mks):
         out += _marker_entries(f"marker/{mk}")
@@ -145,6 +156,49 @@ def list_channels(res: Results) -> list[str]:
     out += [f"energy/{x}" for x in _ENERGY]
     out += [f"solver/{x}" for x in _SOLVER]
     return out
+
+
+def _drive_entries(res: Results) -> list[tuple[str, int]]:
+    """(name, number of driven coordinates) of every drive of the model behind ``res``."""
+    s = model_system(res.system)
+    return [(d.name, len(d.targets)) for d in getattr(getattr(s, "model", None), "drives", ())]
+
+
+def _drive_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
+    """A ``drive/...`` channel (effort per coordinate, or power)."""
+    drive = unescape_name(parts[1])
+    count = dict(_drive_entries(res)).get(drive)
+    if count is None:
+        raise _unknown(res, name, f"no drive {drive!r}")
+    eff = res.drive_effort(drive)
+    if parts[2] == "power" and len(parts) == 3:
+        s = model_system(res.system)
+        rate = np.asarray(res.v, dtype=float)[:, s.drive_dof[s.drive_of == [
+            d.name for d in s.model.drives].index(drive)]]
+        return np.sum(eff * rate, axis=1)
+    if parts[2] == "effort" and len(parts) == 3 and count == 1:
+        return eff[:, 0]
+    if parts[2] == "effort" and len(parts) == 4:
+        return eff[:, _index(res, name, parts[3], count)]
+    raise _unknown(res, name)
+
+
+def _drive_unit(res: Results | None, parts: list[str]) -> str:
+    """"N m" or "N" by the driven coordinate's unit (both without ``res``)."""
+    s = model_system(res.system) if res is not None else None
+    if s is None or len(parts) < 3:
+        return "N m | N"
+    names = [d.name for d in s.model.drives]
+    drive = unescape_name(parts[1])
+    if drive not in names:
+        return "N m | N"
+    dofs = s.drive_dof[s.drive_of == names.index(drive)]
+    c = int(parts[3]) if len(parts) == 4 and parts[3].isdigit() else 0
+    if c >= len(dofs):
+        return "N m | N"
+    start = int(np.flatnonzero(s.dof_is_joint)[0]) if np.any(s.dof_is_joint) else 0
+    unit = joint_units(s)[int(dofs[c]) - start]
+    return {"rad": "N m", "m": "N"}.get(unit, "N m | N")
 
 
 def _marker_entries(e: str) -> list[str]:
@@ -254,6 +308,8 @@ def get_channel(res: Results, name: str) -> np.ndarray:
                     and rest[0] in ("material", "inertial") and rest[1] in _AXES):
                 f = res.node_velocity if q == "velocity" else res.node_acceleration
                 return f(node, frame=rest[0])[:, _AXES.index(rest[1])]
+        if len(parts) in (3, 4) and parts[0] == "drive":
+            return np.array(_drive_channel(res, name, parts), dtype=float)
         if len(parts) in (4, 5) and parts[0] == "marker":
             return np.array(_marker_channel(res, name, parts), dtype=float)
         if len(parts) in (4, 5) and parts[0] == "beam":
@@ -294,6 +350,8 @@ def channel_unit(name: str, res: Results | None = None) -> str:
         return "J"
     if parts[0] == "solver":
         return ""
+    if parts[0] == "drive" and len(parts) >= 3:
+        return "W" if parts[2] == "power" else _drive_unit(res, parts)
     if parts[0] == "marker" and len(parts) >= 4:
         if parts[2] in _PAIR:
             return "m" if parts[2] == "distance" else "m/s"

@@ -314,6 +314,33 @@ class Results:
             cols.append(np.asarray(self.lam[:, a:a + 6], dtype=float) @ A[:, :s.joint_k[j]])
         return np.concatenate(cols, axis=1) if cols else np.zeros((len(self.t), 0))
 
+    def drive_effort(self, name: str) -> np.ndarray:
+        """Force or torque a driver supplies to its coordinates, shape (n, c) for its c driven
+        coordinates (in order of the coordinate index): N m for an angle, N for a translation,
+        positive in the sense of increasing coordinate, as an actuator's.
+
+        Exact: a driven coordinate's row of the equations of motion (Eq. (36)) holds with the
+        driver's force added, so the force is that row's residual at the stored state (the
+        joint's ``A^T lambda`` and its force elements: springs, dampers, actuators, PD laws),
+        evaluated by the compiled element kernels. ``effort * rate`` is the driver's power,
+        which the energy balance counts with the actuators' (``work_act``).
+        """
+        s = model_system(self.system)
+        drives = getattr(getattr(s, "model", None), "drives", ())
+        names = [d.name for d in drives]
+        if name not in names:
+            raise _unknown("drive", name, names, "none: the model has no drives")
+        cache = self.__dict__.setdefault("_drive_r", {})
+        if id(s) not in cache:
+            from se3dyn.engine.system import joint_frames, residual_rows
+
+            H = np.asarray(self.H, float)
+            r = residual_rows(s, np.asarray(self.t, float), H, joint_frames(s, H), self.alpha,
+                              self.v, self.vd, self.lam)
+            cache.clear()
+            cache[id(s)] = r[:, s.drive_dof]
+        return cache[id(s)][:, s.drive_of == names.index(name)].copy()
+
     # ------------------------------------------------------------------------------------------
     # Markers and sensors: frames fixed on nodes (ModelBuilder.marker), H_m = H X
     def _marker(self, name: str):

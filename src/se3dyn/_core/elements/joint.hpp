@@ -53,6 +53,10 @@ struct Joints : ElementBatch {
         B(e, s, Frame(), Bs);  // (independent of the joint frame)
         frame_cols(T, fr[s], Bs, &Bu[108 * e + 36 * s]);
         std::copy(&Bu[108 * e + 36 * s], &Bu[108 * e + 36 * s] + 36, &Bnu[108 * e + 36 * s]);
+        // (a prescribed coordinate is no part of the index-2 correction: frames.hpp)
+        for (int c = 0; c < T.k[fr[s]]; ++c)
+          if (T.driven(fr[s], c))
+            for (int i = 0; i < 6; ++i) Bnu[108 * e + 36 * s + 6 * i + c] = 0.0;
       }
     }
     const_ready = true;
