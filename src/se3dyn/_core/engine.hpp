@@ -81,10 +81,12 @@ struct Engine {
   // rows' blocks and the dynamic rows' xi blocks, which it leaves alone (and zero: Stepper)
   std::vector<std::pair<long, long>> split_ranges;
   std::vector<char> is_joint_frame;    // (F,)
-  // driven coordinates (nd, 4): unknown, kind (0 position, 1 velocity), input slots of the
-  // position (-1 for a velocity driver) and of the rate (se3dyn.engine.layout._drive_table)
+  // driven coordinates (nd, DRIVE): unknown, kind (0 position, 1 velocity), input slots of
+  // the position (-1 for a velocity driver), the rate and the acceleration
+  // (se3dyn.engine.layout._drive_table)
+  static constexpr int DRIVE = 5;
   std::vector<int> drive;
-  int ndrive() const { return int(drive.size() / 4); }
+  int ndrive() const { return int(drive.size() / DRIVE); }
   // the velocity-level blocks the products use (Context::vel): offsets in the values,
   // increasing, and in velv
   std::vector<long> vel_off, vel_at;

@@ -88,10 +88,10 @@ void build(Engine& E, const nb::dict& d) {
   T.F = static_cast<int>(T.dof.size());
   T.classify();
   E.is_joint_frame = ivec<char>(d, "frame_joint");
-  E.drive = ivec<int>(d, "drive");  // (nd, 4), see Engine::drive
+  E.drive = ivec<int>(d, "drive");  // (nd, Engine::DRIVE)
   T.prescribed.assign(E.nq, 0);
   T.pframe.assign(T.F, 0);
-  for (int i = 0; i < E.ndrive(); ++i) T.prescribed[E.drive[4 * i]] = 1;
+  for (int i = 0; i < E.ndrive(); ++i) T.prescribed[E.drive[Engine::DRIVE * i]] = 1;
   for (int f = 0; f < T.F; ++f)
     for (int c = 0; c < T.k[f]; ++c) T.pframe[f] |= T.driven(f, c);
   for (nb::handle h : nb::cast<nb::list>(item(d, "elements"))) {

@@ -152,7 +152,7 @@ struct Stepper {
         if (index2) dropped[E->nq + E->nm + i] = 1;
       }
     // a driven unknown: its row and column the identity's (its value is the driver's: step())
-    for (int i = 0; i < E->ndrive(); ++i) dropped[E->drive[4 * i]] = 1;
+    for (int i = 0; i < E->ndrive(); ++i) dropped[E->drive[Engine::DRIVE * i]] = 1;
     effort.assign(E->ndrive(), 0.0);
     for (int c = 0; c < N; ++c)
       for (int p = colptr[c]; p < colptr[c + 1]; ++p) {
@@ -417,31 +417,25 @@ struct Stepper {
                           std::memcmp(ref, ref_vals->data(), memory_size() * sizeof(double)) == 0);
   }
 
-  // Driven unknowns at the predictor (ModelBuilder.drive): a position driver sets the
-  // increment to f(t_{n+1}) - alpha_n (abelian joints: alpha = alpha_n + n), a velocity driver
-  // the rate to g(t_{n+1}); the rest follows the scheme's recurrences as one Newton update
-  // of that unknown alone would (dv = gamma' dm, dvd = beta' dm, Eqs. (41)-(43)): with index 3
-  // the velocity and acceleration of the increment, with index 2 (velocities follow m) the
-  // rate f'(t_{n+1}) of a position driver too, as the velocity constraint of a rheonomic
-  // joint would. The identity rows and columns (init) keep these values over the iterations.
-  void prescribe(const double* alpha_n, const double* u, bool stab, double gp, double bp,
-                 double* n, double* v, double* vd) const {
+  // Driven unknowns at the predictor (ModelBuilder.drive): the increment, rate and
+  // acceleration of a position driver are its f(t_{n+1}) - alpha_n (abelian joints: alpha =
+  // alpha_n + n), f'(t_{n+1}) and f''(t_{n+1}); a velocity driver's rate and acceleration are
+  // g(t_{n+1}) and g'(t_{n+1}), its increment follows the rate as the scheme's recurrences
+  // make it (Eqs. (41)-(43): dn = dv / gamma'). The rest of the model sees the prescribed
+  // motion exactly at t_{n+1}, as a given input: no start-up transient of the accelerations
+  // (which a driver's constraint row, or its index-3 position alone, would have), so the
+  // efforts converge at order 2 from the first step. The identity rows and columns (init)
+  // keep these values over the iterations.
+  void prescribe(const double* alpha_n, const double* u, double gp, double* n, double* v,
+                 double* vd) const {
     const int nd = E->ndrive();
-    const int* dr = E->drive.data();
     for (int i = 0; i < nd; ++i) {
-      const int d = dr[4 * i], pos = dr[4 * i + 2], rate = dr[4 * i + 3];
-      if (dr[4 * i + 1] == 0) {  // position
-        const double dn = (u[pos] - alpha_n[d]) - n[d];
-        const double dm = stab ? (u[rate] - v[d]) / gp : dn;
-        n[d] = u[pos] - alpha_n[d];
-        v[d] = stab ? u[rate] : v[d] + gp * dm;
-        vd[d] += bp * dm;
-      } else {  // velocity
-        const double dm = (u[rate] - v[d]) / gp;
-        n[d] += dm;
-        v[d] = u[rate];
-        vd[d] += bp * dm;
-      }
+      const int* dr = &E->drive[Engine::DRIVE * i];
+      const int d = dr[0], pos = dr[2], rate = dr[3], acc = dr[4];
+      if (dr[1] == 0) n[d] = u[pos] - alpha_n[d];
+      else n[d] += (u[rate] - v[d]) / gp;
+      v[d] = u[rate];
+      vd[d] = u[acc];
     }
   }
 
@@ -451,7 +445,7 @@ struct Stepper {
   void take_efforts() {
     const int nd = E->ndrive();
     for (int i = 0; i < nd; ++i) {
-      const int d = E->drive[4 * i];
+      const int d = E->drive[Engine::DRIVE * i];
       effort[i] = r[d];
       r[d] = 0.0;
     }
@@ -481,7 +475,7 @@ struct Stepper {
     for (int i = 0; i < nm; ++i) lam[i] = lam_n[i];
     double bp = (1 - am) / (b * h * h * (1 - af));
     double gp = g / (b * h);
-    prescribe(alpha_n, u, stab, gp, bp, n, v, vd);
+    prescribe(alpha_n, u, gp, n, v, vd);
     double cM = 1.0, cC = gp / bp, cK = 1.0 / bp, cv = 1.0 / gp;
     StepInfo info;
     int it = 0;
@@ -584,7 +578,7 @@ struct Stepper {
     }
     if (full_mode) ++full_steps;
     for (int i = 0; i < G.ndrive(); ++i)  // the drivers' power (their forces' work: reports)
-      energy[P_ACTUATOR] += effort[i] * v[G.drive[4 * i]];
+      energy[P_ACTUATOR] += effort[i] * v[G.drive[Engine::DRIVE * i]];
     info.iterations = it;
     info.residual = er;
     info.constraint = ep;

@@ -24,6 +24,7 @@ centroid of all nodes), rotations are left in radians.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -51,7 +52,7 @@ from se3dyn.engine.scaling import (
     _svd,
     _unknown_scale,
 )
-from se3dyn.errors import ModelError, SimulationError
+from se3dyn.errors import ModelError, Se3dynWarning, SimulationError
 from se3dyn.model.timefunc import (
     Callable,
     Component,
@@ -195,8 +196,38 @@ class KinematicsResult(_Accessors):
         return len(self.t)
 
 
+def _model_drivers(s: System) -> list[tuple[str, np.ndarray, TimeFunction]]:
+    """The model's own drives (``ModelBuilder.drive``) as drivers, one per driven coordinate
+    (named by the drive, ``name[i]`` for the coordinates of a drive of several): position
+    drives only, kinematics prescribes positions."""
+    out = []
+    for k, (dof, kind, d) in enumerate(zip(s.drive_dof, s.drive_kind, s.drive_of,
+                                           strict=True)):
+        dr = s.model.drives[d]
+        i = [t for t in range(len(s.drive_of)) if s.drive_of[t] == d].index(k)
+        if kind != 0:
+            raise ModelError(f"drive '{dr.name}'", "velocity", "position drives (kinematics "
+                             "prescribes positions)", "a velocity drive",
+                             "pass drivers= to kinematics, or drive the position")
+        name = dr.name if len(dr.targets) == 1 else f"{dr.name}[{i}]"
+        out.append((name, np.array([dof]), dr.functions[i]))
+    if not out:
+        raise ModelError("kinematics", "drivers", "a non-empty mapping joint name -> time "
+                         "function of its relative coordinate(s), or a model with drives",
+                         None)
+    return out
+
+
 def _drivers(s: System, drivers) -> list[tuple[str, np.ndarray, list[TimeFunction]]]:
-    """Validate drivers: [(name, dof indices (k,), [TimeFunction per joint part])]."""
+    """Validate drivers: [(name, dof indices (k,), [TimeFunction per joint part])]; None: the
+    model's drives (:func:`_model_drivers`)."""
+    if drivers is None:
+        return _model_drivers(s)
+    if s.model.drives:
+        warnings.warn(Se3dynWarning(
+            "kinematics: the model's drives (" + ", ".join(repr(d.name) for d in s.model.drives)
+            + ") are not used: the drivers given replace them (drivers=None uses them)"),
+            stacklevel=3)
     if not isinstance(drivers, Mapping) or not drivers:
         raise ModelError("kinematics", "drivers", "a non-empty mapping joint name -> time "
                          "function of its relative coordinate(s)", drivers)
@@ -259,7 +290,8 @@ def _check_rows(s: System, n: int) -> None:
                          f"{avail / 2**30:.1f} GiB available; ask for fewer output times")
 
 
-def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol: float = 1e-12,
+def kinematics(model_or_system: Model | System, drivers: Mapping | None, times, *,
+               tol: float = 1e-12,
                max_iter: int = 30) -> KinematicsResult:
     """Kinematic analysis of a driven mechanism and inverse dynamics.
 
@@ -289,9 +321,11 @@ def kinematics(model_or_system: Model | System, drivers: Mapping, times, *, tol:
     Parameters
     ----------
     model_or_system : Model or System
-    drivers : mapping joint name -> number, array (k,), TimeFunction or callable of t
+    drivers : mapping joint name -> number, array (k,), TimeFunction or callable of t, or None
         Prescribed relative coordinates of abelian joints (hinge, prismatic, cylindrical, screw,
-        universal). Derivatives: see :func:`time_derivatives`.
+        universal). Derivatives: see :func:`time_derivatives`. None: the model's own position
+        drives (``ModelBuilder.drive``), efforts named by drive; given drivers replace the
+        model's drives (a warning says so).
     times : array_like (n,)
         Increasing output times.
     tol : float

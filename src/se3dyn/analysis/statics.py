@@ -33,7 +33,7 @@ import numpy as np
 
 from se3dyn._lazy import LazyModule
 from se3dyn.analysis.assemble import _model_at
-from se3dyn.analysis.common import _as_system, _Blocks, _OneConfiguration
+from se3dyn.analysis.common import _as_system, _Blocks, _OneConfiguration, _unknown_name
 from se3dyn.engine.evaluate import evaluate
 from se3dyn.engine.inputs import step_inputs
 from se3dyn.engine.scaling import (
@@ -82,6 +82,9 @@ class StaticResult(_OneConfiguration):
     stable : bool or None
         ``min_stiffness > 0`` (up to round-off): the equilibrium is a local minimum of the
         potential energy when the loads are conservative.
+    efforts : ndarray (nd,) or None
+        Drives (``ModelBuilder.drive``): the force or torque holding each driven coordinate
+        (:meth:`drive_effort` by drive name).
     """
 
     system: System
@@ -96,7 +99,18 @@ class StaticResult(_OneConfiguration):
     constraint: float
     min_stiffness: float | None
     stable: bool | None
+    #: (nd,) the force or torque of every driven coordinate (System.drive_dof) at equilibrium
+    efforts: np.ndarray | None = None
     _squeeze: bool = field(default=True, repr=False)
+
+    def drive_effort(self, name: str) -> np.ndarray:
+        """Force or torque a driver supplies to hold its coordinates, shape (c,): the residual
+        of their rows of Eq. (36) at equilibrium (N m or N, positive along the coordinate)."""
+        s = self.system
+        names = [d.name for d in s.model.drives]
+        if name not in names:
+            raise KeyError(_unknown_name("drive", name, names))
+        return self.efforts[s.drive_of == names.index(name)].copy()
 
     @property
     def _lam(self):
@@ -148,6 +162,8 @@ class _Newton:
         self.rs = _row_scale(s, self.L)
         self.redundant = False
         self.mechanism: str | None = None
+        #: driven coordinates (System.drive_dof) and the values they are held at
+        self.held = (s.drive_dof, s.alpha0[s.drive_dof])
 
     def _worst(self, ev, er_vec, ep_vec) -> str:
         s = self.s
@@ -168,16 +184,20 @@ class _Newton:
         er0 = None
         while True:
             ev = evaluate(s, H, HJ, alpha, n, z, z, lam, inputs, None, full_alpha=True)
+            dd, at = self.held
+            effort, r = ev.r[dd].copy(), ev.r.copy()
+            r[dd] = 0.0  # (a driven coordinate's row: its value, the driver's force)
             fs = max(ev.f_scale, 1e-300)
-            er_vec = np.abs(ev.r) / fs
+            er_vec = np.abs(r) / fs
             ep_vec = np.abs(rs * ev.phi)
             er = float(er_vec.max(initial=0.0))
             ep = float(ep_vec.max(initial=0.0))
             if not (np.isfinite(er) and np.isfinite(ep)):
                 raise _StepFailure("the iterate became non-finite", "?", er, ep,
                                    self.mechanism)
-            if er <= self.tol and ep <= self.tol:
-                return ev, lam, it, er, ep
+            miss = at - (alpha[dd] + n[dd])
+            if er <= self.tol and ep <= self.tol and not np.any(miss):
+                return ev, lam, it, er, ep, effort
             if it >= self.max_iter:
                 raise _StepFailure(f"no convergence within max_iter={self.max_iter}",
                                    self._worst(ev, er_vec, ep_vec), er, ep, self.mechanism)
@@ -191,7 +211,10 @@ class _Newton:
             # equation rows times cs (moments) and constraint rows times rs (dimensionless)
             S = np.block([[cs[:, None] * K * cs, cs[:, None] * PT * rs],
                           [rs[:, None] * B * cs, np.zeros((nm, nm))]])
-            rhs = -np.concatenate([cs * ev.r, rs * ev.phi])
+            rhs = -np.concatenate([cs * r, rs * ev.phi])
+            S[dd] = 0.0  # driven coordinates: their rows the identity's, their values given
+            S[dd, dd] = 1.0
+            rhs[dd] = miss / cs[dd]
             d = self._linear_solve(S, rhs, it)
             dn = cs * d[:nq]
             dl = rs * d[nq:]
@@ -289,6 +312,12 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         raise ModelError("static_equilibrium", "t", "a finite time", t)
     full = dict(step_inputs(s, float(t)), kind=s.inputs.kind)
     newton = _Newton(s, tol, max_iter)
+    # drives hold their coordinates: a position driver at f(t) (reached by the load steps
+    # from the initial coordinate), a velocity driver where the model starts
+    slots = np.array(s.inputs.drive_slots, np.int64).reshape(-1, 3)
+    a0 = s.alpha0[s.drive_dof]
+    goal = np.where(slots[:, 0] >= 0, full["u"][np.maximum(slots[:, 0], 0)], a0)
+    efforts = np.zeros(len(a0))
     H, HJ = s.node_H0.copy(), s.joint_H0.copy()
     alpha = s.alpha0.copy()
     lam = np.zeros(s.nm)
@@ -304,8 +333,9 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         target = min(1.0, lf + dlf)
         if 1.0 - target < 1e-12:
             target = 1.0
+        newton.held = (s.drive_dof, goal if target == 1.0 else a0 + target * (goal - a0))
         try:
-            ev, lam_new, it, er, ep = newton.solve(H, HJ, alpha, lam,
+            ev, lam_new, it, er, ep, effort = newton.solve(H, HJ, alpha, lam,
                                                    _scaled_inputs(full, target))
         except _StepFailure as fail:
             if level >= max_cuts:
@@ -331,6 +361,7 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
             run = 0
             continue
         H, HJ, alpha, lam = ev.H, ev.HJ, ev.alpha, lam_new
+        efforts = effort
         lf = target
         factors.append(lf)
         iters.append(it)
@@ -344,7 +375,8 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
     kmin, stable = _stability(s, newton, H, HJ, alpha, lam, _scaled_inputs(full, 1.0))
     return StaticResult(system=s, H=H, HJ=HJ, alpha=alpha, lam=lam,
                         load_factors=np.array(factors), iterations=np.array(iters, dtype=int),
-                        cuts=cuts, residual=er, constraint=ep, min_stiffness=kmin, stable=stable)
+                        cuts=cuts, residual=er, constraint=ep, min_stiffness=kmin, stable=stable,
+                        efforts=efforts)
 
 
 def _mechanism_message(where: str, motion: str, extra: str = "") -> str:
@@ -365,7 +397,9 @@ def _stability(s: System, newton: _Newton, H, HJ, alpha, lam, inputs):
     ev = evaluate(s, H, HJ, alpha, z, z, z, lam, inputs, None, full_alpha=True)
     K, _, B = newton.blocks(ev, (0.0, 0.0, 1.0))
     cs, rs = newton.cs, newton.rs
-    _, N = _null_space(rs[:, None] * B * cs, _RCOND)
+    held = np.zeros((len(s.drive_dof), s.nq))  # (driven coordinates do not move)
+    held[np.arange(len(s.drive_dof)), s.drive_dof] = 1.0
+    _, N = _null_space(np.vstack([rs[:, None] * B * cs, held]), _RCOND)
     if N.shape[1] == 0:
         return None, None
     Kr = N.T @ (cs[:, None] * K * cs) @ N

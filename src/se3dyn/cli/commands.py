@@ -124,6 +124,11 @@ def _check_one(path: str, rank_max: int) -> None:
         print(f"  markers: {len(model.markers)} (outputs only: "
               + ", ".join(f"{mk.name} on {mk.node}" for mk in model.markers[:8])
               + (", ..." if len(model.markers) > 8 else "") + ")")
+    if model.drives:
+        print(f"  drives: {len(model.drives)} (prescribed motion of {len(s.drive_dof)} joint "
+              "coordinates: " + ", ".join(f"{d.name} on joint {d.joint!r} " + ", ".join(
+                  f"coordinate {i} by {k}" for _, i, k in d.targets) for d in model.drives[:8])
+              + (", ..." if len(model.drives) > 8 else "") + ")")
     kinds: dict[str, int] = {}
     for j in model.joints:
         kinds[j.type] = kinds.get(j.type, 0) + 1

@@ -26,25 +26,28 @@ class _Inputs:
 
     ``u[0:3]`` is gravity; then per load its force (3) and torque (3) components, per actuated
     joint its k actuator values, per controlled joint its k PD targets and k target rates, per
-    driven coordinate its prescribed position (position drivers) and rate. ``kind`` (nu,) tells
-    each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD target rate, 5 driven
-    position, 6 driven rate), for load stepping in statics.
+    driven coordinate its prescribed position (position drivers), rate and acceleration.
+    ``kind`` (nu,) tells each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD
+    target rate, 5 driven position, 6 driven rate, 7 driven acceleration), for load stepping in
+    statics.
     """
 
     def __init__(self, d: dict, model: Model):
         nidx = {n: i for i, n in enumerate(d["node_names"])}
-        self.sources = []  # (slot, k, time function, item, what, its rate is the input)
+        # (slot, k, time function, item, what, the derivative that is the input: 0 the value,
+        # 1 the rate, 2 the second derivative)
+        self.sources = []
         kind = [0, 0, 0]
         self.load_slots = []
         for ld in model.loads:
             fs = ts = -1
             if ld.force is not None:
                 fs = len(kind)
-                self.sources.append((fs, 3, ld.force, f"load '{ld.name}'", "force", False))
+                self.sources.append((fs, 3, ld.force, f"load '{ld.name}'", "force", 0))
                 kind += [1] * 3
             if ld.torque is not None:
                 ts = len(kind)
-                self.sources.append((ts, 3, ld.torque, f"load '{ld.name}'", "torque", False))
+                self.sources.append((ts, 3, ld.torque, f"load '{ld.name}'", "torque", 0))
                 kind += [1] * 3
             i = nidx[ld.node]
             R0, x0 = d["node_H0"][i, :3, :3], d["node_H0"][i, :3, 3]
@@ -57,37 +60,44 @@ class _Inputs:
             if js.actuator is not None:
                 item = f"joint '{js.name}' actuator"
                 self.joint_slots.append((len(kind), k, "tau", j))
-                self.sources.append((len(kind), k, js.actuator, item, "value", False))
+                self.sources.append((len(kind), k, js.actuator, item, "value", 0))
                 kind += [2] * k
             if js.control is not None:
                 item = f"joint '{js.name}' control target"
                 tgt, rt = js.control.target, js.control.target_rate
                 self.joint_slots.append((len(kind), k, "ref", j))
-                self.sources.append((len(kind), k, tgt, item, "target", False))
+                self.sources.append((len(kind), k, tgt, item, "target", 0))
                 kind += [3] * k
                 self.joint_slots.append((len(kind), k, "rate", j))
                 if rt is None:
-                    self.sources.append((len(kind), k, tgt, item, "target rate", True))
+                    self.sources.append((len(kind), k, tgt, item, "target rate", 1))
                 else:
-                    self.sources.append((len(kind), k, rt, item, "target_rate", False))
+                    self.sources.append((len(kind), k, rt, item, "target_rate", 0))
                 kind += [4] * k
-        # per driven coordinate (System.drive_dof): the slots of its position and of its rate
-        # (-1: none), kinds 5 and 6
+        # per driven coordinate (System.drive_dof): the slots of its position (-1 for a
+        # velocity driver), rate and acceleration, kinds 5, 6, 7
         self.drive_slots = []
         for dr in model.drives:
             for (_, i, what), f in zip(dr.targets, dr.functions, strict=True):
                 item = f"drive '{dr.name}' coordinate {i}"
-                pos = -1
-                if what == "position":
-                    pos = len(kind)
-                    self.sources.append((pos, 1, f, item, "position", False))
+                order = 0 if what == "position" else -1  # derivative of f that is the position
+                slots = [-1]
+                if order == 0:
+                    self.sources.append((len(kind), 1, f, item, "position", 0))
+                    slots[0] = len(kind)
                     kind.append(5)
-                self.sources.append((len(kind), 1, f, item, "velocity", what == "position"))
-                self.drive_slots.append((pos, len(kind)))
-                kind.append(6)
+                for o, what_o, kd in ((order + 1, "velocity", 6), (order + 2, "acceleration", 7)):
+                    self.sources.append((len(kind), 1, f, item, what_o, o))
+                    slots.append(len(kind))
+                    kind.append(kd)
+                self.drive_slots.append(tuple(slots))
         self.kind = np.array(kind, np.int64)
         self.nu = len(kind)
         self.gravity = np.asarray(model.gravity, float)
+
+
+#: the function of a time function that gives its value, rate or second derivative
+_DERIV = (lambda tf: tf, lambda tf: tf.rate, lambda tf: tf.accel)
 
 
 def _sample(f, t: float, shape: tuple[int, ...], item: str, what: str) -> np.ndarray:
@@ -120,8 +130,8 @@ def step_inputs(s: System, t: float) -> dict:
     ins = s.inputs
     u = np.zeros(ins.nu)
     u[:3] = ins.gravity
-    for slot, k, tf, item, what, rate in ins.sources:
-        u[slot:slot + k] = _sample(tf.rate if rate else tf, t, (k,), item, what)
+    for slot, k, tf, item, what, order in ins.sources:
+        u[slot:slot + k] = _sample(_DERIV[order](tf), t, (k,), item, what)
     return dict(u=u)
 
 
@@ -137,8 +147,8 @@ def input_table(s: System, times: np.ndarray) -> tuple[np.ndarray, int]:
     U[:, :3] = ins.gravity
     slow = []
     for src in ins.sources:
-        slot, k, tf, _item, _what, rate = src
-        fn = getattr(tf, "sample_rate" if rate else "sample", None)
+        slot, k, tf, _item, _what, order = src
+        fn = getattr(tf, ("sample", "sample_rate", "sample_accel")[order], None)
         try:
             val = np.asarray(fn(times), dtype=float).reshape(nt, -1)
             val = np.broadcast_to(val, (nt, k))
@@ -153,8 +163,8 @@ def input_table(s: System, times: np.ndarray) -> tuple[np.ndarray, int]:
         return U, nt
     for row, t in enumerate(times):
         try:
-            for slot, k, tf, item, what, rate in slow:
-                U[row, slot:slot + k] = _sample(tf.rate if rate else tf, t, (k,), item, what)
+            for slot, k, tf, item, what, order in slow:
+                U[row, slot:slot + k] = _sample(_DERIV[order](tf), t, (k,), item, what)
         except SimulationError:
             return U, row
     return U, nt

@@ -494,8 +494,9 @@ def layout(s) -> Layout:
 
 
 def _drive_table(s) -> np.ndarray:
-    """(nd, 4) per driven coordinate: its unknown, its kind (0 position, 1 velocity) and the
-    input slots of its position (-1 for a velocity driver) and of its rate (newton.hpp)."""
-    slots = np.array(s.inputs.drive_slots, np.int64).reshape(-1, 2)
+    """(nd, 5) per driven coordinate: its unknown, its kind (0 position, 1 velocity) and the
+    input slots of its position (-1 for a velocity driver), rate and acceleration
+    (newton.hpp, Stepper::prescribe)."""
+    slots = np.array(s.inputs.drive_slots, np.int64).reshape(-1, 3)
     return np.ascontiguousarray(np.column_stack([s.drive_dof, s.drive_kind, slots]),
-                                np.int64).reshape(-1, 4)
+                                np.int64).reshape(-1, 5)

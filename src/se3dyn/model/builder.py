@@ -71,6 +71,30 @@ class ModelBuilder:
         self._markers: dict[str, MarkerSpec] = {}
         self._drives: dict[str, DriveSpec] = {}
 
+    @classmethod
+    def from_model(cls, model: Model) -> ModelBuilder:
+        """A builder holding everything of a built ``model`` (its validated specs as they are),
+        to add to it: drives to an example, markers to a model read from a file, bodies to an
+        imported robot. ``from_model(m).build()`` has the very specs of ``m``.
+
+        Examples
+        --------
+        >>> mb = sd.ModelBuilder.from_model(sd.examples.slider_crank())  # doctest: +SKIP
+        >>> mb.drive("motor", "1", velocity=2 * math.pi)  # doctest: +SKIP
+        """
+        if not isinstance(model, Model):
+            raise ModelError("ModelBuilder.from_model", "model", "a Model (ModelBuilder.build())",
+                             type(model).__name__)
+        mb = cls(model.gravity, model.name)
+        for attr, specs in (("_nodes", model.nodes), ("_joints", model.joints),
+                            ("_loads", model.loads), ("_springs", model.springs),
+                            ("_bushings", model.bushings), ("_visuals", model.visuals),
+                            ("_beams", model.beams), ("_markers", model.markers),
+                            ("_drives", model.drives)):
+            getattr(mb, attr).update((sp.name, sp) for sp in specs)
+        mb._composites.update(model.composites)
+        return mb
+
     # -----------------------------------------------------------------------------------------
     def node(self, name: str, position: Any = (0.0, 0.0, 0.0), *, orientation: Any = None,
              mass: float = 0.0, inertia: Any = None, principal_axes: Any = None,

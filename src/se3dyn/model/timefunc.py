@@ -54,6 +54,10 @@ class TimeFunction:
         """Rates ``f.rate(t)`` at many times, shaped as :meth:`sample`."""
         return np.array([np.asarray(self.rate(t), dtype=float) for t in times], dtype=float)
 
+    def sample_accel(self, times: np.ndarray) -> np.ndarray:
+        """Second derivatives ``f.accel(t)`` at many times, shaped as :meth:`sample`."""
+        return np.array([np.asarray(self.accel(t), dtype=float) for t in times], dtype=float)
+
 
 def _many(times: np.ndarray, v: Any) -> np.ndarray:
     """A constant value repeated at every time: (nt,) or (nt, k)."""
@@ -119,6 +123,9 @@ class Constant(TimeFunction):
     def accel(self, t):
         return 0.0 * np.asarray(self.value)
 
+    def sample_accel(self, times):
+        return _many(times, 0.0 * np.asarray(self.value))
+
     def sample(self, times):
         return _many(times, self.value)
 
@@ -152,6 +159,9 @@ class Step(TimeFunction):
 
     def accel(self, t):
         return 0.0 * np.asarray(self.value)
+
+    def sample_accel(self, times):
+        return _many(times, 0.0 * np.asarray(self.value))
 
     def sample(self, times):
         t = np.asarray(times, dtype=float)
@@ -187,6 +197,9 @@ class Ramp(TimeFunction):
 
     def accel(self, t):
         return 0.0 * np.asarray(self.value)
+
+    def sample_accel(self, times):
+        return _many(times, 0.0 * np.asarray(self.value))
 
     def sample(self, times):
         t = np.asarray(times, dtype=float)
@@ -254,6 +267,9 @@ class Table(TimeFunction):
 
     def accel(self, t):
         return 0.0 * self.values[0]
+
+    def sample_accel(self, times):
+        return _many(times, 0.0 * self.values[0])
 
 
 @dataclass(frozen=True)
@@ -342,6 +358,9 @@ class Component(TimeFunction):
 
     def accel(self, t):
         return self._pick(self.base.accel(t))
+
+    def sample_accel(self, times):
+        return self._pick_many(self.base.sample_accel(times))
 
     def _pick_many(self, v: np.ndarray) -> np.ndarray:
         v = np.asarray(v, dtype=float)
