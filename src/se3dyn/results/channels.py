@@ -14,9 +14,12 @@ A channel is one scalar time history, shape (n,), named by a path (see ``docs/re
     joint/<joint>/multiplier/<i>                    N (i mod 6 < 3), N m (otherwise)
     joint/<joint>/reaction/joint|inertial/fx|fy|fz|mx|my|mz    N, N m  (wrench on body B)
     joint/<joint>/torque/<i>                        N m or N (per coordinate)
+    joint/<joint>/actuator/<i>                      N m or N (actuator + PD law, per coordinate)
+    joint/<joint>/spring/<i>                        N m or N (spring + damper, per coordinate)
     drive/<drive>/effort                            N m or N (a drive of one coordinate)
     drive/<drive>/effort/<i>                        N m or N (per driven coordinate, several)
     drive/<drive>/power                             W   (sum of effort * rate)
+    spring/<spring>/force|length|rate               N, m, m/s (point spring-damper)
     marker/<marker>/position/x|y|z                  m
     marker/<marker>/rotation/R11 .. R33             -   (marker axes in the inertial frame)
     marker/<marker>/velocity/material|inertial/x|y|z|wx|wy|wz      m/s, rad/s
@@ -44,12 +47,20 @@ elements along its coordinates. The inertial components and the torque need the 
 attachment frame and axes: results read from a file list them only when the file stores its
 model.
 
+Force sensors (:meth:`Results.actuator_effort`, :meth:`Results.spring_force`,
+:meth:`Results.spring_damper_force`): the generalized force of a joint's actuator and PD law
+(positive along increasing coordinates) and of its spring and damper (positive when stretched),
+listed for the joints that have them, evaluated by the compiled kernels; the axial force of a
+point spring-damper (tension positive), its length and rate. They need the model: results read
+from a file list them when the file stores its model.
+
 Drivers (``ModelBuilder.drive``) give the force or torque they supply
 (:meth:`Results.drive_effort`: exact, from the residual of the driven coordinates' equations of
 motion) and its power; results read from a file list them when the file stores its model.
 
-Escaping: a node, joint or marker name is written with ``%`` replaced by ``%25`` and ``/`` by
-``%2F`` (in this order), so ``node/a%2Fb/position/x`` is the x position of node ``a/b``.
+Escaping: a node, joint, marker, drive or spring name is written with ``%`` replaced by
+``%25`` and ``/`` by ``%2F`` (in this order), so ``node/a%2Fb/position/x`` is the x position
+of node ``a/b``.
 Composite joints (e.g. a universal joint) are listed under their own name, with the
 coordinates of their parts side by side as :meth:`Results.joint_coordinates` gives them.
 """
@@ -62,6 +73,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from se3dyn.errors import UnknownNameError, close_matches
+from se3dyn.results.forces import PARTS, has_part
 from se3dyn.results.results import marker_specs, model_system
 
 if TYPE_CHECKING:
@@ -78,6 +90,7 @@ _ROT = tuple(f"R{i}{j}" for i in (1, 2, 3) for j in (1, 2, 3))
 _SENSORS = ("accelerometer", "gyroscope")
 _PAIR = ("distance", "distance_rate")
 _WRENCH = ("fx", "fy", "fz", "mx", "my", "mz")
+_SPRING = {"force": "N", "length": "m", "rate": "m/s"}
 _BEAM = {"force": ("N", "V2", "V3", "T", "M2", "M3"),
          "strain": ("e1", "g2", "g3", "k1", "k2", "k3")}
 
@@ -139,10 +152,14 @@ def list_channels(res: Results) -> list[str]:
             out += [f"{e}/reaction/{frame}/{c}" for c in _WRENCH]
         if geom:
             out += [f"{e}/torque/{c}" for c in range(k)]
+            for part in _joint_parts(res, name):
+                out += [f"{e}/{part}/{c}" for c in range(k)]
     for name, count in _drive_entries(res):
         e = f"drive/{escape_name(name)}"
         out += [f"{e}/effort"] if count == 1 else [f"{e}/effort/{c}" for c in range(count)]
         out.append(f"{e}/power")
+    for name in _spring_entries(res):
+        out += [f"spring/{escape_name(name)}/{q}" for q in _SPRING]
     mks = [escape_name(mk.name) for mk in marker_specs(s)]
     for i, mk in enumerate(mks):
         out += _marker_entries(f"marker/{mk}")
@@ -156,6 +173,23 @@ def list_channels(res: Results) -> list[str]:
     out += [f"energy/{x}" for x in _ENERGY]
     out += [f"solver/{x}" for x in _SOLVER]
     return out
+
+
+def _joint_parts(res: Results, name: str) -> tuple[str, ...]:
+    """The parts of force elements (``"actuator"``, ``"spring"``) that a joint or composite has
+    in the model behind ``res`` (none without the model)."""
+    s = model_system(res.system)
+    if s is None:
+        return ()
+    joints = s.model.joints
+    ids = res._joints(name)
+    return tuple(p for p in PARTS if any(has_part(joints[j], p) for j in ids))
+
+
+def _spring_entries(res: Results) -> list[str]:
+    """The names of the point spring-dampers of the model behind ``res``."""
+    s = model_system(res.system)
+    return [sp.name for sp in getattr(getattr(s, "model", None), "springs", ())]
 
 
 def _drive_entries(res: Results) -> list[tuple[str, int]]:
@@ -308,6 +342,13 @@ def get_channel(res: Results, name: str) -> np.ndarray:
                     and rest[0] in ("material", "inertial") and rest[1] in _AXES):
                 f = res.node_velocity if q == "velocity" else res.node_acceleration
                 return f(node, frame=rest[0])[:, _AXES.index(rest[1])]
+        if len(parts) == 3 and parts[0] == "spring" and parts[2] in _SPRING:
+            spring = unescape_name(parts[1])
+            if spring not in _spring_entries(res):
+                raise _unknown(res, name, f"no spring-damper {spring!r}")
+            f = {"force": res.spring_damper_force, "length": res.spring_damper_length,
+                 "rate": res.spring_damper_rate}[parts[2]]
+            return f(spring)
         if len(parts) in (3, 4) and parts[0] == "drive":
             return np.array(_drive_channel(res, name, parts), dtype=float)
         if len(parts) in (4, 5) and parts[0] == "marker":
@@ -333,6 +374,12 @@ def get_channel(res: Results, name: str) -> np.ndarray:
             if parts[2] == "torque" and len(parts) == 4:
                 c = _index(res, name, parts[3], k)
                 return res.joint_torque(joint)[:, c]
+            if parts[2] in PARTS and len(parts) == 4:
+                if parts[2] not in _joint_parts(res, joint):
+                    raise _unknown(res, name, f"joint {joint!r} has no {parts[2]}")
+                c = _index(res, name, parts[3], k)
+                f = res.actuator_effort if parts[2] == "actuator" else res.spring_force
+                return f(joint)[:, c]
     except (ValueError, IndexError) as e:
         raise _unknown(res, name, str(e)) from None
     raise _unknown(res, name)
@@ -340,9 +387,9 @@ def get_channel(res: Results, name: str) -> np.ndarray:
 
 def channel_unit(name: str, res: Results | None = None) -> str:
     """Unit of a channel for axis labels: "m", "m/s", "m/s^2", "rad", "rad/s", "rad/s^2", "J",
-    "N", "N m", "s", or "" (counts, dimensionless). Joint coordinates are "rad" or "m" when
-    ``res`` is given (from the joint axes), otherwise "rad | m"; joint torques "N m" or "N"
-    likewise (otherwise "N m | N")."""
+    "N", "N m", "W", "s", or "" (counts, dimensionless). Joint coordinates are "rad" or "m" when
+    ``res`` is given (from the joint axes), otherwise "rad | m"; joint torques, actuator efforts
+    and spring forces "N m" or "N" likewise (otherwise "N m | N")."""
     parts = str(name).split("/")
     if parts == ["time"]:
         return "s"
@@ -350,6 +397,8 @@ def channel_unit(name: str, res: Results | None = None) -> str:
         return "J"
     if parts[0] == "solver":
         return ""
+    if parts[0] == "spring" and len(parts) == 3:
+        return _SPRING.get(parts[2], "")
     if parts[0] == "drive" and len(parts) >= 3:
         return "W" if parts[2] == "power" else _drive_unit(res, parts)
     if parts[0] == "marker" and len(parts) >= 4:
@@ -382,7 +431,7 @@ def channel_unit(name: str, res: Results | None = None) -> str:
         return "N" if parts[4].startswith("f") else "N m"
     if parts[0] == "joint" and len(parts) == 4:
         q = parts[2]
-        if q == "torque":
+        if q in ("torque", *PARTS):
             unit = "rad | m"
             if res is not None and parts[3].isdigit():
                 unit = _joint_unit(res, unescape_name(parts[1]), int(parts[3])) or unit

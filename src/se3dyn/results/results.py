@@ -342,6 +342,89 @@ class Results:
         return cache[id(s)][:, s.drive_of == names.index(name)].copy()
 
     # ------------------------------------------------------------------------------------------
+    # Force sensors: the parts of the joints' force elements, point spring-dampers
+    def _force_rows(self, part: str, name: str) -> np.ndarray:
+        """The residual of the joints' force elements of ``part`` at the stored rows, (n, nq)
+        (:func:`se3dyn.results.forces.joint_force_rows`), computed once per part."""
+        from se3dyn.results.forces import joint_force_rows
+
+        self._joints(name)  # an unknown joint is reported first
+        s = model_system(self.system)
+        if s is None:
+            raise ModelError("results", "joint", "results with their model (a compiled System, "
+                             "or a results file that stores its model) for the joint's force "
+                             "elements", name)
+        cache = self.__dict__.setdefault("_force_r", {})
+        key = (id(s), part)
+        if key not in cache:
+            cache[key] = joint_force_rows(s, part, self.t, self.H, self.alpha, self.v, self.vd)
+        return cache[key]
+
+    def actuator_effort(self, name: str) -> np.ndarray:
+        """Generalized force that a joint's actuator (``actuator=``, Eq. (66)) and PD law
+        (``control=``) apply along its coordinates, shape (n, k): ``tau(t) - kp (alpha -
+        target(t)) - kd (v - target_rate(t))``, N m for an angle and N for a translation,
+        positive in the sense of increasing coordinates (as :meth:`drive_effort`).
+
+        Exact: evaluated by the compiled element kernel at the stored rows (the time
+        functions at the rows' times), see :mod:`se3dyn.results.forces`. ``sum(effort * v)``
+        is the actuators' power, whose time integral is ``work_actuators`` (with the drives').
+        Zero columns for a joint without actuator or PD law; for a composite joint its parts'
+        values side by side (as :meth:`joint_coordinates`).
+        """
+        return -self._joint_cols(name, self._force_rows("actuator", name))
+
+    def spring_force(self, name: str) -> np.ndarray:
+        """Generalized force of a joint's spring and damper (``stiffness=``, ``damping=``,
+        Eqs. (62), (64)), shape (n, k): ``K (alpha - reference) + C v`` on an abelian joint,
+        positive when the spring is stretched beyond its reference (it then pulls the
+        coordinate back: the force on body B along increasing coordinates is minus this, as a
+        point spring-damper's tension, :meth:`spring_damper_force`). On a non-abelian joint
+        (spherical, planar) the spring acts on the log coordinates, ``T_A(alpha)^-T K (alpha -
+        reference) + C v``, the kernel's generalized force on the joint's unknowns.
+
+        Exact: evaluated by the compiled element kernel at the stored rows (see
+        :mod:`se3dyn.results.forces`). Without drives on the joint, ``joint_torque =
+        actuator_effort - spring_force``. Zero columns for a joint without spring or damper.
+        """
+        return self._joint_cols(name, self._force_rows("spring", name))
+
+    def _spring_damper(self, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(length, rate, force) of a point spring-damper, each (n,), computed once."""
+        from se3dyn.results.forces import point_spring
+
+        s = model_system(self.system)
+        specs = getattr(getattr(s, "model", None), "springs", ())
+        names = [sp.name for sp in specs]
+        if name not in names:
+            raise _unknown("spring-damper", name, names,
+                           "none: the model has no spring-dampers (or its results file stores "
+                           "no model)")
+        cache = self.__dict__.setdefault("_spring_d", {})
+        key = (id(s), name)
+        if key not in cache:
+            a, b, ca, cb, k, d, L0 = s.springs[names.index(name)]
+            H = np.asarray(self.H, dtype=float)
+            wa, wb = (node_dofs(self.system, H, self.v, i, "material") for i in (a, b))
+            cache[key] = point_spring(H[:, a], wa, ca, H[:, b], wb, cb, k, d, L0)
+        return cache[key]
+
+    def spring_damper_force(self, name: str) -> np.ndarray:
+        """Axial force of a point spring-damper (``ModelBuilder.spring_damper``), shape (n,) (N):
+        ``stiffness (L - length) + damping dL/dt``, tension positive (the spring then pulls its
+        two points towards each other)."""
+        return self._spring_damper(name)[2].copy()
+
+    def spring_damper_length(self, name: str) -> np.ndarray:
+        """Distance ``L`` between the two points of a point spring-damper, shape (n,) (m)."""
+        return self._spring_damper(name)[0].copy()
+
+    def spring_damper_rate(self, name: str) -> np.ndarray:
+        """Time derivative ``dL/dt`` of :meth:`spring_damper_length`, shape (n,) (m/s), from the
+        exact velocities of the two points (positive when they move apart)."""
+        return self._spring_damper(name)[1].copy()
+
+    # ------------------------------------------------------------------------------------------
     # Markers and sensors: frames fixed on nodes (ModelBuilder.marker), H_m = H X
     def _marker(self, name: str):
         """(spec, node index) of a marker; UnknownNameError listing the valid names."""
