@@ -131,6 +131,11 @@ class Results:
     :meth:`marker_frame`, :meth:`marker_velocity`, :meth:`marker_acceleration`,
     :meth:`accelerometer` and :meth:`gyroscope`; they need ``system.model.markers`` (a
     compiled System) or ``system.markers`` and ``system.gravity`` (a layout read from a file).
+
+    Joint and force sensors (:meth:`joint_reaction`, :meth:`joint_torque`,
+    :meth:`actuator_effort`, :meth:`spring_force`, :meth:`drive_effort`,
+    :meth:`spring_damper_force`) need the model: a compiled System, or a results file that
+    stores it (:func:`model_system`).
     """
 
     system: System
