@@ -769,3 +769,98 @@ def test_demo_model_visuals_lie_on_its_links_at_every_stored_time():
     np.testing.assert_allclose(b, x[:, names.index("7")], atol=1e-9)
     c = part_pose(parts["slider"], res.H[:, parts["slider"].node])[:, :3, 3]
     np.testing.assert_allclose(c, x[:, names.index("8")], atol=1e-12)
+
+
+# ---------------------------------------------------------------------------------------------
+# 8. markers and drives (issue 30): triads moving with their nodes, collars on driven joints,
+#    the drive's effort in the plot panel
+# ---------------------------------------------------------------------------------------------
+def driven_crank_model():
+    """The paper's slider-crank with its crank driven up to 2 pi rad/s from rest, a marker on
+    the connecting rod (rotated, off its node) and one on the ground."""
+    mb = sd.ModelBuilder.from_model(sd.examples.slider_crank())
+    mb.drive("motor", "1", velocity=sd.Ramp(2 * np.pi, 0.0, 0.2))
+    R = Rotation.from_rotvec([0.3, -0.5, 0.8]).as_matrix()
+    mb.marker("rod_mid", "6", offset=(0.05, 0.02, -0.01), orientation=R)
+    mb.marker("base", "1")
+    return mb.build()
+
+
+@pytest.fixture(scope="module")
+def driven_crank():
+    model = driven_crank_model()
+    return model, sd.simulate(model, t_end=0.5, step=1e-2)
+
+
+def test_marker_triads_move_with_their_nodes(driven_crank):
+    model, res = driven_crank
+    scene = build_scene(res)
+    assert scene.markers == [("rod_mid", 5), ("base", 0)]
+    for name, i in scene.markers:
+        parts = _parts(scene, "marker", f"marker {name!r} on node {model.marker(name).node!r}")
+        assert len(parts) == 4 and {p.node for p in parts} == {i}
+        dot = next(p for p in parts if p.kind == "sphere")
+        axes = [p for p in parts if p.kind == "cylinder"]
+        Hm = res.marker_frame(name)
+        for k in (0, len(res) // 2, len(res) - 1):
+            # the dot at the marker's origin, each arm along one marker axis, from the origin
+            np.testing.assert_allclose(part_pose(dot, res.H[k, i])[:3, 3], Hm[k, :3, 3],
+                                       atol=1e-12)
+            for a, p in enumerate(axes):
+                P = part_pose(p, res.H[k, i])
+                arm = P[:3, 2] / np.linalg.norm(P[:3, 2])  # the cylinder's length axis
+                np.testing.assert_allclose(arm, Hm[k, :3, a], atol=1e-12)
+                start = P[:3, 3] - 0.5 * P[:3, 2]
+                np.testing.assert_allclose(start, Hm[k, :3, 3], atol=1e-12)
+
+
+def test_driven_joint_has_a_collar_on_its_axis_and_the_page_plots_its_effort(driven_crank,
+                                                                             tmp_path):
+    from se3dyn.results.channels import get_channel
+
+    model, res = driven_crank
+    scene = build_scene(res)
+    collar = _parts(scene, "drive")
+    assert [p.label for p in collar] == ["drive 'motor' on joint '1'"]
+    # on node A of the hinge (the ground), centred on the joint point, along the hinge axis
+    j = model.joint("1")
+    c = collar[0]
+    assert c.node == 0 and c.kind == "cylinder"
+    P = part_pose(c, res.H[-1, 0])
+    np.testing.assert_allclose(P[:3, 3], model.node(j.node_b).position, atol=1e-12)
+    axis = P[:3, 2] / np.linalg.norm(P[:3, 2])
+    assert abs(axis @ j.A[3:, 0]) == pytest.approx(1.0)
+    assert scene.drives == [{"name": "motor", "joint": "1", "kind": "velocity",
+                             "channel": "drive/motor/effort"}]
+    tags = parse_page(html_page(res))
+    meta = json.loads(tags.scripts["se3dyn-meta"]["text"])
+    assert meta["markers"] == [{"name": "rod_mid", "node": 5}, {"name": "base", "node": 0}]
+    assert meta["drives"] == scene.drives
+    # the drive's effort is embedded and plotted first, in N m, with its values
+    names = meta["channels"]["names"]
+    assert meta["plot"] == "drive/motor/effort"
+    k = names.index("drive/motor/effort")
+    assert meta["channels"]["units"][k] == "N m"
+    effort = get_channel(res, "drive/motor/effort")
+    assert np.ptp(effort) > 0
+    np.testing.assert_allclose(blob_of(tags, "channels")[k], effort, rtol=1e-6,
+                               atol=1e-6 * np.abs(effort).max())
+    assert "marker/rod_mid/accelerometer/x" in names and "drive/motor/power" in names
+    assert {"marker 'rod_mid' on node '6'", "drive 'motor' on joint '1'"} <= set(meta["labels"])
+    roles = blob_of(tags, "part_info")[:, 3]
+    assert (roles == meta["roles"].index("marker")).sum() == 8
+    assert (roles == meta["roles"].index("drive")).sum() == 1
+    # the glTF file carries them too
+    export_gltf(res, tmp_path / "driven.glb")
+    import pygltflib
+
+    g = pygltflib.GLTF2().load(str(tmp_path / "driven.glb"))
+    assert sum(n.name == "drive 'motor' on joint '1'" for n in g.nodes) == 1
+    assert sum((n.name or "").startswith("marker 'rod_mid'") for n in g.nodes) == 4
+
+
+def test_models_without_markers_or_drives_keep_their_page(crank):
+    _, res = crank
+    meta = json.loads(parse_page(html_page(res)).scripts["se3dyn-meta"]["text"])
+    assert meta["markers"] == [] and meta["drives"] == []
+    assert meta["plot"] == "joint/1/alpha/0"

@@ -425,3 +425,42 @@ def test_default_inertia_box_is_an_outline_while_links_are_drawn(browser, crank_
     assert np.argmax([r, g, bl]) == np.argmax(want)  # in the body's dominant colour
     browser.evaluate("document.getElementById('show-joints').click()")
     assert_clean(browser)
+
+
+def test_markers_and_drives_are_drawn_listed_and_plotted(browser, tmp_path):
+    # the driven slider-crank of tests/test_viewer.py: a marker triad on the connecting rod,
+    # an orange collar on the driven crank, the drive listed and its effort plotted
+    from test_viewer import driven_crank_model
+
+    model = driven_crank_model()
+    res = sd.simulate(model, t_end=0.5, step=1e-2)
+    path = tmp_path / "driven.html"
+    write_html(res, path)
+    browser.log.clear()
+    browser.open(url(path, 0.3))
+    assert browser.evaluate("se3dyn.markers.map(m => m.name)") == ["rod_mid", "base"]
+    assert browser.evaluate("se3dyn.partsOfRole('marker')") == 8
+    assert browser.evaluate("se3dyn.partsOfRole('drive')") == 1
+    assert browser.evaluate("se3dyn.plotted()") == "drive/motor/effort"
+    assert browser.evaluate("document.getElementById('marker-list').textContent") == \
+        "rod_mid, base"
+    link = "document.querySelector('#drives a.drive')"
+    assert browser.evaluate(f"{link}.textContent") == "motor"
+    # another channel, then the drive's name plots its effort again
+    assert browser.evaluate("se3dyn.selectChannel('energy/total')") is True
+    browser.evaluate(f"{link}.click()")
+    assert browser.evaluate("se3dyn.plotted()") == "drive/motor/effort"
+    assert browser.evaluate("document.getElementById('plot-msg').textContent") == ""
+    # the marker is drawn where the camera sees it: hiding the markers changes the picture there
+    browser.frames()
+    shown = browser.screenshot()
+    k = int(np.argmin(np.abs(res.t - 0.3)))
+    p = res.marker_position("rod_mid")[k]
+    xy = browser.evaluate(f"se3dyn.project({p[0]}, {p[1]}, {p[2]})")
+    assert on_canvas(browser, xy)
+    browser.evaluate("document.getElementById('show-markers').click()")
+    browser.frames()
+    assert browser.evaluate("se3dyn.partsOfRole('marker')") == 0
+    hidden = browser.screenshot()
+    assert np.abs(region(shown, xy, 6) - region(hidden, xy, 6)).max() > 50
+    assert_clean(browser)

@@ -35,7 +35,8 @@ __all__ = ["export_gltf", "unit_solid"]
 _FLOAT, _UINT, _USHORT = 5126, 5125, 5123  # glTF component types
 _ARRAY, _ELEMENTS = 34962, 34963  # buffer view targets
 _ROLE_PBR = {"body": (0.05, 0.55), "visual": (0.05, 0.55), "joint": (0.35, 0.35),
-             "link": (0.1, 0.6), "ground": (0.0, 0.9)}  # metallic, roughness
+             "link": (0.1, 0.6), "ground": (0.0, 0.9), "marker": (0.0, 0.5),
+             "drive": (0.2, 0.4)}  # metallic, roughness
 
 
 def unit_solid(kind: str, params=(), mesh=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

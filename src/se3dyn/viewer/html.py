@@ -3,7 +3,8 @@
 The page holds, inline:
 
 * ``#se3dyn-meta``: JSON with the times, node names, position bounds, the geometries, labels,
-  the embedded channel names and units, and what to show first;
+  the embedded channel names and units, what to show first, and the markers and drives drawn
+  (names; their shapes are parts, roles ``marker`` and ``drive``);
 * ``#se3dyn-blob-NAME``: base64 of deflated typed arrays (:mod:`se3dyn.viewer.encode`):
   ``frames`` (quantised node frames, uint16 (n, M, 6)), ``part_matrix`` (float32 (P, 12): the
   first three rows of ``matrix @ diag(scale, 1)`` of every part), ``part_info`` (int32 (P, 5):
@@ -55,10 +56,14 @@ _LIBS = (("se3dyn-lib-three-core", "three.core.js"),
          ("se3dyn-lib-orbit-controls", "OrbitControls.js"))
 # channels in the order they are embedded when no pattern is given (positions and displacements
 # are computed in the page from the frames)
-_PRIORITY = ("energy/*", "solver/*", "joint/*/alpha/*", "joint/*/velocity/*",
+_PRIORITY = ("energy/*", "solver/*", "drive/*", "joint/*/alpha/*", "joint/*/velocity/*",
+             "joint/*/actuator/*", "joint/*/spring/*", "spring/*",
              "node/*/velocity/inertial/*", "node/*/velocity/material/*",
-             "node/*/acceleration/*", "joint/*/multiplier/*", "node/*/rotation/*")
+             "node/*/acceleration/*", "marker/*/position/*", "marker/*/accelerometer/*",
+             "marker/*/gyroscope/*", "joint/*/multiplier/*", "node/*/rotation/*")
 _DERIVED = ("node/*/position/*", "node/*/displacement/*")
+# joint channels with one value per coordinate, whose unit follows the coordinate's
+_PER_COORDINATE = ("alpha", "velocity", "torque", "actuator", "spring")
 
 
 @lru_cache(maxsize=1)
@@ -93,13 +98,14 @@ def _units(res, names: list[str]) -> list[str]:
     out = []
     for c in names:
         parts = c.split("/")
-        unit = channel_unit(c)
-        if parts[0] == "joint" and len(parts) == 4 and parts[2] in ("alpha", "velocity"):
+        unit = channel_unit(c, res) if parts[0] == "drive" else channel_unit(c)
+        if parts[0] == "joint" and len(parts) == 4 and parts[2] in _PER_COORDINATE:
             cols = [u for j in res._joints(unescape_name(parts[1]))
                     for u in per_dof[start[j]:start[j] + k[j]]]
             u = cols[int(parts[3])] if int(parts[3]) < len(cols) and cols[int(parts[3])] else ""
             if u:
-                unit = u if parts[2] == "alpha" else u + "/s"
+                unit = {"alpha": u, "velocity": u + "/s"}.get(
+                    parts[2], {"rad": "N m", "m": "N"}.get(u, unit))
         out.append(unit)
     return out
 
@@ -165,6 +171,9 @@ def _channels(res, patterns, budget: int) -> tuple[list[str], list[str], np.ndar
 def _default_plot(res, scene: Scene, names: list[str], data: np.ndarray) -> str | None:
     from se3dyn.results.channels import escape_name
 
+    for d in scene.drives:  # a driven model: what its first drive supplies
+        if d["channel"] in names:
+            return d["channel"]
     for k, c in enumerate(names):
         if c.startswith("joint/") and "/alpha/" in c and np.ptp(data[k]) > 0:
             return c
@@ -265,6 +274,8 @@ def page_data(res, scene: Scene, *, channels=None, plot=None,
         "channels": {"names": names, "units": units, "note": note},
         "plot": plot,
         "notes": list(scene.notes),
+        "markers": [{"name": name, "node": i} for name, i in scene.markers],
+        "drives": list(scene.drives),
         "counts": {"nodes": M, "joints": len(res.system.joint_names), "parts": P},
     }
     return meta, blobs

@@ -28,6 +28,11 @@ Default picture (nodes without ``visuals``):
   node's material frame, so they stay on the joint axis as the mechanism moves;
 * **links**: a thin rod from each node to each joint point it carries (the body's arms);
 * **ground**: a pyramid on a plate under every fixed node, pointing against gravity;
+* **markers** (``ModelBuilder.marker``): an axis triad on the marker frame (x red, y green,
+  z blue, as the node frames) and a small dot at its origin, moving with the marker's node;
+* **drives** (``ModelBuilder.drive``): an orange collar around each driven coordinate's axis
+  at the joint point, on the joint's node A (the motor's housing), so a driven joint stands
+  out from the free ones; the page lists the drives and plots their efforts;
 * **beams**: a :class:`Tube` per beam, drawn by default (the model's ``visuals`` do not replace
   it): the element's centre line with an elliptic section whose area and second moments are the
   beam's (:func:`beam_section`), skinned on the beam's nodes (see :class:`Tube`);
@@ -56,7 +61,12 @@ GROUND_COLOR = "#6b6f76"
 POINT_COLOR = "#7a7f87"
 #: Smallest side of a default body box relative to its largest (flat or slender bodies).
 MIN_ASPECT = 0.08
-ROLES = ("body", "visual", "joint", "link", "ground")
+ROLES = ("body", "visual", "joint", "link", "ground", "marker", "drive")
+#: Marker triads: the colours of the x, y, z axes (those of the page's node frames), the dot.
+MARKER_AXES = ("#d62728", "#2ca02c", "#1f77b4")
+MARKER_COLOR = "#22262c"
+#: Collar of a driven joint coordinate.
+DRIVE_COLOR = "#e4572e"
 #: Beam colour (steel blue-grey, apart from the body palette).
 BEAM_COLOR = "#8a96a3"
 #: Points on the outline of a beam's section, and section rings per element.
@@ -82,7 +92,8 @@ class Part:
     color : str
         ``"#rrggbb"``.
     role : str
-        ``body``, ``visual``, ``joint``, ``link`` or ``ground`` (what the page toggles).
+        ``body``, ``visual``, ``joint``, ``link``, ``ground``, ``marker`` or ``drive`` (what
+        the page toggles).
     label : str
         What it shows, e.g. ``"joint '1' (hinge)"``.
     params : tuple of float
@@ -187,6 +198,11 @@ class Scene:
     model_name : str
     notes : list of str
         Remarks shown by the page (e.g. no model stored).
+    markers : list of (str, int)
+        The markers drawn: name and node index.
+    drives : list of dict
+        The drives drawn: ``name``, ``joint`` (as given), ``kind`` (``"position"``,
+        ``"velocity"`` or both joined by ``+``) and ``channel``, the effort channel plotted.
     """
 
     node_names: tuple
@@ -203,6 +219,8 @@ class Scene:
     hi: np.ndarray = field(default_factory=lambda: np.zeros(3))
     model_name: str = "model"
     notes: list = field(default_factory=list)
+    markers: list = field(default_factory=list)
+    drives: list = field(default_factory=list)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -602,6 +620,52 @@ def _from_model(scene: Scene, res, model, diag: float, dirs: list[Path]) -> None
                                         np.array([0.3 * g, 0.3 * g, L]), LINK_COLOR, "link",
                                         f"link of node {names[i]!r} to {label}"))
         _joint_glyph(scene, j, a, b, p0, R0, x0, H, g, label)
+    _markers(scene, model, idx, g)
+    _drives(scene, model, idx, R0, x0, g)
+
+
+def _markers(scene: Scene, model, idx: dict, g: float) -> None:
+    """An axis triad and a dot per marker (module docstring), in its node's material frame:
+    the marker's offset ``X`` (:class:`~se3dyn.model.specs.MarkerSpec`) is that pose."""
+    size = 2.5 * g
+    for mk in model.markers:
+        i = idx[mk.node]
+        X = np.asarray(mk.X, dtype=float)
+        c = X[:3, 3]
+        label = f"marker {mk.name!r} on node {mk.node!r}"
+        scene.parts.append(Part(i, "sphere", _frame(None, c), np.full(3, 0.3 * g), MARKER_COLOR,
+                                "marker", label))
+        for a in range(3):
+            e = X[:3, a]
+            scene.parts.append(Part(i, "cylinder", _axis_frame(c + 0.5 * size * e, e),
+                                    np.array([0.1 * g, 0.1 * g, size]), MARKER_AXES[a],
+                                    "marker", label))
+        scene.markers.append((mk.name, i))
+
+
+def _drives(scene: Scene, model, idx: dict, R0, x0, g: float) -> None:
+    """A collar per driven coordinate (module docstring): around the coordinate's axis (its
+    rotation axis, else its direction of translation; a column of the joint's A, Table 1) at
+    the joint point, on node A."""
+    from se3dyn.results.channels import escape_name
+
+    joints = {j.name: j for j in model.joints}
+    for dr in model.drives:
+        label = f"drive {dr.name!r} on joint {dr.joint!r}"
+        for jname, c, _kind in dr.targets:
+            j = joints[jname]
+            a, b = idx[j.node_a], idx[j.node_b]
+            p0 = np.asarray(j.at, dtype=float) if j.at is not None else x0[b]
+            col = np.asarray(j.A, dtype=float).reshape(6, -1)[:, c]
+            axis = col[3:] if np.linalg.norm(col[3:]) > 0 else col[:3]
+            axis = R0[a].T @ (axis / np.linalg.norm(axis))
+            scene.parts.append(Part(a, "cylinder", _axis_frame(R0[a].T @ (p0 - x0[a]), axis),
+                                    np.array([1.6 * g, 1.6 * g, 1.2 * g]), DRIVE_COLOR, "drive",
+                                    label))
+        kinds = "+".join(sorted({k for _, _, k in dr.targets}))
+        effort = f"drive/{escape_name(dr.name)}/effort" + ("" if len(dr.targets) == 1 else "/0")
+        scene.drives.append({"name": dr.name, "joint": dr.joint, "kind": kinds,
+                             "channel": effort})
 
 
 def _joint_glyph(scene, j, a, b, p0, R0, x0, H, g, label) -> None:

@@ -237,11 +237,15 @@ const ROLE_MATERIAL = {
   joint: { roughness: 0.35, metalness: 0.35 },
   link: { roughness: 0.6, metalness: 0.1 },
   ground: { roughness: 0.9, metalness: 0.0 },
+  marker: { roughness: 0.5, metalness: 0.0 },
+  drive: { roughness: 0.4, metalness: 0.2 },
 };
+const JOINT_ROLES = ['joint', 'link', 'drive'];  // toggled together ("joints and links")
 
 const state = {
   t: t0, playing: false, speed: 1, loop: true, k: 0, ready: false,
   traces: new Set(META.traces), showTraces: false, showFrames: false, showJoints: true,
+  showMarkers: true,
 };
 let frames = null;
 let partLocal = [];
@@ -797,10 +801,37 @@ function setupUI() {
   $('show-joints').addEventListener('change', (e) => {
     state.showJoints = e.target.checked;
     for (const g of groups) {
-      if (g.role === 'joint' || g.role === 'link') g.mesh.visible = state.showJoints;
+      if (JOINT_ROLES.includes(g.role)) g.mesh.visible = state.showJoints;
     }
     showOutline();
     applyTime();
+  });
+  const markers = META.markers || [];
+  $('markers-row').hidden = !markers.length;
+  $('show-markers').addEventListener('change', (e) => {
+    state.showMarkers = e.target.checked;
+    for (const g of groups) if (g.role === 'marker') g.mesh.visible = state.showMarkers;
+    requestRender();
+  });
+  $('marker-list').textContent = markers.map((m) => m.name).join(', ');
+  // drives: their names, each plotting its effort when clicked
+  const drives = META.drives || [];
+  const dl = $('drives');
+  dl.hidden = !drives.length;
+  if (drives.length) dl.append('drives (orange): ');
+  drives.forEach((d, i) => {
+    const a = document.createElement('a');
+    a.href = '#';
+    a.className = 'drive';
+    a.textContent = d.name;
+    a.title = `${d.kind} drive on joint '${d.joint}': plot ${d.channel}`;
+    a.addEventListener('click', (ev) => {
+      ev.preventDefault();
+      $('channel').value = d.channel;
+      selectChannel(d.channel);
+    });
+    if (i) dl.append(', ');
+    dl.append(a);
   });
   $('reset-view').addEventListener('click', () => { homeView(); requestRender(); });
   // channel list
@@ -920,7 +951,10 @@ async function main() {
       const r = renderer.domElement.getBoundingClientRect();
       return [r.left + ((v.x + 1) / 2) * r.width, r.top + ((1 - v.y) / 2) * r.height];
     },
-    selectChannel,
+    selectChannel, plotted: () => plot.name,
+    markers: META.markers || [], drives: META.drives || [],
+    partsOfRole: (role) => groups.filter((g) => g.role === role)
+      .reduce((c, g) => c + (g.mesh.visible ? g.parts.length : 0), 0),
     tubePositions: () => (tube ? Array.from(tube.mesh.geometry.attributes.position.array) : []),
   };
   const h = hashTime();
