@@ -12,7 +12,7 @@ An opt-in layer on top of :class:`~se3dyn.results.results.Results` (the core nev
 * :func:`build_scene` (:mod:`se3dyn.viewer.shapes`): what is drawn. Visual shapes of the model
   (``ModelBuilder.visual``, ``visuals:`` in model files) or a default picture: bodies as boxes
   with the body's mass and inertia, joint glyphs on the joint axes, links from nodes to joints,
-  ground symbols at fixed nodes, the gravity direction.
+  ground symbols at fixed nodes, the gravity direction; marker triads and drive collars.
 
 Mesh files need ``trimesh`` and glTF export ``pygltflib`` (``pip install 'se3dyn[view]'``).
 """
