@@ -138,3 +138,21 @@ def test_bad_pid_laws_are_refused(law, field):
 def test_kinematics_says_it_leaves_the_integral_out():
     with pytest.warns(Se3dynWarning, match="integral part of the PID laws"):
         sd.kinematics(_rotor(), {"axle": lambda t: math.sin(t)}, [0.0, 0.1])
+
+
+def test_armature_adds_inertia_to_the_joint_coordinate_only():
+    # a rotor J with armature a under a constant torque: theta = tau t^2 / (2 (J + a)); the
+    # kinetic energy counts the armature (work = 1/2 (J + a) w^2)
+    a, tau = 0.3, 2.0
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("rotor", mass=1.0, inertia=(J, J, J))
+    mb.joint("axle", "hinge", "g", "rotor", axis=(0, 0, 1), torque=tau, armature=a)
+    res = _run(mb.build(), 1.0, 1e-2)
+    np.testing.assert_allclose(res.joint_coordinates("axle")[:, 0],
+                               tau * res.t ** 2 / (2 * (J + a)), rtol=0, atol=1e-12)
+    w = res.joint_velocities("axle")[:, 0]
+    np.testing.assert_allclose(res.kinetic, 0.5 * (J + a) * w ** 2, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(res.work_actuators, res.kinetic, rtol=1e-9, atol=1e-12)
+    with pytest.raises(ModelError, match=r"joint 'b'.*armature.*abelian"):
+        mb.joint("b", "spherical", "g", "rotor", armature=0.1)

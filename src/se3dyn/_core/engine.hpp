@@ -380,6 +380,7 @@ struct Engine {
     X.S = &S;
     X.coords = o.alpha;
     X.vq = v;
+    X.vdq = vd;
     X.lam = lam;
     X.u = u;
     X.gravity = u;  // u[0:3] is gravity (se3dyn.engine.inputs._Inputs)

@@ -112,6 +112,8 @@ def model_file(mf):
           "coordinates, `reference` and PD targets are then absolute; absent: they count from "
           "the initial configuration."),
         F("damping", kvec_nn, 0, "Damper C on the relative velocities (Eq. 64)."),
+        F("armature", kvec_nn, 0, "Abelian joints: inertia on the relative coordinates (the "
+          "reflected rotor inertia N^2 J_rotor of a geared motor; kg m^2 or kg)."),
         F("actuator", mf.TimeFunc(), None, act_doc),
         F("torque", mf.TimeFunc(), None, "Alias of `actuator`."),
         F("force", mf.TimeFunc(), None, "Alias of `actuator`."),
@@ -177,6 +179,8 @@ def _joint_out(mf, j) -> dict:
             d[key] = py(arr)
     if j.initial is not None:
         d["initial"] = py(j.initial)
+    if j.armature is not None:
+        d["armature"] = py(j.armature)
     if j.actuator is not None:
         k = _act_key(j.type)
         d[k] = tf_out(j.actuator, item, k)
@@ -206,6 +210,8 @@ def _universal_out(mf, name: str, parts: tuple[str, ...], model) -> dict:
             d[key] = [float(a1[0]), float(a2[0])]
     if j1.initial is not None:
         d["initial"] = [float(j1.initial[0]), float(j2.initial[0])]
+    if j1.armature is not None:
+        d["armature"] = [float(j1.armature[0]), float(j2.armature[0])]
 
     def source(f, fld):
         # the k-vector function a universal joint's per-hinge component was cut from

@@ -29,8 +29,9 @@ def tables(s, lay) -> dict:
     jd_dof = np.repeat(np.asarray(s.joint_dofadr, np.int64)[withk], jk[withk]) + (
         np.arange(len(jd_joint)) - np.repeat(np.cumsum(jk[withk]) - jk[withk], jk[withk]))
     K, D = np.asarray(s.dof_stiffness)[jd_dof], np.asarray(s.dof_damping)[jd_dof]
+    Ja = np.asarray(s.dof_armature)[jd_dof]
     used = np.zeros(m, bool)
-    used[jd_joint[(K != 0) | (D != 0)]] = True
+    used[jd_joint[(K != 0) | (D != 0) | (Ja != 0)]] = True
     used[np.array(list(slots["tau"]) + list(slots["ref"]), np.int64)] = True
     used &= jk > 0
     ids = np.flatnonzero(used)
@@ -59,6 +60,7 @@ def tables(s, lay) -> dict:
     return dict(frame=(M + ids).astype(np.int64), K=pad("dof_stiffness"),
                 ref=pad("dof_reference"), C=pad("dof_damping"), kp=pad("dof_kp"),
                 kd=pad("dof_kd"), ki=pad("dof_ki"), lim=pad("dof_limit"),
+                Ja=pad("dof_armature"),
                 zslot=np.array([slots["pid"].get(j, -1) for j in ids.tolist()], np.int64),
                 zidx=np.array([first_pid.get(j, -1) for j in ids.tolist()], np.int64),
                 tau=np.array([slots["tau"].get(j, -1) for j in ids.tolist()], np.int64),
@@ -105,6 +107,7 @@ def examples(rng):
         mb.node("g", fixed=True)
         mb.node("b", position=(0.3, 0.1, 0.0), mass=1.5, inertia=(1, 1.2, 1.4))
         mb.joint("j", "cylindrical", "g", "b", axis=_unit(rng), damping=(0.3, 0.2),
+                 armature=tuple(rng.uniform(0.1, 0.5, 2)),
                  control=PID(kp=tuple(rng.uniform(1, 2, 2)), ki=tuple(rng.uniform(1, 3, 2)),
                              kd=tuple(rng.uniform(0, 1, 2)),
                              target=Ramp(tuple(rng.normal(size=2)), 0.1, 2.0), limit=limit))

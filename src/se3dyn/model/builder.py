@@ -231,7 +231,7 @@ class ModelBuilder:
               stiffness: Any = None, reference: Any = None, damping: Any = None,
               actuator: Any = None, torque: Any = None, force: Any = None,
               control: PD | PID | None = None, at: Any = None,
-              initial: Any = None) -> None:
+              initial: Any = None, armature: Any = None) -> None:
         """Add a kinematic joint ``H_B = H_A H_J`` (Eq. (7)) between nodes A and B, or between
         frames attached to them at the point ``at``.
 
@@ -274,6 +274,11 @@ class ModelBuilder:
             centres), so a rigid body with several joints needs one node. Without ``at`` the
             joint acts between the node frames, as in the paper (``X_A = X_B = I``). A
             universal joint puts both hinges and its cross at ``at``.
+        armature : float or array_like (k,), optional
+            Abelian joints: inertia added to the joint's own coordinates (kg m^2 for an angle,
+            kg for a translation), the reflected inertia ``N^2 J_rotor`` of a motor's rotor
+            behind a gear of ratio N (MuJoCo's ``armature``): the kinetic energy
+            ``1/2 armature v^2`` and the force ``armature * v_dot`` on the coordinate.
         initial : float or array_like (k,), optional
             Abelian joints (hinge, prismatic, cylindrical, screw, universal): the values of
             the relative coordinates in the initial configuration, e.g. a hinge that starts at
@@ -315,7 +320,7 @@ class ModelBuilder:
         p = _vec(at, 3, item, "at", allow_none=True)
         if type == "universal":
             self._universal(name, node_a, node_b, axes, stiffness, reference, damping,
-                            act_field, act, control, p, initial)
+                            act_field, act, control, p, initial, armature)
             return
         given = {"axis": axis, "axes": axes, "normal": normal, "pitch": pitch, "A": A}
         jt = JOINT_TYPES[type]
@@ -329,10 +334,11 @@ class ModelBuilder:
                 raise ModelError(item, key, f"a value (required for a {type} joint)", None)
         A_ = jt.make_A(item, **params)
         self._add_joint(name, type, node_a, node_b, params, A_, stiffness, reference, damping,
-                        act_field, act, control, at=p, initial=initial)
+                        act_field, act, control, at=p, initial=initial, armature=armature)
 
     def _add_joint(self, name, type, node_a, node_b, params, A_, stiffness, reference, damping,
-                   act_field, act, control, composite=None, at=None, initial=None):
+                   act_field, act, control, composite=None, at=None, initial=None,
+                   armature=None):
         item = f"joint {name!r} ({type})"
         if name in self._joints:
             raise ModelError(f"joint {composite!r}" if composite else item, "name",
@@ -370,11 +376,18 @@ class ModelBuilder:
                                  type, "the coordinates of this joint are log coordinates of "
                                  "its relative motion, zero in the initial configuration")
             init = _kvec(initial, k, item, "initial")
+        arm = None
+        if armature is not None:
+            if not is_abelian(A_):
+                raise ModelError(item, "armature", "an abelian joint (its coordinates' rates are "
+                                 "the rotor's)", type)
+            arm = _kvec(armature, k, item, "armature", nonneg=True)
         self._joints[name] = JointSpec(name, type, node_a, node_b, params, A_, K, a0, C, tau, pd,
-                                       composite, None if at is None else at.copy(), init)
+                                       composite, None if at is None else at.copy(), init,
+                                       armature=arm)
 
     def _universal(self, name, node_a, node_b, axes, stiffness, reference, damping, act_field,
-                   act, control, at=None, initial=None):
+                   act, control, at=None, initial=None, armature=None):
         item = f"joint {name!r} (universal)"
         try:
             ax = np.asarray(axes, dtype=float)
@@ -423,7 +436,8 @@ class ModelBuilder:
             self._add_joint(sname, "hinge", na, nb, {"axis": a}, A_, part(stiffness, i,
                             "stiffness"), part(reference, i, "reference"),
                             part(damping, i, "damping"), act_field, sub_act, sub_pd,
-                            composite=name, at=at, initial=part(initial, i, "initial"))
+                            composite=name, at=at, initial=part(initial, i, "initial"),
+                            armature=part(armature, i, "armature"))
             sub.append(sname)
         self._composites[name] = tuple(sub)
 

@@ -199,6 +199,8 @@ class JointSpec:
     #: (4, 4) on its
     #: nodes, the initial joint transformation and A (6, k) in the attachment frame of node B.
     frames: tuple | None = None
+    #: (k,) inertia on the joint's coordinates (reflected rotor inertia), or None
+    armature: np.ndarray | None = None
 
     @property
     def k(self) -> int:

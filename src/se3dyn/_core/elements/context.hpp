@@ -27,6 +27,7 @@ struct Context {
   const FrameState* S;
   const double* coords;  // (nq,) relative coordinates alpha (Eq. (60)) on joint unknowns
   const double* vq;      // (nq,) velocities v
+  const double* vdq = nullptr;  // (nq,) accelerations vd
   const double* lam;     // (nm,) multipliers
   const double* u;       // (nu,) time-dependent inputs at the iterate's time
   const double* gravity; // (3,) = u[0:3]

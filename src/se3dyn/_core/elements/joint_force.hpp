@@ -34,6 +34,7 @@ struct JointForces : ElementBatch {
   std::vector<int> f;                       // (n,) joint frame
   std::vector<double> K, ref, C, kp, kd;    // (n, 6), first k used
   std::vector<double> ki, lim;              // (n, 6) PID integral gains, output limits (inf)
+  std::vector<double> Ja;                   // (n, 6) armature: inertia on the coordinates
   std::vector<int> zslot, zidx;             // (n,) PID: first input slot (3 per coordinate:
                                             // z_n, e_n, h/2) and first state index, or -1
   std::vector<int> tau, pref, prate;        // (n,) first input slot (k consecutive) or -1
@@ -69,6 +70,7 @@ struct JointForces : ElementBatch {
     kd = t.real("kd");
     ki = t.real("ki");
     lim = t.real("lim");
+    Ja = t.real("Ja");
     zslot = t.ints<int>("zslot");
     zidx = t.ints<int>("zidx");
     tau = t.ints<int>("tau");
@@ -113,7 +115,7 @@ struct JointForces : ElementBatch {
         if (zslot[e] >= 0) pd = pid(X, e, c, al[c], pd, wk, wd);
         double ta = tau[e] >= 0 ? X.u[tau[e] + c] : 0.0;
         tpd[c] = ta + pd;
-        g[c] = fs[c] + C[6 * e + c] * v[c] - tpd[c];
+        g[c] = fs[c] + C[6 * e + c] * v[c] - tpd[c] + Ja[6 * e + c] * X.vdq[d + c];
         X.r[d + c] += g[c];
       }
       X.scale(g, k);
@@ -135,6 +137,7 @@ struct JointForces : ElementBatch {
           X.energy[ELASTIC] += 0.5 * K[6 * e + c] * dl * dl;
           X.energy[P_ACTUATOR] += tpd[c] * v[c];
           X.energy[P_DISSIPATION] += C[6 * e + c] * v[c] * v[c];
+          X.energy[KINETIC] += 0.5 * Ja[6 * e + c] * v[c] * v[c];
         }
       }
       if (!X.vals || off[e] < 0) continue;
@@ -170,6 +173,7 @@ struct JointForces : ElementBatch {
         for (int i = 0; i < k; ++i)
           for (int c = 0; c < k; ++c) Bk[6 * i + c] *= X.cK;
       }
+      for (int c = 0; c < k; ++c) Bc[7 * c] += X.cM * Ja[6 * e + c];  // (velocity level)
       double Bt[36];
       for (int i = 0; i < 36; ++i) Bt[i] = Bk[i] + Bc[i];
       add_block(X.vals, off[e], k, k, Bt, 1.0);
