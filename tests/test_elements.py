@@ -44,6 +44,14 @@ def _state(s, rng, scale=0.3):
                 v=rng.normal(size=s.nq), vd=rng.normal(size=s.nq), lam=rng.normal(size=s.nm))
 
 
+def _with_pid_states(s, inputs, rng):
+    """The inputs with PID states (z_n, e_n, h/2) in their slots (joint_force.hpp), as the
+    time loop writes them: a step's integral and its tangent ki h/2 exercised."""
+    for slot in s.inputs.pid_slots:
+        inputs["u"][slot:slot + 3] = (rng.normal(), rng.normal(), 0.01)
+    return inputs
+
+
 def _eval(s, st, inputs, coef=None, **kw):
     return evaluate(s, st["Hn"], st["HJn"], st["alpha"], st["n"], st["v"], st["vd"], st["lam"],
                     inputs, coef, velocity=True, **kw)
@@ -75,7 +83,7 @@ def test_tangent_blocks_are_the_derivatives_of_the_residual(key, i):
     s = compile_model(_model(key, i))
     rng = np.random.default_rng(10 + i)
     st = _state(s, rng)
-    inputs = step_inputs(s, 0.37)
+    inputs = _with_pid_states(s, step_inputs(s, 0.37), rng)
     nq, nm = s.nq, s.nm
 
     def f_of(name, what):
@@ -105,7 +113,7 @@ def test_residual_is_invariant_under_a_superposed_rigid_motion(key, i):
     s = compile_model(_model(key, i))
     rng = np.random.default_rng(20 + i)
     st = _state(s, rng)
-    inputs = step_inputs(s, 0.81)
+    inputs = _with_pid_states(s, step_inputs(s, 0.81), rng)
     G = lie.exp_se3(rng.normal(size=6))
     moved = dict(st, Hn=G @ st["Hn"])
     u = inputs["u"].copy()

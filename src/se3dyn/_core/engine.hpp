@@ -84,6 +84,10 @@ struct Engine {
   // driven coordinates (nd, DRIVE): unknown, kind (0 position, 1 velocity), input slots of
   // the position (-1 for a velocity driver), the rate and the acceleration
   // (se3dyn.engine.layout._drive_table)
+  // PID laws (joint_force.hpp): per controlled coordinate the input slot of its state
+  // (z_n, e_n, h/2: 3 slots), written by the time loop (Stepper::controller_inputs)
+  std::vector<int> ctrl_slot;
+  int npid() const { return int(ctrl_slot.size()); }
   static constexpr int DRIVE = 5;
   std::vector<int> drive;
   int ndrive() const { return int(drive.size() / DRIVE); }
@@ -336,6 +340,7 @@ struct Engine {
     double* vals;    // (nvals or nvals2,) or nullptr
     double* energy;  // (N_ENERGY,) or nullptr
     double* arhs = nullptr;  // (nm,) acceleration-level constraint right-hand side or nullptr
+    double* ctrl = nullptr;  // (2 npid,) PID states of the iterate (joint_force.hpp) or nullptr
     // the matrix of the split index-2 iteration (newton.hpp) instead of the full one: without
     // the dynamic rows' xi blocks -(cM M + cC C_T) B_n^T and the constraint rows
     // (Context::phi_rows), the xi block as B_n B_n^T (symmetric: half the products)
@@ -375,6 +380,7 @@ struct Engine {
     X.S = &S;
     X.coords = o.alpha;
     X.vq = v;
+    X.vdq = vd;
     X.lam = lam;
     X.u = u;
     X.gravity = u;  // u[0:3] is gravity (se3dyn.engine.inputs._Inputs)
@@ -391,6 +397,7 @@ struct Engine {
     X.cK = cK;
     X.phi_rows = !o.split;
     X.energy = o.energy;
+    X.ctrl = o.ctrl;
     X.arhs = o.arhs;
     if (o.arhs) std::fill(o.arhs, o.arhs + nm, 0.0);
     joints->cv_ = cv;

@@ -89,6 +89,7 @@ void build(Engine& E, const nb::dict& d) {
   T.classify();
   E.is_joint_frame = ivec<char>(d, "frame_joint");
   E.drive = ivec<int>(d, "drive");  // (nd, Engine::DRIVE)
+  E.ctrl_slot = ivec<int>(d, "ctrl_slot");  // (npid,)
   T.prescribed.assign(E.nq, 0);
   T.pframe.assign(T.F, 0);
   for (int i = 0; i < E.ndrive(); ++i) T.prescribed[E.drive[Engine::DRIVE * i]] = 1;
@@ -390,6 +391,18 @@ NB_MODULE(_engine, m) {
              return nb::make_tuple(S.lu.n(), n1, n2);
            }, nb::arg("part") = "lu")
       .def("full_steps", [](const Stepper& S) { return S.full_steps; })
+      .def("ctrl_into",
+           [](const Stepper& S, DArr out) {
+             // the PID states (z, e) of the last iterate (2 npid,), see joint_force.hpp
+             double* o = ptr(out, S.ctrl_out.size(), "out");
+             std::copy(S.ctrl_out.begin(), S.ctrl_out.end(), o);
+           })
+      .def("controller_inputs",
+           [](const Stepper& S, CArr ctrl, double h, DArr u) {
+             // u (nu,) with the PID states of ctrl (2 npid,) for a step of size h, in place
+             S.controller_inputs(cptr(ctrl, 2L * S.E->npid(), "ctrl"), h,
+                                 ptr(u, S.E->nu, "u"));
+           })
       .def("memory_size", [](const Stepper& S) { return S.memory_size(); })
       .def("serials",
            [](const Stepper& S) {
@@ -434,7 +447,7 @@ NB_MODULE(_engine, m) {
              double am, double af, double g, double b, double tol_r, double ltol, double lscale,
              int max_iter, bool reuse, double kmax, DArr H, DArr alpha, DArr v, DArr vd, DArr a,
              DArr lam, DArr acc, DArr rt, DArr rH, DArr rv, DArr rvd, DArr rlam, DArr ralpha,
-             DArr rscal, long count) {
+             DArr rscal, long count, DArr ctrl) {
             Engine& E = *S.E;
             int F = E.T.F, nq = E.nq, nm = E.nm;
             long nt = static_cast<long>(times.size());
@@ -443,7 +456,7 @@ NB_MODULE(_engine, m) {
             Stepper::Params P{0.0, am, af, g, b, tol_r, ltol, lscale, kmax, max_iter, reuse};
             Stepper::Carry c{ptr(H, 16 * F, "H"), ptr(alpha, nq, "alpha"), ptr(v, nq, "v"),
                              ptr(vd, nq, "vd"), ptr(a, nq, "a"), ptr(lam, nm, "lam"),
-                             ptr(acc, 8, "acc")};
+                             ptr(acc, 8, "acc"), ptr(ctrl, 2L * E.npid(), "ctrl")};
             Stepper::Rows rows;
             rows.cap = static_cast<long>(rt.size());
             rows.count = count;

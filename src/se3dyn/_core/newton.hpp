@@ -120,6 +120,7 @@ struct Stepper {
   std::vector<double> vals, rhs, r, phi, psi;
   std::vector<double> energy = std::vector<double>(N_ENERGY);  // (N_ENERGY,) of the last iterate
   std::vector<double> effort;  // (nd,) the drivers' forces of the last iterate (take_efforts)
+  std::vector<double> ctrl_out;  // (2 npid,) PID states (z, e) of the last iterate
   // solver memory (see the header): the matrix values of the last full factorisation, the
   // reference of the refactorisations' pivot sequence (none kept while it is the generic
   // matrix's, ref_probe), and a serial number of it (Python side). Never changed once made:
@@ -154,6 +155,7 @@ struct Stepper {
     // a driven unknown: its row and column the identity's (its value is the driver's: step())
     for (int i = 0; i < E->ndrive(); ++i) dropped[E->drive[Engine::DRIVE * i]] = 1;
     effort.assign(E->ndrive(), 0.0);
+    ctrl_out.assign(2L * E->npid(), 0.0);
     for (int c = 0; c < N; ++c)
       for (int p = colptr[c]; p < colptr[c + 1]; ++p) {
         int rw = rowind[p];
@@ -495,6 +497,7 @@ struct Stepper {
     // the converged one are the new state's (no evaluation of its own)
     Engine::Out o{r.data(), phi.data(), stab ? psi.data() : nullptr, alpha, nullptr,
                   energy.data()};
+    o.ctrl = ctrl_out.empty() ? nullptr : ctrl_out.data();
     o.split = split && !full_mode;
     // a split iteration that must be refactorised goes over to the full matrix (for the run)
     auto fall_back = [&]() {
@@ -596,11 +599,23 @@ struct Stepper {
     int M = 0;
     double *t, *H, *v, *vd, *lam, *alpha, *scal;  // (cap,), (cap, M, 16), ..., (cap, 9)
   };
-  // The integration state carried between steps: frames (F, 16), alpha, v, vd, a, lam and
-  // acc = (powers p_act, p_ext, p_diss, works W_act, W_ext, dissipated, h_last, t)
+  // The integration state carried between steps: frames (F, 16), alpha, v, vd, a, lam,
+  // acc = (powers p_act, p_ext, p_diss, works W_act, W_ext, dissipated, h_last, t) and the
+  // PID states ctrl (2 npid: z, e)
   struct Carry {
-    double *H, *alpha, *v, *vd, *a, *lam, *acc;
+    double *H, *alpha, *v, *vd, *a, *lam, *acc, *ctrl;
   };
+
+  // The inputs of a step of size h: u (nu) with the PID states (z_n, e_n, h/2) in their slots
+  // (joint_force.hpp), from ctrl (2 npid)
+  void controller_inputs(const double* ctrl, double h, double* u) const {
+    for (int i = 0; i < E->npid(); ++i) {
+      double* z = u + E->ctrl_slot[i];
+      z[0] = ctrl[2 * i];
+      z[1] = ctrl[2 * i + 1];
+      z[2] = 0.5 * h;
+    }
+  }
   struct RunResult {
     int status = 0, done = 0, iterations = 0, factorisations = 0;
     double residual = 0, constraint = 0;
@@ -634,11 +649,16 @@ struct Stepper {
                 int output_every, Carry c, Rows& rows) {
     Engine& G = *E;
     int nq = G.nq, nm = G.nm, F = G.T.F, nu = G.nu;
-    std::vector<double> alpha(nq), v(nq), vd(nq), a(nq), lam(nm), n(nq), a_n(nq);
+    std::vector<double> alpha(nq), v(nq), vd(nq), a(nq), lam(nm), n(nq), a_n(nq), ubuf(nu);
     RunResult R;
     for (int i = i0; i < i1; ++i) {
       double t1 = times[i], h = t1 - c.acc[7], h_last = c.acc[6];
       const double* u = U + (long)i * nu;
+      if (G.npid() > 0) {  // (the table's rows stay as they are: a copy with the PID states)
+        std::copy(u, u + nu, ubuf.begin());
+        controller_inputs(c.ctrl, h, ubuf.data());
+        u = ubuf.data();
+      }
       for (int q = 0; q < nq; ++q)
         a_n[q] = (h_last > 0 && h != h_last) ? c.vd[q] + (h / h_last) * (c.a[q] - c.vd[q]) : c.a[q];
       G.load_frames(c.H);
@@ -667,6 +687,7 @@ struct Stepper {
       std::copy(vd.begin(), vd.end(), c.vd);
       std::copy(a.begin(), a.end(), c.a);
       std::copy(lam.begin(), lam.end(), c.lam);
+      std::copy(ctrl_out.begin(), ctrl_out.end(), c.ctrl);
       if (((i + 1) % output_every == 0 || i == last) && rows.count < rows.cap) {
         long r = rows.count++;
         rows.t[r] = t1;

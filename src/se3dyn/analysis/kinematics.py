@@ -348,6 +348,11 @@ def kinematics(model_or_system: Model | System, drivers: Mapping | None, times, 
     """
     s = _as_system(model_or_system, "kinematics")
     drv = _drivers(s, drivers)
+    if np.any(s.dof_ki > 0):
+        warnings.warn(Se3dynWarning(
+            "kinematics: the integral part of the PID laws is taken as zero in the inverse "
+            "dynamics (its value is the history of a run); their P and D parts count"),
+            stacklevel=2)
     tt = _check_settings(s, times, tol, max_iter)
     kp = _problem(s, drv)
     _check_structure(kp)

@@ -82,9 +82,10 @@ class StaticResult(_OneConfiguration):
     stable : bool or None
         ``min_stiffness > 0`` (up to round-off): the equilibrium is a local minimum of the
         potential energy when the loads are conservative.
-    efforts : ndarray (nd,) or None
-        Drives (``ModelBuilder.drive``): the force or torque holding each driven coordinate
-        (:meth:`drive_effort` by drive name).
+    efforts : ndarray (nd + npid,) or None
+        Drives (``ModelBuilder.drive``) and PID laws: the force or torque holding each driven
+        or PID-controlled coordinate (:meth:`drive_effort` by drive name,
+        :meth:`control_effort` by joint).
     """
 
     system: System
@@ -99,7 +100,8 @@ class StaticResult(_OneConfiguration):
     constraint: float
     min_stiffness: float | None
     stable: bool | None
-    #: (nd,) the force or torque of every driven coordinate (System.drive_dof) at equilibrium
+    #: (nd + npid,) the force or torque holding every driven coordinate (System.drive_dof), then
+    #: every PID-controlled one (``System.inputs.pid_ref``), at equilibrium
     efforts: np.ndarray | None = None
     _squeeze: bool = field(default=True, repr=False)
 
@@ -110,7 +112,25 @@ class StaticResult(_OneConfiguration):
         names = [d.name for d in s.model.drives]
         if name not in names:
             raise KeyError(_unknown_name("drive", name, names))
-        return self.efforts[s.drive_of == names.index(name)].copy()
+        return self.efforts[:len(s.drive_of)][s.drive_of == names.index(name)].copy()
+
+    def control_effort(self, joint: str) -> np.ndarray:
+        """Force or torque of a joint's PID law at equilibrium, shape (k,): its integral part
+        (the proportional and derivative parts vanish there, the coordinate at its target)."""
+        s = self.system
+        dofs = [d for _, d in s.inputs.pid_ref]
+        if joint not in s.joint_names and joint not in s.composites:
+            raise KeyError(_unknown_name("joint", joint, list(s.joint_names)))
+        parts = s.composites.get(joint, (joint,))
+        out = []
+        for p in parts:
+            j = s.joint_names.index(p)
+            for c in range(int(s.joint_k[j])):
+                d = int(s.joint_dofadr[j]) + c
+                if d not in dofs:
+                    raise KeyError(f"joint {joint!r} has no PID law")
+                out.append(self.efforts[len(s.drive_of) + dofs.index(d)])
+        return np.array(out)
 
     @property
     def _lam(self):
@@ -162,7 +182,7 @@ class _Newton:
         self.rs = _row_scale(s, self.L)
         self.redundant = False
         self.mechanism: str | None = None
-        #: driven coordinates (System.drive_dof) and the values they are held at
+        #: driven and PID-controlled coordinates and the values they are held at
         self.held = (s.drive_dof, s.alpha0[s.drive_dof])
 
     def _worst(self, ev, er_vec, ep_vec) -> str:
@@ -313,10 +333,14 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
     full = dict(step_inputs(s, float(t)), kind=s.inputs.kind)
     newton = _Newton(s, tol, max_iter)
     # drives hold their coordinates: a position driver at f(t) (reached by the load steps
-    # from the initial coordinate), a velocity driver where the model starts
+    # from the initial coordinate), a velocity driver where the model starts; the integral
+    # action of a PID law holds its coordinate at the target (its steady state: e = 0)
     slots = np.array(s.inputs.drive_slots, np.int64).reshape(-1, 3)
-    a0 = s.alpha0[s.drive_dof]
-    goal = np.where(slots[:, 0] >= 0, full["u"][np.maximum(slots[:, 0], 0)], a0)
+    pid = np.array(s.inputs.pid_ref, np.int64).reshape(-1, 2)
+    held = np.concatenate([s.drive_dof, pid[:, 1]])
+    a0 = s.alpha0[held]
+    goal = np.concatenate([np.where(slots[:, 0] >= 0, full["u"][np.maximum(slots[:, 0], 0)],
+                                    a0[:len(slots)]), full["u"][pid[:, 0]]])
     efforts = np.zeros(len(a0))
     H, HJ = s.node_H0.copy(), s.joint_H0.copy()
     alpha = s.alpha0.copy()
@@ -333,7 +357,7 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         target = min(1.0, lf + dlf)
         if 1.0 - target < 1e-12:
             target = 1.0
-        newton.held = (s.drive_dof, goal if target == 1.0 else a0 + target * (goal - a0))
+        newton.held = (held, goal if target == 1.0 else a0 + target * (goal - a0))
         try:
             ev, lam_new, it, er, ep, effort = newton.solve(H, HJ, alpha, lam,
                                                    _scaled_inputs(full, target))
@@ -397,8 +421,9 @@ def _stability(s: System, newton: _Newton, H, HJ, alpha, lam, inputs):
     ev = evaluate(s, H, HJ, alpha, z, z, z, lam, inputs, None, full_alpha=True)
     K, _, B = newton.blocks(ev, (0.0, 0.0, 1.0))
     cs, rs = newton.cs, newton.rs
-    held = np.zeros((len(s.drive_dof), s.nq))  # (driven coordinates do not move)
-    held[np.arange(len(s.drive_dof)), s.drive_dof] = 1.0
+    dofs = newton.held[0]  # (driven and PID-held coordinates do not move)
+    held = np.zeros((len(dofs), s.nq))
+    held[np.arange(len(dofs)), dofs] = 1.0
     _, N = _null_space(np.vstack([rs[:, None] * B * cs, held]), _RCOND)
     if N.shape[1] == 0:
         return None, None

@@ -170,7 +170,8 @@ class Condensation:
         return State(t=st.t, H=st.H[self.root_full], HJ=st.HJ[self.joint_full], v=st.v[d],
                      vd=st.vd[d], a=st.a[d], lam=st.lam[self.mult_full], alpha=st.alpha[d],
                      work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated,
-                     power=st.power, dropped=dropped, h_last=st.h_last, solver=st.solver)
+                     power=st.power, dropped=dropped, h_last=st.h_last, solver=st.solver,
+                     ctrl=st.ctrl)  # (PID laws are on joints kept: the same order)
 
     def expand_rows(self, H, v, vd, alpha, lam, a=None) -> tuple:
         """Rows of the reduced system (leading axis n) as rows of the full system: frames
@@ -222,7 +223,7 @@ class Condensation:
         return State(t=st.t, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
                      work_act=st.work_act, work_ext=st.work_ext, dissipated=st.dissipated,
                      power=st.power, dropped=self.mult_full[np.asarray(st.dropped, np.int64)],
-                     h_last=st.h_last, solver=st.solver)
+                     h_last=st.h_last, solver=st.solver, ctrl=st.ctrl)
 
     # -- reactions ------------------------------------------------------------------------------
     def joint_frames(self, H: np.ndarray) -> np.ndarray:

@@ -83,6 +83,15 @@ def _drive_start(s: System, t0: float, u: np.ndarray) -> tuple[np.ndarray, np.nd
     return u[slots[:, 1]], u[slots[:, 2]]
 
 
+def _pid_start(s: System, u: np.ndarray) -> np.ndarray:
+    """The PID states (z, e) at the start of a run (2 npid,): no integral yet, the error of the
+    initial coordinates against the targets at t0."""
+    z = np.zeros(2 * len(s.inputs.pid_slots))
+    for i, (ref, dof) in enumerate(s.inputs.pid_ref):
+        z[2 * i + 1] = s.alpha0[dof] - u[ref]
+    return z
+
+
 def _check_drive_velocities(s: System, v: np.ndarray, values: np.ndarray, dropped) -> None:
     """The projected initial velocities must satisfy the velocity constraints with the driven
     rates kept: else the drivers ask for a motion the joints do not allow (a coordinate a
@@ -360,7 +369,8 @@ class GeneralizedAlpha:
             power[0] += float(ev1.r[dd] @ v[dd])
         return State(t=t0, H=H, HJ=HJ, v=v, vd=vd, a=vd.copy(),
                      lam=rhs[nq:].copy(), alpha=s.alpha0.copy(), power=power,
-                     dropped=dropped, solver=_ws(s, ws).memory(stp) if keep else None)
+                     dropped=dropped, solver=_ws(s, ws).memory(stp) if keep else None,
+                     ctrl=_pid_start(s, inputs["u"]))
 
     @staticmethod
     def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,
@@ -414,9 +424,13 @@ class GeneralizedAlpha:
         alpha, v, vd, a, n = (np.zeros(nq) for _ in range(5))
         lam = np.zeros(nm)
         c = np.ascontiguousarray
+        u = inputs["u"]
+        ctrl = np.array(st.ctrl, dtype=float)
+        if ctrl.size:  # the PID states of the step's start in their input slots
+            stp.controller_inputs(ctrl, float(h), u)
         status, it, er, ep, nfac, en = stp.step(
             Hall, c(st.alpha, float), c(st.v, float), c(st.vd, float), c(a_n, float),
-            c(st.lam, float), inputs["u"], float(h), am, af, g, b, self.tol_residual,
+            c(st.lam, float), u, float(h), am, af, g, b, self.tol_residual,
             self.tol_constraint * s.length_scale, float(s.length_scale), self.max_iter,
             self.newton == "modified", KMAX, Hout, alpha, v, vd, a, lam, n)
         if status != 0:
@@ -437,8 +451,10 @@ class GeneralizedAlpha:
         # leaving (1/6 - beta - (alpha_m - alpha_f) / 2) h^3 q^(3), with h q^(3) measured by
         # a_{n+1} - a_n (0.084 h^3 q^(3) at rho_inf = 0.9, 1/12 at 1)
         err = (1.0 / 6.0 - b - 0.5 * (am - af)) * h * h * (a - a_n)
+        if ctrl.size:
+            stp.ctrl_into(ctrl)
         new = State(t=t1, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
-                    dropped=st.dropped, h_last=h, solver=w.memory(stp))
+                    dropped=st.dropped, h_last=h, solver=w.memory(stp), ctrl=ctrl)
         # energies and powers of the converged iterate (the compiled loop's too)
         e = dict(kinetic=en[0], potential=en[1], spring=en[2], power=np.array(en[3:6]))
         p = e["power"]
@@ -540,4 +556,5 @@ def interpolate(s: System, st0: State, st1: State, n: np.ndarray, theta: float,
                  work_act=lin(st0.work_act, st1.work_act),
                  work_ext=lin(st0.work_ext, st1.work_ext),
                  dissipated=lin(st0.dissipated, st1.dissipated),
-                 power=lin(st0.power, st1.power), dropped=st1.dropped)
+                 power=lin(st0.power, st1.power), dropped=st1.dropped,
+                 ctrl=lin(st0.ctrl, st1.ctrl))

@@ -671,6 +671,7 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int,
     c = lambda x: np.array(x, dtype=float)  # noqa: E731
     alpha, v, vd, a, lam = c(st.alpha), c(st.v), c(st.vd), c(st.a), c(st.lam)
     acc = np.array([*st.power, st.work_act, st.work_ext, st.dissipated, st.h_last, st.t])
+    ctrl = c(st.ctrl)
     am, af, g, b = integ.params
     i = k0
     fac = 0
@@ -689,7 +690,7 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int,
                      vd=vd.copy(), a=a.copy(), lam=lam.copy(), alpha=alpha.copy(),
                      work_act=float(acc[3]), work_ext=float(acc[4]), dissipated=float(acc[5]),
                      power=acc[:3].copy(), dropped=st.dropped, h_last=float(acc[6]),
-                     solver=ws.memory(stp))
+                     solver=ws.memory(stp), ctrl=ctrl.copy())
 
     while i < n_ok:
         if i >= b1:  # the next block of times and inputs
@@ -719,7 +720,7 @@ def _run_compiled(s: System, integ: GeneralizedAlpha, st: State, times, k0: int,
             integ.tol_residual, integ.tol_constraint * s.length_scale, float(s.length_scale),
             integ.max_iter, integ.newton == "modified", KMAX, H, alpha, v, vd, a, lam, acc,
             rec.t, rec.H.reshape(-1), rec.v.reshape(-1), rec.vd.reshape(-1),
-            rec.lam.reshape(-1), rec.alpha.reshape(-1), rec.scal.reshape(-1), rec.n)
+            rec.lam.reshape(-1), rec.alpha.reshape(-1), rec.scal.reshape(-1), rec.n, ctrl)
         dt = time.perf_counter() - tic
         rec.added(count)
         stats["newton_iterations"] += its

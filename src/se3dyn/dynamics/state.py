@@ -35,6 +35,8 @@ class State:
     dropped : ndarray (nr,)    redundant constraint equations left out (multiplier indices);
                                their multipliers stay zero (see :func:`GeneralizedAlpha.init`)
     h_last : float             size of the step that produced this state (0 initially)
+    ctrl : ndarray (2 npid,)   PID laws: per controlled coordinate the integral of its error
+                               and the error (z, e) at t (``_core/elements/joint_force.hpp``)
     solver : SolverMemory or None
         The linear solver's memory after the step that produced this state; None: the model's
         own (the pivot sequence of its generic matrix, which a new workspace starts with)
@@ -55,6 +57,7 @@ class State:
     dropped: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64))
     h_last: float = 0.0
     solver: SolverMemory | None = None
+    ctrl: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self):
         for f in dataclasses.fields(self):

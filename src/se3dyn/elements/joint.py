@@ -112,10 +112,13 @@ def model_file(mf):
           "coordinates, `reference` and PD targets are then absolute; absent: they count from "
           "the initial configuration."),
         F("damping", kvec_nn, 0, "Damper C on the relative velocities (Eq. 64)."),
+        F("armature", kvec_nn, 0, "Abelian joints: inertia on the relative coordinates (the "
+          "reflected rotor inertia N^2 J_rotor of a geared motor; kg m^2 or kg)."),
         F("actuator", mf.TimeFunc(), None, act_doc),
         F("torque", mf.TimeFunc(), None, "Alias of `actuator`."),
         F("force", mf.TimeFunc(), None, "Alias of `actuator`."),
-        F("control", mf.Section("control"), None, "PD control law (abelian joints only)."),
+        F("control", mf.Section("control"), None, "PD or PID control law (abelian joints "
+          "only)."),
         F("at", v3, None, "Attachment point in the inertial frame of the initial "
           "configuration (m): the joint connects frames fixed to `a` and `b` at this point "
           "(inertial orientation at t0), H_B X_B = H_A X_A H_J with X = H0^-1 H(I, at), "
@@ -124,17 +127,24 @@ def model_file(mf):
     )
     control = (
         F("kp", kvec_nn, None, "Proportional gain(s) (required).", True),
+        F("ki", kvec_nn, 0, "Integral gain(s) (1/s): a PID law when given, tau = -kp e - ki "
+          "int e dt - kd e_dot, the integral a state of the run (trapezoidal rule in the "
+          "step's Newton iterations)."),
         F("kd", kvec_nn, 0, "Derivative gain(s)."),
+        F("limit", mf.OneOf((mf.Num(exclusive_minimum=0), mf.Vec(None, 1, 6))), None,
+          "Largest magnitude of the law's force/torque (a PID law; anti-windup: the integral "
+          "holds while saturated). Absent: no saturation."),
         F("target", mf.TimeFunc(), 0, "Target relative coordinates alpha_ref(t)."),
         F("target_rate", mf.TimeFunc(), "d target/dt", "Target rates (the derivative of "
           "`target` when absent)."),
     )
 
     def add(mb, name, kw):
-        from se3dyn.model.specs import PD
+        from se3dyn.model.specs import PD, PID
 
         if "control" in kw:
-            kw["control"] = PD(**kw["control"].values)
+            law = dict(kw["control"].values)
+            kw["control"] = PID(**law) if ("ki" in law or "limit" in law) else PD(**law)
         mb.joint(name, kw.pop("type"), kw.pop("a"), kw.pop("b"), **kw)
 
     return mf.ElementSection(
@@ -169,6 +179,8 @@ def _joint_out(mf, j) -> dict:
             d[key] = py(arr)
     if j.initial is not None:
         d["initial"] = py(j.initial)
+    if j.armature is not None:
+        d["armature"] = py(j.armature)
     if j.actuator is not None:
         k = _act_key(j.type)
         d[k] = tf_out(j.actuator, item, k)
@@ -176,6 +188,7 @@ def _joint_out(mf, j) -> dict:
         c = j.control
         d["control"] = {"kp": py(c.kp), "kd": py(c.kd),
                         "target": tf_out(c.target, item, "control.target")}
+        d["control"].update(_pid_out(c, item))
         if c.target_rate is not None:
             d["control"]["target_rate"] = tf_out(c.target_rate, item, "control.target_rate")
     return d
@@ -197,6 +210,8 @@ def _universal_out(mf, name: str, parts: tuple[str, ...], model) -> dict:
             d[key] = [float(a1[0]), float(a2[0])]
     if j1.initial is not None:
         d["initial"] = [float(j1.initial[0]), float(j2.initial[0])]
+    if j1.armature is not None:
+        d["armature"] = [float(j1.armature[0]), float(j2.armature[0])]
 
     def source(f, fld):
         # the k-vector function a universal joint's per-hinge component was cut from
@@ -212,9 +227,31 @@ def _universal_out(mf, name: str, parts: tuple[str, ...], model) -> dict:
         d["control"] = {"kp": [float(c1.kp[0]), float(c2.kp[0])],
                         "kd": [float(c1.kd[0]), float(c2.kd[0])],
                         "target": source(c1.target, "control.target")}
+        if hasattr(c1, "ki"):
+            from se3dyn.model.specs import PID
+
+            d["control"].update(_pid_out(PID(np.r_[c1.kp, c2.kp], np.r_[c1.ki, c2.ki],
+                                             np.r_[c1.kd, c2.kd], 0.0, None,
+                                             np.r_[c1.limit, c2.limit]), item))
         if c1.target_rate is not None:
             d["control"]["target_rate"] = source(c1.target_rate, "control.target_rate")
     return d
+
+
+def _pid_out(c, item: str) -> dict:
+    """The PID fields of a normalised control law (none for a PD law)."""
+    if not hasattr(c, "ki"):
+        return {}
+    out = {"ki": [float(x) for x in c.ki]}
+    lim = np.asarray(c.limit, dtype=float)
+    if np.all(np.isfinite(lim)):
+        out["limit"] = [float(x) for x in lim]
+    elif np.any(np.isfinite(lim)):
+        from se3dyn.errors import ModelError
+
+        raise ModelError(item, "control.limit", "limits on all coordinates or none, to write a "
+                         "model file", lim)
+    return out
 
 
 def _save(mf, model) -> dict:

@@ -14,9 +14,13 @@ TRAITS = dict(conservative=False, constraint=False, objective=True)
 
 
 def tables(s, lay) -> dict:
-    slots = {"tau": {}, "ref": {}, "rate": {}}
+    slots = {"tau": {}, "ref": {}, "rate": {}, "pid": {}}
     for slot, _k, kind, j in s.inputs.joint_slots:
         slots[kind][j] = slot
+    first_pid, count = {}, 0  # joint -> its first PID coordinate among all (input order)
+    for j in sorted(slots["pid"], key=slots["pid"].get):
+        first_pid[j] = count
+        count += int(s.joint_k[j])
     m, M = s.m, s.M
     jk = np.asarray(s.joint_k, np.int64)
     withk = np.flatnonzero(jk > 0)
@@ -25,8 +29,9 @@ def tables(s, lay) -> dict:
     jd_dof = np.repeat(np.asarray(s.joint_dofadr, np.int64)[withk], jk[withk]) + (
         np.arange(len(jd_joint)) - np.repeat(np.cumsum(jk[withk]) - jk[withk], jk[withk]))
     K, D = np.asarray(s.dof_stiffness)[jd_dof], np.asarray(s.dof_damping)[jd_dof]
+    Ja = np.asarray(s.dof_armature)[jd_dof]
     used = np.zeros(m, bool)
-    used[jd_joint[(K != 0) | (D != 0)]] = True
+    used[jd_joint[(K != 0) | (D != 0) | (Ja != 0)]] = True
     used[np.array(list(slots["tau"]) + list(slots["ref"]), np.int64)] = True
     used &= jk > 0
     ids = np.flatnonzero(used)
@@ -54,7 +59,10 @@ def tables(s, lay) -> dict:
     fg = lay.frame_groups(M + ids)
     return dict(frame=(M + ids).astype(np.int64), K=pad("dof_stiffness"),
                 ref=pad("dof_reference"), C=pad("dof_damping"), kp=pad("dof_kp"),
-                kd=pad("dof_kd"),
+                kd=pad("dof_kd"), ki=pad("dof_ki"), lim=pad("dof_limit"),
+                Ja=pad("dof_armature"),
+                zslot=np.array([slots["pid"].get(j, -1) for j in ids.tolist()], np.int64),
+                zidx=np.array([first_pid.get(j, -1) for j in ids.tolist()], np.int64),
                 tau=np.array([slots["tau"].get(j, -1) for j in ids.tolist()], np.int64),
                 pref=np.array([slots["ref"].get(j, -1) for j in ids.tolist()], np.int64),
                 prate=np.array([slots["rate"].get(j, -1) for j in ids.tolist()], np.int64),
@@ -71,13 +79,14 @@ def _orthonormal_axes(rng):
 
 
 def examples(rng):
-    """Spring, damper, actuator and PD law on abelian joints (hinge, cylindrical); spring,
+    """Spring, damper, actuator and PD law on abelian joints (hinge, cylindrical), PID laws
+    (unsaturated, saturated) on a cylindrical joint; spring,
     damper and actuator on non-abelian ones (spherical, planar; they take no PD law), whose
     spring (Eq. (62) on the log coordinates) acts through T_A(alpha)^-T: anisotropic stiffness
     and a nonzero reference, so that the derivative of T_A^-T at fixed force is exercised (an
     isotropic spring without reference cannot tell it from K alpha: T(theta)^T theta = theta)."""
     from se3dyn.model.builder import ModelBuilder
-    from se3dyn.model.specs import PD
+    from se3dyn.model.specs import PD, PID
     from se3dyn.model.timefunc import Ramp, Sine
 
     out = []
@@ -92,6 +101,16 @@ def examples(rng):
                  actuator=Sine(tuple(rng.normal(size=k)), 1.3),
                  control=PD(kp=tuple(rng.uniform(1, 2, k)), kd=tuple(rng.uniform(0, 1, k)),
                                target=Ramp(tuple(rng.normal(size=k)), 0.1, 2.0)))
+        out.append(mb.build())
+    for limit in (1e3, 0.05):  # PID laws, unsaturated and saturated (the contract tests fill
+        mb = ModelBuilder()   # the laws' state slots: z_n, e_n, h/2)
+        mb.node("g", fixed=True)
+        mb.node("b", position=(0.3, 0.1, 0.0), mass=1.5, inertia=(1, 1.2, 1.4))
+        mb.joint("j", "cylindrical", "g", "b", axis=_unit(rng), damping=(0.3, 0.2),
+                 armature=tuple(rng.uniform(0.1, 0.5, 2)),
+                 control=PID(kp=tuple(rng.uniform(1, 2, 2)), ki=tuple(rng.uniform(1, 3, 2)),
+                             kd=tuple(rng.uniform(0, 1, 2)),
+                             target=Ramp(tuple(rng.normal(size=2)), 0.1, 2.0), limit=limit))
         out.append(mb.build())
     for typ in ("spherical", "planar"):
         mb = ModelBuilder()

@@ -28,8 +28,8 @@ class _Inputs:
     joint its k actuator values, per controlled joint its k PD targets and k target rates, per
     driven coordinate its prescribed position (position drivers), rate and acceleration.
     ``kind`` (nu,) tells each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD
-    target rate, 5 driven position, 6 driven rate, 7 driven acceleration), for load stepping in
-    statics.
+    target rate, 5 driven position, 6 driven rate, 7 driven acceleration, 8 PID state), for
+    load stepping in statics.
     """
 
     def __init__(self, d: dict, model: Model):
@@ -55,6 +55,11 @@ class _Inputs:
             self.load_slots.append((i, c, fs, ts, int(ld.force_frame == "body"),
                                     int(ld.torque_frame == "body")))
         self.joint_slots = []  # (slot, k, kind, joint index)
+        #: per PID-controlled coordinate, in order: the first of its 3 state slots (z_n, e_n,
+        #: h/2; joint_force.hpp), which the time loop fills (zero in the tables)
+        self.pid_slots: list[int] = []
+        #: and its target's input slot and its unknown
+        self.pid_ref: list[tuple[int, int]] = []
         for j, js in enumerate(model.joints):
             k = js.k
             if js.actuator is not None:
@@ -74,6 +79,12 @@ class _Inputs:
                 else:
                     self.sources.append((len(kind), k, rt, item, "target_rate", 0))
                 kind += [4] * k
+                if hasattr(js.control, "ki"):  # a PID law: its states, written by the loop
+                    ref = self.joint_slots[-2][0]
+                    self.joint_slots.append((len(kind), k, "pid", j))
+                    self.pid_slots += [len(kind) + 3 * c for c in range(k)]
+                    self.pid_ref += [(ref + c, int(d["joint_dofadr"][j]) + c) for c in range(k)]
+                    kind += [8] * (3 * k)
         # per driven coordinate (System.drive_dof): the slots of its position (-1 for a
         # velocity driver), rate and acceleration, kinds 5, 6, 7
         self.drive_slots = []

@@ -202,6 +202,7 @@ class Layout:
             velprod=np.ascontiguousarray(velprod, np.int64).reshape(-1, 6),
             xiprod=np.ascontiguousarray(xiprod, np.int64).reshape(-1, 6),
             drive=_drive_table(s),
+            ctrl_slot=np.array(s.inputs.pid_slots, np.int64),
             **_log_tables(s, self.frame_A, self.F, self._logs))
         rg = self._blocks_in_value_order()
         self.groups2, self.groups3 = self._lu_groups(rg, con_c, con_f)

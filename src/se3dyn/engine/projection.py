@@ -122,7 +122,7 @@ def project_velocities(s: System, Wm, B, v0: np.ndarray, *, L: float | None = No
 
 
 def _project_dense(s: System, Wd: np.ndarray, Bs: np.ndarray, v0: np.ndarray, E: np.ndarray,
-                   L: float, fixed: np.ndarray) -> tuple[np.ndarray, bool]:
+                   L: float, fixed: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
     """The problem of :func:`project_velocities` by rank-revealing dense factorisations (SVD of
     the massless columns, least squares on the body velocities in ``M^-1/2`` coordinates), with
     the held parts ``E`` first and without them when they conflict with the joints; the
@@ -149,7 +149,7 @@ def _project_dense(s: System, Wd: np.ndarray, Bs: np.ndarray, v0: np.ndarray, E:
                 uj += [len(uj) // 6] * 6
                 uv += list(Q[:, k] * cs[idx])
     kb, ku0 = len(bj) // 6, len(uj) // 6
-    rest = np.flatnonzero(~nodal & ~fixed)
+    rest = np.flatnonzero(~nodal if fixed is None else ~nodal & ~fixed)
     Tb = sp.csc_matrix((bv, (bi, bj)), shape=(nq, kb))
     Tu = sp.hstack([sp.csc_matrix((uv, (ui, uj)), shape=(nq, ku0)),
                     sp.csc_matrix((cs[rest], (rest, np.arange(len(rest)))),

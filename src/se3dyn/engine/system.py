@@ -133,6 +133,9 @@ class System(LayoutCounts):
     dof_damping: np.ndarray
     dof_kp: np.ndarray
     dof_kd: np.ndarray
+    dof_ki: np.ndarray  # PID integral gains
+    dof_limit: np.ndarray  # PID output limits (inf: none)
+    dof_armature: np.ndarray  # inertia on joint coordinates (reflected rotor inertia)
     dof_is_joint: np.ndarray  # (nq,) bool
     #: (nq,) relative coordinates in the initial configuration: the joints' ``initial`` values
     #: (absolute coordinates), zero elsewhere
@@ -370,6 +373,9 @@ def _dof_tables(joints, joint_dofadr: np.ndarray, nq: int) -> dict:
     dof_C = np.zeros(nq)
     dof_kp = np.zeros(nq)
     dof_kd = np.zeros(nq)
+    dof_ki = np.zeros(nq)
+    dof_armature = np.zeros(nq)
+    dof_limit = np.full(nq, np.inf)
     dof_is_joint = np.zeros(nq, dtype=bool)
     alpha0 = np.zeros(nq)
     for jj, j in enumerate(joints):
@@ -382,11 +388,18 @@ def _dof_tables(joints, joint_dofadr: np.ndarray, nq: int) -> dict:
         dof_K[d] = j.stiffness
         dof_ref[d] = j.reference
         dof_C[d] = j.damping
+        if j.armature is not None:
+            dof_armature[d] = j.armature
         if j.control is not None:
             dof_kp[d] = j.control.kp
             dof_kd[d] = j.control.kd
+            if hasattr(j.control, "ki"):  # PID
+                dof_ki[d] = j.control.ki
+                dof_limit[d] = j.control.limit
     return dict(dof_stiffness=dof_K, dof_reference=dof_ref, dof_damping=dof_C, dof_kp=dof_kp,
-                dof_kd=dof_kd, dof_is_joint=dof_is_joint, alpha0=alpha0)
+                dof_kd=dof_kd, dof_ki=dof_ki, dof_limit=dof_limit, dof_armature=dof_armature,
+                dof_is_joint=dof_is_joint,
+                alpha0=alpha0)
 
 
 def _joint_groups(joint_k, A_mat, ja, jb, node_fixed, node_dofadr, joint_dofadr,

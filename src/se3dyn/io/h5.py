@@ -597,7 +597,8 @@ _SERIES = ("nodes/position", "nodes/rotation", "nodes/velocity", "nodes/accelera
 
 _STATE_DOC = ("t, h_last, work_act, work_ext, dissipated, power (3), number of dropped "
               "equations nr, dropped (nm, first nr used), H (M x 16), HJ (m x 16), v, vd, a "
-              "(nq each), lam (nm), alpha (nq), nv (the values of the linear solver's memory "
+              "(nq each), lam (nm), alpha (nq), the PID states (z, e) of State.ctrl (2 per "
+              "PID-controlled coordinate), nv (the values of the linear solver's memory "
               "in /restart/solver, -1: none)")
 _MEMORY_DOC = ("State.solver.ref of the checkpoint in the slot of the same index of "
                "/restart/state (its first nv values): the iteration matrix of the last full "
@@ -605,9 +606,14 @@ _MEMORY_DOC = ("State.solver.ref of the checkpoint in the slot of the same index
                "one more value, the mode of the iteration (0 split, 1 full matrix)")
 
 
+def _npid(s) -> int:
+    """PID-controlled coordinates of a system (State.ctrl holds 2 values each)."""
+    return len(getattr(getattr(s, "inputs", None), "pid_slots", ()))
+
+
 def _state_length(s) -> int:
     M, m, nq, nm = len(s.node_names), len(s.joint_names), int(s.nq), int(s.nm)
-    return 9 + nm + 16 * (M + m) + 4 * nq + nm + 1
+    return 9 + nm + 16 * (M + m) + 4 * nq + nm + 2 * _npid(s) + 1
 
 
 def _pack_slot(s, cp, rows: int, seq: int, base_its: int):
@@ -622,7 +628,7 @@ def _pack_slot(s, cp, rows: int, seq: int, base_its: int):
     payload = np.concatenate([
         [st.t, st.h_last, st.work_act, st.work_ext, st.dissipated], np.asarray(st.power),
         [len(st.dropped)], dropped, np.asarray(st.H).ravel(), np.asarray(st.HJ).ravel(),
-        st.v, st.vd, st.a, st.lam, st.alpha,
+        st.v, st.vd, st.a, st.lam, st.alpha, np.asarray(st.ctrl, dtype=float),
         [-1 if memory is None else len(memory)]]).astype(np.float64)
     head = np.array([seq, rows, cp.steps, base_its + cp.newton_iterations, cp.rejected,
                      cp.h_next, 0.0, len(payload)], dtype=np.float64)
@@ -678,7 +684,7 @@ def _read_checkpoint(f: h5py.File, s):
     HJ = take(16 * m).reshape(m, 4, 4)
     v, vd, a = take(nq), take(nq), take(nq)
     lam, alpha = take(nm), take(nq)
-    extra = {}
+    extra = {"ctrl": take(2 * _npid(s))}
     if memory is not None:
         from se3dyn.engine.memory import SolverMemory
 

@@ -5,6 +5,7 @@ time functions, beam sections, visual shapes and the example models (the lowest 
 from se3dyn.model.builder import ModelBuilder
 from se3dyn.model.specs import (
     PD,
+    PID,
     BeamSpec,
     BushingSpec,
     JointSpec,
@@ -14,5 +15,5 @@ from se3dyn.model.specs import (
     SpringDamperSpec,
 )
 
-__all__ = ["ModelBuilder", "Model", "NodeSpec", "JointSpec", "LoadSpec", "PD",
+__all__ = ["ModelBuilder", "Model", "NodeSpec", "JointSpec", "LoadSpec", "PD", "PID",
            "SpringDamperSpec", "BushingSpec", "BeamSpec"]

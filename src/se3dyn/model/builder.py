@@ -17,6 +17,7 @@ from se3dyn.model.specs import (
     INERTIA_RANGE,
     MAX_ABS,
     PD,
+    PID,
     BeamSpec,
     BushingSpec,
     DriveSpec,
@@ -29,6 +30,7 @@ from se3dyn.model.specs import (
     _bounded,
     _check_name,
     _kvec,
+    _limits,
     _rotation,
     _sym6,
     _unknown,
@@ -228,7 +230,8 @@ class ModelBuilder:
               axes: Any = None, normal: Any = None, pitch: Any = None, A: Any = None,
               stiffness: Any = None, reference: Any = None, damping: Any = None,
               actuator: Any = None, torque: Any = None, force: Any = None,
-              control: PD | None = None, at: Any = None, initial: Any = None) -> None:
+              control: PD | PID | None = None, at: Any = None,
+              initial: Any = None, armature: Any = None) -> None:
         """Add a kinematic joint ``H_B = H_A H_J`` (Eq. (7)) between nodes A and B, or between
         frames attached to them at the point ``at``.
 
@@ -259,8 +262,8 @@ class ModelBuilder:
         actuator : number, array (k,), TimeFunction or callable of t
             Actuator force/torque tau(t) on the relative coordinates (Eq. (66)). ``torque`` and
             ``force`` are aliases, for readability.
-        control : PD, optional
-            PD control law on the relative coordinates (abelian joints only).
+        control : PD or PID, optional
+            PD or PID control law on the relative coordinates (abelian joints only).
         at : array_like, shape (3,), optional
             Where the joint sits: a point in the inertial frame of the initial configuration.
             The joint then connects two frames rigidly attached to nodes A and B, both at ``at``
@@ -271,6 +274,11 @@ class ModelBuilder:
             centres), so a rigid body with several joints needs one node. Without ``at`` the
             joint acts between the node frames, as in the paper (``X_A = X_B = I``). A
             universal joint puts both hinges and its cross at ``at``.
+        armature : float or array_like (k,), optional
+            Abelian joints: inertia added to the joint's own coordinates (kg m^2 for an angle,
+            kg for a translation), the reflected inertia ``N^2 J_rotor`` of a motor's rotor
+            behind a gear of ratio N (MuJoCo's ``armature``): the kinetic energy
+            ``1/2 armature v^2`` and the force ``armature * v_dot`` on the coordinate.
         initial : float or array_like (k,), optional
             Abelian joints (hinge, prismatic, cylindrical, screw, universal): the values of
             the relative coordinates in the initial configuration, e.g. a hinge that starts at
@@ -312,7 +320,7 @@ class ModelBuilder:
         p = _vec(at, 3, item, "at", allow_none=True)
         if type == "universal":
             self._universal(name, node_a, node_b, axes, stiffness, reference, damping,
-                            act_field, act, control, p, initial)
+                            act_field, act, control, p, initial, armature)
             return
         given = {"axis": axis, "axes": axes, "normal": normal, "pitch": pitch, "A": A}
         jt = JOINT_TYPES[type]
@@ -326,10 +334,11 @@ class ModelBuilder:
                 raise ModelError(item, key, f"a value (required for a {type} joint)", None)
         A_ = jt.make_A(item, **params)
         self._add_joint(name, type, node_a, node_b, params, A_, stiffness, reference, damping,
-                        act_field, act, control, at=p, initial=initial)
+                        act_field, act, control, at=p, initial=initial, armature=armature)
 
     def _add_joint(self, name, type, node_a, node_b, params, A_, stiffness, reference, damping,
-                   act_field, act, control, composite=None, at=None, initial=None):
+                   act_field, act, control, composite=None, at=None, initial=None,
+                   armature=None):
         item = f"joint {name!r} ({type})"
         if name in self._joints:
             raise ModelError(f"joint {composite!r}" if composite else item, "name",
@@ -351,18 +360,14 @@ class ModelBuilder:
         tau = None if act is None else as_timefunc(act, item, act_field, k)
         pd = None
         if control is not None:
-            if not isinstance(control, PD):
-                raise ModelError(item, "control", "an se3dyn.PD(kp, kd, target) law", control)
+            if not isinstance(control, PD | PID):
+                raise ModelError(item, "control", "an se3dyn.PD(kp, kd, target) or "
+                                 "se3dyn.PID(kp, ki, kd, target) law", control)
             if not is_abelian(A_):
                 raise ModelError(item, "control", "an abelian joint (hinge, prismatic, "
-                                 "cylindrical, screw) for a PD law on relative coordinates",
+                                 "cylindrical, screw) for a control law on relative coordinates",
                                  type)
-            kp = _kvec(control.kp, k, item, "control.kp", nonneg=True)
-            kd = _kvec(control.kd, k, item, "control.kd", nonneg=True)
-            tgt = as_timefunc(control.target, item, "control.target", k)
-            rate = (None if control.target_rate is None
-                    else as_timefunc(control.target_rate, item, "control.target_rate", k))
-            pd = PD(kp, kd, tgt, rate)
+            pd = _control_law(control, k, item)
         init = None
         if initial is not None:
             if k == 0 or not is_abelian(A_):
@@ -371,11 +376,18 @@ class ModelBuilder:
                                  type, "the coordinates of this joint are log coordinates of "
                                  "its relative motion, zero in the initial configuration")
             init = _kvec(initial, k, item, "initial")
+        arm = None
+        if armature is not None:
+            if not is_abelian(A_):
+                raise ModelError(item, "armature", "an abelian joint (its coordinates' rates are "
+                                 "the rotor's)", type)
+            arm = _kvec(armature, k, item, "armature", nonneg=True)
         self._joints[name] = JointSpec(name, type, node_a, node_b, params, A_, K, a0, C, tau, pd,
-                                       composite, None if at is None else at.copy(), init)
+                                       composite, None if at is None else at.copy(), init,
+                                       armature=arm)
 
     def _universal(self, name, node_a, node_b, axes, stiffness, reference, damping, act_field,
-                   act, control, at=None, initial=None):
+                   act, control, at=None, initial=None, armature=None):
         item = f"joint {name!r} (universal)"
         try:
             ax = np.asarray(axes, dtype=float)
@@ -409,15 +421,23 @@ class ModelBuilder:
             sub_act = None if tau is None else Component(tau, i)
             sub_pd = None
             if control is not None:
-                sub_pd = PD(part(control.kp, i, "control.kp"), part(control.kd, i, "control.kd"),
-                            Component(as_timefunc(control.target, item, "control.target", 2), i),
-                            None if control.target_rate is None else Component(
-                                as_timefunc(control.target_rate, item, "control.target_rate",
-                                            2), i))
+                tgt = Component(as_timefunc(control.target, item, "control.target", 2), i)
+                rate = None if control.target_rate is None else Component(
+                    as_timefunc(control.target_rate, item, "control.target_rate", 2), i)
+                if isinstance(control, PID):
+                    lim = None if control.limit is None else part(control.limit, i,
+                                                                  "control.limit")
+                    sub_pd = PID(part(control.kp, i, "control.kp"),
+                                 part(control.ki, i, "control.ki"),
+                                 part(control.kd, i, "control.kd"), tgt, rate, lim)
+                else:
+                    sub_pd = PD(part(control.kp, i, "control.kp"),
+                                part(control.kd, i, "control.kd"), tgt, rate)
             self._add_joint(sname, "hinge", na, nb, {"axis": a}, A_, part(stiffness, i,
                             "stiffness"), part(reference, i, "reference"),
                             part(damping, i, "damping"), act_field, sub_act, sub_pd,
-                            composite=name, at=at, initial=part(initial, i, "initial"))
+                            composite=name, at=at, initial=part(initial, i, "initial"),
+                            armature=part(armature, i, "armature"))
             sub.append(sname)
         self._composites[name] = tuple(sub)
 
@@ -907,6 +927,22 @@ class ModelBuilder:
                      bushings=tuple(self._bushings.values()), beams=tuple(self._beams.values()),
                      markers=tuple(self._markers.values()),
                      drives=tuple(self._drives.values()))
+
+
+def _control_law(control: PD | PID, k: int, item: str) -> PD | PID:
+    """A joint's control law normalised to k coordinates: gains arrays (k,), targets time
+    functions, a PID's limit an array (k,) (inf: none)."""
+    kp = _kvec(control.kp, k, item, "control.kp", nonneg=True)
+    kd = _kvec(control.kd, k, item, "control.kd", nonneg=True)
+    tgt = as_timefunc(control.target, item, "control.target", k)
+    rate = (None if control.target_rate is None
+            else as_timefunc(control.target_rate, item, "control.target_rate", k))
+    if isinstance(control, PD):
+        return PD(kp, kd, tgt, rate)
+    ki = _kvec(control.ki, k, item, "control.ki", nonneg=True)
+    lim = (np.full(k, np.inf) if control.limit is None
+           else _limits(control.limit, k, item, "control.limit"))
+    return PID(kp, ki, kd, tgt, rate, lim)
 
 
 def marker_offset(node: NodeSpec, at: np.ndarray | None, offset: np.ndarray | None,

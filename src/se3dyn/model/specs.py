@@ -71,6 +71,51 @@ class PD:
 
 
 @dataclass(frozen=True)
+class PID:
+    """PID control law on the relative coordinates of an abelian joint, with saturation and
+    anti-windup.
+
+    ``tau = sat(-kp e - ki z - kd (alpha_dot - target_rate(t)))``, ``e = alpha - target(t)``,
+    ``z = int e dt`` (zero at the start of a run), ``sat`` clipping to ``[-limit, limit]``. The
+    integral is a state of the run, integrated inside every step's Newton iterations by the
+    trapezoidal rule (second order, like the rest of the step; ``_core/elements/
+    joint_force.hpp``); while the output is saturated and integrating would push it further,
+    the integral holds (conditional integration: no windup).
+
+    Parameters
+    ----------
+    kp, ki, kd : float or array_like, shape (k,)
+        Proportional (N m/rad or N/m), integral (per second) and derivative gains (>= 0).
+    target : number, array (k,), TimeFunction or callable of t
+        Target relative coordinates alpha_ref(t).
+    target_rate : same, optional
+        Target rates; derivative of ``target`` if omitted.
+    limit : float or array_like (k,), optional
+        Largest magnitude of the law's force or torque (> 0); None: no saturation.
+    """
+
+    kp: Any
+    ki: Any = 0.0
+    kd: Any = 0.0
+    target: Any = 0.0
+    target_rate: Any = None
+    limit: Any = None
+
+    def __post_init__(self):
+        for fld in ("kp", "ki", "kd"):
+            v = getattr(self, fld)
+            _kvec(v, int(np.size(v)) if isinstance(v, list | tuple | np.ndarray) else 1,
+                  "PID", fld, nonneg=True)
+        if self.limit is not None:
+            v = self.limit
+            _limits(v, int(np.size(v)) if isinstance(v, list | tuple | np.ndarray) else 1,
+                    "PID", "limit")
+        as_timefunc(self.target, "PID", "target")
+        if self.target_rate is not None:
+            as_timefunc(self.target_rate, "PID", "target_rate")
+
+
+@dataclass(frozen=True)
 class NodeSpec:
     """A node: a frame in SE(3) (Eq. (1)) with optional rigid-body inertia at it (Eq. (49)).
 
@@ -120,8 +165,9 @@ class JointSpec:
         Spring K (Eq. (62)) with reference alpha0, damper C (Eq. (64)).
     actuator : TimeFunction or None
         Actuator force/torque tau(t) (Eq. (66)), k components.
-    control : PD or None
-        PD law, normalised: kp, kd arrays (k,), target and target_rate TimeFunctions.
+    control : PD, PID or None
+        Control law, normalised: gains arrays (k,), target and target_rate TimeFunctions;
+        a PID's limit an array (k,) (inf: no saturation).
     composite : str or None
         Name of the composite joint (e.g. a universal joint) this joint belongs to.
     initial : ndarray, shape (k,) or None
@@ -144,7 +190,7 @@ class JointSpec:
     reference: np.ndarray
     damping: np.ndarray
     actuator: TimeFunction | None
-    control: PD | None
+    control: PD | PID | None
     composite: str | None = None
     at: np.ndarray | None = None
     initial: np.ndarray | None = None
@@ -153,6 +199,8 @@ class JointSpec:
     #: (4, 4) on its
     #: nodes, the initial joint transformation and A (6, k) in the attachment frame of node B.
     frames: tuple | None = None
+    #: (k,) inertia on the joint's coordinates (reflected rotor inertia), or None
+    armature: np.ndarray | None = None
 
     @property
     def k(self) -> int:
@@ -488,6 +536,19 @@ def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.nd
     if nonneg and np.any(a < 0):
         raise ModelError(item, fld, "non-negative values", v)
     return _bounded(a, item, fld, v)
+
+
+def _limits(v: Any, k: int, item: str, fld: str) -> np.ndarray:
+    """Output limits (k,) of a control law: positive numbers, inf for none."""
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(item, fld, f"a positive number or {k} (inf: no limit)", v) from None
+    if a.ndim == 0:
+        a = np.full(k, float(a))
+    if a.shape != (k,) or np.any(np.isnan(a)) or np.any(a <= 0):
+        raise ModelError(item, fld, f"a positive number or {k} (inf: no limit)", v)
+    return a
 
 
 def _sym6(v: Any, item: str, fld: str) -> np.ndarray:

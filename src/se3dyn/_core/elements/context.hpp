@@ -27,6 +27,7 @@ struct Context {
   const FrameState* S;
   const double* coords;  // (nq,) relative coordinates alpha (Eq. (60)) on joint unknowns
   const double* vq;      // (nq,) velocities v
+  const double* vdq = nullptr;  // (nq,) accelerations vd
   const double* lam;     // (nm,) multipliers
   const double* u;       // (nu,) time-dependent inputs at the iterate's time
   const double* gravity; // (3,) = u[0:3]
@@ -47,6 +48,7 @@ struct Context {
   bool phi_rows = true;
   double fscale = 0;     // magnitude of the forces entering r (for relative tolerances)
   double* energy;        // (N_ENERGY,) or nullptr
+  double* ctrl = nullptr;  // (2 npid,) PID states (z, e) of the iterate (joint_force.hpp) or nullptr
 
   // Where the velocity-level block at offset `off` of vals goes: into velv, or nowhere
   // (nullptr: not an index-2 matrix, or a block no index-2 product uses)

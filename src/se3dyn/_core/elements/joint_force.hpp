@@ -1,6 +1,16 @@
 // Force elements on the relative coordinates of a joint (Secs. 8-10): springs (Eq. (62)),
-// dampers (Eq. (64)), actuators tau(t) (Eq. (66)) and PD control laws
-// tau = -kp (alpha - alpha_ref(t)) - kd (v - rate_ref(t)).
+// dampers (Eq. (64)), actuators tau(t) (Eq. (66)) and PD and PID control laws
+// tau = -kp e - ki z - kd (v - rate_ref(t)), e = alpha - alpha_ref(t), z = int e dt, with an
+// optional saturation |tau| <= limit.
+//
+// PID: the integral z is a state carried from step to step, integrated by the trapezoidal
+// rule inside the step's Newton iterations: z_{n+1} = z_n + h/2 (e_n + e_{n+1}), implicit and
+// second order, A-stable (the rule the generalized-alpha scheme reduces to for a first-order
+// state without numerical damping). The inputs of the step hold (z_n, e_n, h/2) per
+// coordinate (slots `zslot`, written by the time loop, newton.hpp); the kernel writes the
+// iterate's (z_{n+1}, e_{n+1}) to Context::ctrl. d tau / d alpha = -(kp + ki h/2). Saturated:
+// tau = +-limit, no tangent, and the integral holds (z_{n+1} = z_n) while integrating would
+// push further into saturation (conditional integration: anti-windup).
 //
 // On abelian joints alpha are the relative coordinates of Eq. (60) (d alpha = d n_j), so the
 // tangent is diag(cK (K + kp) + cC (C + kd)) (Eqs. (63), (65)). On non-abelian joints springs
@@ -23,6 +33,10 @@ namespace se3dyn {
 struct JointForces : ElementBatch {
   std::vector<int> f;                       // (n,) joint frame
   std::vector<double> K, ref, C, kp, kd;    // (n, 6), first k used
+  std::vector<double> ki, lim;              // (n, 6) PID integral gains, output limits (inf)
+  std::vector<double> Ja;                   // (n, 6) armature: inertia on the coordinates
+  std::vector<int> zslot, zidx;             // (n,) PID: first input slot (3 per coordinate:
+                                            // z_n, e_n, h/2) and first state index, or -1
   std::vector<int> tau, pref, prate;        // (n,) first input slot (k consecutive) or -1
   std::vector<char> nonab;                  // (n,) spring on a non-abelian joint
   std::vector<double> Apinv;                // (n, 6, 6) A^+ (k x 6, ld 6)
@@ -54,6 +68,11 @@ struct JointForces : ElementBatch {
     C = t.real("C");
     kp = t.real("kp");
     kd = t.real("kd");
+    ki = t.real("ki");
+    lim = t.real("lim");
+    Ja = t.real("Ja");
+    zslot = t.ints<int>("zslot");
+    zidx = t.ints<int>("zidx");
     tau = t.ints<int>("tau");
     pref = t.ints<int>("pref");
     prate = t.ints<int>("prate");
@@ -71,7 +90,7 @@ struct JointForces : ElementBatch {
       int fr = f[e], k = T.k[fr], d = T.dof[fr];
       const double* al = X.coords + d;
       const double* v = X.vq + d;
-      double fs[6], g[6], tpd[6];
+      double fs[6], g[6], tpd[6], wk[6], wd[6];  // (wk, wd: the control law's tangent gains)
       for (int c = 0; c < k; ++c) fs[c] = K[6 * e + c] * (al[c] - ref[6 * e + c]);
       double TAi[36];
       if (nonab[e]) {
@@ -91,9 +110,12 @@ struct JointForces : ElementBatch {
         if (pref[e] >= 0) pd -= kp[6 * e + c] * (al[c] - X.u[pref[e] + c]);
         if (prate[e] >= 0) pd -= kd[6 * e + c] * (v[c] - X.u[prate[e] + c]);
         else pd -= kd[6 * e + c] * v[c];
+        wk[c] = kp[6 * e + c];
+        wd[c] = kd[6 * e + c];
+        if (zslot[e] >= 0) pd = pid(X, e, c, al[c], pd, wk, wd);
         double ta = tau[e] >= 0 ? X.u[tau[e] + c] : 0.0;
         tpd[c] = ta + pd;
-        g[c] = fs[c] + C[6 * e + c] * v[c] - tpd[c];
+        g[c] = fs[c] + C[6 * e + c] * v[c] - tpd[c] + Ja[6 * e + c] * X.vdq[d + c];
         X.r[d + c] += g[c];
       }
       X.scale(g, k);
@@ -115,13 +137,14 @@ struct JointForces : ElementBatch {
           X.energy[ELASTIC] += 0.5 * K[6 * e + c] * dl * dl;
           X.energy[P_ACTUATOR] += tpd[c] * v[c];
           X.energy[P_DISSIPATION] += C[6 * e + c] * v[c] * v[c];
+          X.energy[KINETIC] += 0.5 * Ja[6 * e + c] * v[c] * v[c];
         }
       }
       if (!X.vals || off[e] < 0) continue;
       double Bk[36] = {0}, Bc[36] = {0};
       for (int c = 0; c < k; ++c) {
-        Bk[7 * c] = X.cK * (K[6 * e + c] + kp[6 * e + c]);
-        Bc[7 * c] = X.cC * (C[6 * e + c] + kd[6 * e + c]);
+        Bk[7 * c] = X.cK * (K[6 * e + c] + wk[c]);
+        Bc[7 * c] = X.cC * (C[6 * e + c] + wd[c]);
       }
       if (nonab[e]) {
         // Bk = cK [T_A^-T (K - G) + diag(kp)] J, J = d alpha / d n_j = T_A^-1 A^+ T(A n_j) A
@@ -145,16 +168,38 @@ struct JointForces : ElementBatch {
         for (int i = 0; i < k; ++i)
           for (int c = 0; c < k; ++c) KG[6 * i + c] = (i == c ? K[6 * e + c] : 0.0) - G[6 * i + c];
         prod6(k, k, k, TAi, true, KG, false, M);
-        for (int c = 0; c < k; ++c) M[7 * c] += kp[6 * e + c];
+        for (int c = 0; c < k; ++c) M[7 * c] += wk[c];
         prod6(k, k, k, M, false, J, false, Bk);
         for (int i = 0; i < k; ++i)
           for (int c = 0; c < k; ++c) Bk[6 * i + c] *= X.cK;
       }
+      for (int c = 0; c < k; ++c) Bc[7 * c] += X.cM * Ja[6 * e + c];  // (velocity level)
       double Bt[36];
       for (int i = 0; i < 36; ++i) Bt[i] = Bk[i] + Bc[i];
       add_block(X.vals, off[e], k, k, Bt, 1.0);
       if (double* V = X.vel(off[e])) add_block(V, 0, k, k, Bc, 1.0);
     }
+  }
+
+  // The PID law of coordinate c of element e (the header): its force from the PD part `pd`,
+  // the tangent gains wk (d/d alpha) and wd (d/d v) set, (z_{n+1}, e_{n+1}) to X.ctrl
+  double pid(Context& X, int e, int c, double alpha, double pd, double* wk, double* wd) const {
+    const double* zs = X.u + zslot[e] + 3 * c;  // z_n, e_n, h/2
+    const double err = alpha - X.u[pref[e] + c];
+    const double gi = ki[6 * e + c], L = lim[6 * e + c];
+    double z = zs[0] + zs[2] * (zs[1] + err);
+    double out = pd - gi * z;
+    wk[c] += gi * zs[2];
+    if (std::fabs(out) > L) {
+      if (-gi * zs[2] * (zs[1] + err) * out > 0) z = zs[0];  // (anti-windup)
+      out = out > 0 ? L : -L;
+      wk[c] = wd[c] = 0.0;
+    }
+    if (X.ctrl) {
+      X.ctrl[2 * (zidx[e] + c)] = z;
+      X.ctrl[2 * (zidx[e] + c) + 1] = err;
+    }
+    return out;
   }
 
   // Gauss-Jordan inverse of a k x k matrix (ld 6) with partial pivoting

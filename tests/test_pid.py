@@ -1,0 +1,158 @@
+"""PID control laws with an integral state, saturation and anti-windup (sd.PID, issue 30).
+
+References are closed forms independent of se3dyn: a rotor of inertia J under
+``tau = -kp e - ki z - kd e'`` (``e = theta - r``, ``z' = e``) is the linear system
+``y' = A y``, ``y = (z, e, e')``, ``A = [[0, 1, 0], [0, 0, 1], [-ki/J, -kp/J, -kd/J]]``,
+solved exactly by ``scipy.linalg.expm``; saturated at ``|tau| = L`` it turns at the constant
+acceleration ``L / J``.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+import scipy.optimize as so
+
+import se3dyn as sd
+from se3dyn.errors import ModelError, Se3dynWarning
+from se3dyn.io.modelfile import load_model, save_model
+
+J, KP, KI, KD, R = 0.5, 20.0, 30.0, 4.0, 1.0
+A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-KI / J, -KP / J, -KD / J]])
+
+
+def _rotor(**law):
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("rotor", mass=1.0, inertia=(J, J, J))
+    mb.joint("axle", "hinge", "g", "rotor", axis=(0, 0, 1),
+             control=sd.PID(KP, KI, KD, target=R, **law))
+    return mb.build()
+
+
+def _run(model, t_end, h, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Se3dynWarning)
+        return sd.simulate(model, t_end, h, **kw)
+
+
+@pytest.mark.parametrize("formulation", ["index2", "index3"])
+def test_rotor_under_pid_follows_the_third_order_closed_form_at_order_2(formulation):
+    T = 2.0
+    y = sla.expm(A * T) @ np.array([0.0, -R, 0.0])
+    errs = []
+    for h in (1e-2, 5e-3, 2.5e-3, 1.25e-3):
+        res = _run(_rotor(), T, h, formulation=formulation)
+        st = res.stats["final_state"]
+        th, om = res.joint_coordinates("axle")[-1, 0], res.joint_velocities("axle")[-1, 0]
+        # the state carries the integral and the error: (z, e) at T
+        errs.append(max(abs(th - R - y[1]), abs(om - y[2]), abs(st.ctrl[0] - y[0]),
+                        abs(st.ctrl[1] - (th - R))))
+    orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert np.all(orders > 1.9), (errs, orders)
+    assert errs[-1] < 1e-6
+
+
+def test_integral_action_removes_the_steady_error_of_a_constant_load():
+    # a constant torque load: PD alone stops short by tau / kp, PID reaches the target
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("rotor", mass=1.0, inertia=(J, J, J))
+    mb.joint("axle", "hinge", "g", "rotor", axis=(0, 0, 1), torque=-3.0,
+             control=sd.PID(KP, KI, KD, target=R))
+    res = _run(mb.build(), 12.0, 1e-2)
+    assert abs(res.joint_coordinates("axle")[-1, 0] - R) < 1e-5
+    z = res.stats["final_state"].ctrl[0]
+    assert abs(-KI * z - 3.0) < 1e-4  # the integral carries the load
+    # statics: the integral action's steady state holds the coordinate at the target
+    st = sd.static_equilibrium(mb.build())
+    np.testing.assert_allclose(st.joint_coordinates("axle"), [R], atol=1e-12)
+    np.testing.assert_allclose(st.control_effort("axle"), [3.0], rtol=1e-10)
+
+
+def test_saturated_start_accelerates_at_the_limit_and_the_integral_holds():
+    L = 5.0
+    # saturated while the unsaturated law asks for more than L (z held at 0: anti-windup)
+    raw = lambda t: -KP * (L * t * t / (2 * J) - R) - KD * (L * t / J)  # noqa: E731
+    ts = so.brentq(lambda t: raw(t) - L, 1e-6, 2.0)
+    res = _run(_rotor(limit=L), 0.9 * ts, 1e-3)
+    th = res.joint_coordinates("axle")[:, 0]
+    np.testing.assert_allclose(th, L * res.t ** 2 / (2 * J), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(res.joint_torque("axle")[:, 0], L, rtol=1e-10)
+    assert res.stats["final_state"].ctrl[0] == 0.0  # no windup
+    # without anti-windup the integral would have reached int_0^t e dt (about -0.18 here)
+    e = L * res.t ** 2 / (2 * J) - R
+    assert abs(np.trapezoid(e, res.t)) > 0.1
+    # after the switch the law is linear again: the closed form from the switch on
+    T = 1.5
+    y = sla.expm(A * (T - ts)) @ np.array([0.0, L * ts * ts / (2 * J) - R, L * ts / J])
+    res = _run(_rotor(limit=L), T, 1e-3)
+    # (the step over the switch integrates the error over all of it: O(h) once)
+    assert abs(res.joint_coordinates("axle")[-1, 0] - R - y[1]) < 1e-4
+
+
+def test_pid_laws_in_model_files_and_universal_joints():
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("rotor", mass=1.0, inertia=(J, J, J))
+    mb.joint("axle", "hinge", "g", "rotor", axis=(0, 0, 1),
+             control=sd.PID(KP, KI, KD, target=sd.Ramp(1.0), limit=5.0))
+    mb.node("b2", (1, 0, 0), mass=1.0, inertia=(0.5, 0.5, 0.5))
+    mb.joint("u", "universal", "rotor", "b2", axes=[(1, 0, 0), (0, 1, 0)], at=(1, 0, 0),
+             control=sd.PID([1, 2], [3, 4], [0.5, 0.6], target=[0.1, 0.2]))
+    model = mb.build()
+    text = save_model(model)
+    assert "ki: [30.0]" in text and "limit: [5.0]" in text and "ki: [3.0, 4.0]" in text
+    back, _ = load_model(text)
+    a, b = _run(model, 0.3, 1e-2), _run(back, 0.3, 1e-2)
+    for x in ("H", "v", "vd", "lam"):
+        assert np.array_equal(getattr(a, x), getattr(b, x))
+    assert np.array_equal(a.stats["final_state"].ctrl, b.stats["final_state"].ctrl)
+
+
+def test_compiled_stepwise_and_resumed_runs_carry_the_integral_bit_for_bit():
+    model = _rotor(limit=8.0)
+    a = _run(model, 0.6, 1e-2)
+    b = _run(model, 0.6, 1e-2, output_step=1e-2)
+    assert np.array_equal(a.H, b.H) and np.array_equal(a.v, b.v)
+    mid = _run(model, 0.3, 1e-2).stats["final_state"]
+    c = _run(model, 0.6, 1e-2, initial_state=mid)
+    assert np.array_equal(c.H[-1], a.H[-1]) and np.array_equal(c.v[-1], a.v[-1])
+    assert np.array_equal(c.stats["final_state"].ctrl, a.stats["final_state"].ctrl)
+
+
+@pytest.mark.parametrize("law, field", [
+    (dict(kp=1.0, ki=-1.0), "ki"),
+    (dict(kp=1.0, limit=0.0), "limit"),
+    (dict(kp=1.0, limit=float("nan")), "limit"),
+])
+def test_bad_pid_laws_are_refused(law, field):
+    with pytest.raises(ModelError, match=f"PID.*{field}"):
+        sd.PID(**law)
+
+
+def test_kinematics_says_it_leaves_the_integral_out():
+    with pytest.warns(Se3dynWarning, match="integral part of the PID laws"):
+        sd.kinematics(_rotor(), {"axle": lambda t: math.sin(t)}, [0.0, 0.1])
+
+
+def test_armature_adds_inertia_to_the_joint_coordinate_only():
+    # a rotor J with armature a under a constant torque: theta = tau t^2 / (2 (J + a)); the
+    # kinetic energy counts the armature (work = 1/2 (J + a) w^2)
+    a, tau = 0.3, 2.0
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("rotor", mass=1.0, inertia=(J, J, J))
+    mb.joint("axle", "hinge", "g", "rotor", axis=(0, 0, 1), torque=tau, armature=a)
+    res = _run(mb.build(), 1.0, 1e-2)
+    np.testing.assert_allclose(res.joint_coordinates("axle")[:, 0],
+                               tau * res.t ** 2 / (2 * (J + a)), rtol=0, atol=1e-12)
+    w = res.joint_velocities("axle")[:, 0]
+    np.testing.assert_allclose(res.kinetic, 0.5 * (J + a) * w ** 2, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(res.work_actuators, res.kinetic, rtol=1e-9, atol=1e-12)
+    with pytest.raises(ModelError, match=r"joint 'b'.*armature.*abelian"):
+        mb.joint("b", "spherical", "g", "rotor", armature=0.1)
