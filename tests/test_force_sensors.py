@@ -14,7 +14,7 @@ import se3dyn as sd
 from se3dyn import lie
 from se3dyn.errors import ModelError, UnknownNameError
 from se3dyn.io.h5 import ResultsWriter, read_results
-from se3dyn.model.specs import PD
+from se3dyn.model.specs import PD, PID
 from se3dyn.results.channels import channel_unit, get_channel, list_channels
 
 GZ = 9.81
@@ -102,21 +102,23 @@ def test_actuator_work_is_the_integral_of_effort_times_rate():
                                    rtol=0, atol=1e-9 * np.abs(r.joint_torque(j)).max())
 
 
-def test_spring_force_of_a_mass_on_a_prismatic_joint_is_newtons_law():
+@pytest.mark.parametrize("armature", [0.0, 0.7])
+def test_spring_force_of_a_mass_on_a_prismatic_joint_is_newtons_law(armature):
     # a mass on a slanted rail with a spring and a damper, started away from its reference
-    # and moving: along the rail m a = m g . u - F, F the spring's force (tension positive)
+    # and moving: along the rail (m + J_a) a = m g . u - F, F the spring's force (tension
+    # positive), J_a the rail's armature (reflected inertia of a drive train, no weight)
     u = np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0)
     K, C, ref = 120.0, 1.5, 0.1
     mb = sd.ModelBuilder(gravity=(0, 0, -GZ))
     mb.node("ground", (0, 0, 0), fixed=True)
     mb.node("mass", (0.2, -0.1, 0.3), mass=M, inertia=(0.1, 0.1, 0.1), velocity=0.4 * u)
     mb.joint("rail", "prismatic", "ground", "mass", axis=u, stiffness=K, reference=ref,
-             damping=C)
+             damping=C, **({"armature": armature} if armature else {}))
     r = sd.simulate(mb.build(), t_end=1.0, step=1e-3, tol_residual=1e-13)
     F = r.spring_force("rail")[:, 0]
     a = r.node_acceleration("mass", "inertial")[:, :3] @ u
     scale = K * 0.2
-    np.testing.assert_allclose(F, M * (np.array([0, 0, -GZ]) @ u) - M * a, rtol=0,
+    np.testing.assert_allclose(F, M * (np.array([0, 0, -GZ]) @ u) - (M + armature) * a, rtol=0,
                                atol=1e-9 * scale)
     # from the positions and velocities of the mass, independently of the joint coordinates
     x = (r.node_position("mass") - r.node_position("mass")[0]) @ u
@@ -152,6 +154,33 @@ def test_spring_force_on_a_spherical_joint_acts_on_the_log_coordinates():
                                rtol=1e-14, atol=1e-15)
     np.testing.assert_allclose(r.joint_torque("pivot"), act - F, rtol=0,
                                atol=1e-9 * np.abs(F).max())
+
+
+def test_pid_effort_is_the_law_with_its_integral_state():
+    # a rod on a hinge under gravity, with armature and a spring, lifted to a ramped target by
+    # a PID law: the integral state is not in the rows, so the effort comes from the joint's
+    # equation of motion; it must be the law itself, -kp e - ki z - kd (v - rate), with
+    # z = int e dt by the trapezoidal rule over the stored steps (every step is stored), and
+    # its power must integrate to the run's actuator work
+    kp, ki, kd, Ja = 60.0, 40.0, 5.0, 0.05
+    r = sd.simulate(_rod(0.0, armature=Ja, stiffness=2.0,
+                         control=PID(kp=kp, ki=ki, kd=kd, target=sd.Ramp(0.5, 0.0, 0.5))),
+                    t_end=2.0, step=1e-3, tol_residual=1e-12)
+    act = r.actuator_effort("hinge")[:, 0]
+    al, v = r.joint_coordinates("hinge")[:, 0], r.joint_velocities("hinge")[:, 0]
+    e = al - 0.5 * np.clip(r.t / 0.5, 0.0, 1.0)
+    rate = np.where(r.t < 0.5, 1.0, 0.0)  # (the ramp's rate; at t = 0.5 s its left value)
+    law = -kp * e - ki * _trapezoid(r.t, e) - kd * (v - rate)
+    np.testing.assert_allclose(act, law, rtol=0, atol=1e-9 * np.abs(act).max())
+    assert abs(e[-1]) < 0.05 and abs(ki * _trapezoid(r.t, e)[-1]) > 1.0  # the integral acts
+    W = r.work_actuators
+    np.testing.assert_allclose(_trapezoid(r.t, act * v), W, rtol=0, atol=1e-9 * np.abs(W).max())
+    # at the end, nearly at rest: it holds the gravity moment and the spring
+    assert act[-1] == pytest.approx(M * GZ * 0.5 * L * np.cos(al[-1]) + 2.0 * al[-1], rel=1e-2)
+    d = r.system.joint_dofadr[r.system.joint_names.index("hinge")]
+    np.testing.assert_allclose(r.joint_torque("hinge")[:, 0],
+                               act - r.spring_force("hinge")[:, 0] - Ja * r.vd[:, d], rtol=0,
+                               atol=1e-12 * np.abs(act).max())
 
 
 # -------------------------------------------------------------------------------------------------

@@ -8,14 +8,20 @@ equations of motion (Eq. (36)) are ``A^T lambda + g_j = 0`` with the force eleme
     g_j = K (alpha - alpha_ref) + C v - tau(t) - PD,   PD = -kp (alpha - target(t))
                                                              - kd (v - target_rate(t))
 
-(springs Eq. (62), dampers Eq. (64), actuators Eq. (66); on non-abelian joints the spring acts
-on the log coordinates, ``T_A(alpha)^-T K (alpha - alpha_ref)``, see
-``se3dyn/_core/elements/joint_force.hpp``). Rather than writing these formulas a second time,
-each part is the residual that the same kernels give for a copy of the model holding that part
-only (:func:`part_model`), at the stored rows with zero multipliers
-(:func:`se3dyn.engine.system.residual_rows`): the joint rows then hold ``g_j`` of that part
-alone, exactly as the run evaluated it (time functions at the rows' times, the log coordinates
-and ``T_A`` of non-abelian joints included).
+(springs Eq. (62), dampers Eq. (64), actuators Eq. (66), PD and PID laws; a joint's armature
+adds the inertia ``J_a dv/dt``; on non-abelian joints the spring acts on the log coordinates,
+``T_A(alpha)^-T K (alpha - alpha_ref)``, see ``se3dyn/_core/elements/joint_force.hpp``).
+Rather than writing these formulas a second time, each part is the residual that the same
+kernels give for a copy of the model holding that part only (:func:`part_model`), at the
+stored rows with zero multipliers (:func:`se3dyn.engine.system.residual_rows`): the joint rows
+then hold ``g_j`` of that part alone, exactly as the run evaluated it (time functions at the
+rows' times, the log coordinates and ``T_A`` of non-abelian joints included). The armature
+(inertia, not a force) is in neither part.
+
+A PID law's integral ``z`` is a state of the step (``State.ctrl``), not stored in the rows, so
+the kernel cannot evaluate the law again at a stored row; the effort of a PID-controlled joint
+is taken from its equation of motion instead (:func:`pid_joints`; the results' accessor):
+``A^T lambda + spring + J_a dv/dt``, exact to the Newton tolerance of the step.
 
 **Point spring-dampers, in numpy.** Their kernel returns the two nodes' wrenches, not the scalar
 force of the line between the points, so :func:`point_spring` computes ``L``, ``dL/dt`` and
@@ -32,7 +38,8 @@ from dataclasses import replace
 
 import numpy as np
 
-__all__ = ["PARTS", "part_model", "has_part", "joint_force_rows", "point_spring"]
+__all__ = ["PARTS", "part_model", "has_part", "pid_joints", "joint_force_rows",
+           "point_spring"]
 
 #: The parts of a joint's force elements: ``"actuator"`` (time-function actuator and PD law)
 #: and ``"spring"`` (spring and damper).
@@ -44,26 +51,33 @@ _PART_SYSTEMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 def has_part(joint, part: str) -> bool:
     """Whether a :class:`~se3dyn.model.specs.JointSpec` has force elements of ``part``."""
-    if part == "actuator":
+    if part == "actuator":  # (control: a PD or a PID law)
         return joint.actuator is not None or joint.control is not None
     return bool(np.any(np.asarray(joint.stiffness) != 0) or np.any(np.asarray(joint.damping)
                                                                      != 0))
 
 
+def pid_joints(model) -> list[int]:
+    """Indices of the joints under a PID law (:class:`~se3dyn.model.specs.PID`)."""
+    return [j for j, js in enumerate(model.joints) if hasattr(js.control, "ki")]
+
+
 def part_model(model, part: str):
     """A copy of ``model`` whose joints keep only the force elements of ``part`` (the others
-    zero or absent), without the elements that never act on joint coordinates (loads, point
-    spring-dampers, bushings, beams) nor drives: the same nodes, joints and numbering of the
-    unknowns, so its residual's joint rows are ``g_j`` of that part alone."""
+    zero or absent, and no armature), without the elements that never act on joint
+    coordinates (loads, point spring-dampers, bushings, beams) nor drives: the same nodes,
+    joints and numbering of the unknowns, so its residual's joint rows are ``g_j`` of that part
+    alone."""
     if part not in PARTS:
         raise ValueError(f"part: expected one of {PARTS}, got {part!r}")
     joints = []
     for j in model.joints:
         if part == "actuator":
             z = np.zeros(j.k)
-            joints.append(replace(j, stiffness=z, reference=z.copy(), damping=z.copy()))
+            joints.append(replace(j, stiffness=z, reference=z.copy(), damping=z.copy(),
+                                  armature=None))
         else:
-            joints.append(replace(j, actuator=None, control=None))
+            joints.append(replace(j, actuator=None, control=None, armature=None))
     return replace(model, joints=tuple(joints), loads=(), springs=(), bushings=(), beams=(),
                    drives=())
 

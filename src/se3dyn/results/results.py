@@ -362,22 +362,45 @@ class Results:
         cache = self.__dict__.setdefault("_force_r", {})
         key = (id(s), part)
         if key not in cache:
-            cache[key] = joint_force_rows(s, part, self.t, self.H, self.alpha, self.v, self.vd)
+            rows = joint_force_rows(s, part, self.t, self.H, self.alpha, self.v, self.vd)
+            if part == "actuator":
+                rows = -rows  # (the residual holds -tau: the effort is positive along alpha)
+                self._pid_efforts(s, rows, name)
+            cache[key] = rows
         return cache[key]
 
+    def _pid_efforts(self, s, rows: np.ndarray, name: str) -> None:
+        """The efforts of the PID-controlled joints into ``rows`` (n, nq), in place: their
+        integral state is not in the stored rows, so from the joint coordinates' equations of
+        motion (Eq. (36)), ``A^T lambda + spring + J_a dv/dt`` (:mod:`se3dyn.results.forces`)."""
+        from se3dyn.results.forces import pid_joints
+
+        pids = pid_joints(s.model)
+        if not pids:
+            return
+        spring = self._force_rows("spring", name)
+        Ja = np.asarray(getattr(s, "dof_armature", np.zeros(s.nq)), dtype=float)
+        for j in pids:
+            d, k = int(s.joint_dofadr[j]), int(s.joint_k[j])
+            rows[:, d:d + k] = (self.joint_torque(s.joint_names[j]) + spring[:, d:d + k]
+                                + Ja[d:d + k] * np.asarray(self.vd, float)[:, d:d + k])
+
     def actuator_effort(self, name: str) -> np.ndarray:
-        """Generalized force that a joint's actuator (``actuator=``, Eq. (66)) and PD law
-        (``control=``) apply along its coordinates, shape (n, k): ``tau(t) - kp (alpha -
-        target(t)) - kd (v - target_rate(t))``, N m for an angle and N for a translation,
-        positive in the sense of increasing coordinates (as :meth:`drive_effort`).
+        """Generalized force that a joint's actuator (``actuator=``, Eq. (66)) and control law
+        (``control=``: PD or PID) apply along its coordinates, shape (n, k): ``tau(t) - kp
+        (alpha - target(t)) - kd (v - target_rate(t))`` (a PID law: ``- ki z`` more, saturated),
+        N m for an angle and N for a translation, positive in the sense of increasing
+        coordinates (as :meth:`drive_effort`).
 
         Exact: evaluated by the compiled element kernel at the stored rows (the time
-        functions at the rows' times), see :mod:`se3dyn.results.forces`. ``sum(effort * v)``
+        functions at the rows' times), see :mod:`se3dyn.results.forces`; under a PID law, whose
+        integral state the rows do not hold, from the joint's equation of motion (``A^T lambda
+        + spring + J_a dv/dt``, to the Newton tolerance of the step). ``sum(effort * v)``
         is the actuators' power, whose time integral is ``work_actuators`` (with the drives').
         Zero columns for a joint without actuator or PD law; for a composite joint its parts'
         values side by side (as :meth:`joint_coordinates`).
         """
-        return -self._joint_cols(name, self._force_rows("actuator", name))
+        return self._joint_cols(name, self._force_rows("actuator", name))
 
     def spring_force(self, name: str) -> np.ndarray:
         """Generalized force of a joint's spring and damper (``stiffness=``, ``damping=``,
@@ -390,7 +413,8 @@ class Results:
 
         Exact: evaluated by the compiled element kernel at the stored rows (see
         :mod:`se3dyn.results.forces`). Without drives on the joint, ``joint_torque =
-        actuator_effort - spring_force``. Zero columns for a joint without spring or damper.
+        actuator_effort - spring_force - J_a dv/dt`` (``J_a`` the joint's armature, if any).
+        Zero columns for a joint without spring or damper.
         """
         return self._joint_cols(name, self._force_rows("spring", name))
 
