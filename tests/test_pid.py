@@ -156,3 +156,90 @@ def test_armature_adds_inertia_to_the_joint_coordinate_only():
     np.testing.assert_allclose(res.work_actuators, res.kinetic, rtol=1e-9, atol=1e-12)
     with pytest.raises(ModelError, match=r"joint 'b'.*armature.*abelian"):
         mb.joint("b", "spherical", "g", "rotor", armature=0.1)
+
+
+# ---------------------------------------------------------------------------------------------
+# sampled (digital) PID laws: zero-order hold
+# ---------------------------------------------------------------------------------------------
+TS = 0.02
+
+
+def _sampled_rotor(limit=None):
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("rotor", mass=1.0, inertia=(J, J, J))
+    mb.joint("axle", "hinge", "g", "rotor", axis=(0, 0, 1),
+             control=sd.PID(KP, KI, KD, target=R, limit=limit, sample_time=TS))
+    return mb.build()
+
+
+def _discrete_closed_form(K, limit=math.inf):
+    """The rotor under the held law, sample to sample: exact for a constant torque over each
+    sample period (theta += Ts w + Ts^2 u / 2J, w += Ts u / J), the sampled law of PID's
+    docstring."""
+    th, om, integral = 0.0, 0.0, 0.0
+    out = [th]
+    for _ in range(K):
+        e = th - R
+        new = integral + TS * e
+        u = -KP * e - KI * new - KD * om
+        if abs(u) > limit:
+            if -KI * TS * e * u > 0:
+                new = integral
+            u = max(-limit, min(limit, u))
+        integral = new
+        th, om = th + TS * om + TS * TS * u / (2 * J), om + TS * u / J
+        out.append(th)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("limit", [None, 3.0])
+@pytest.mark.parametrize("formulation", ["index2", "index3"])
+def test_sampled_pid_matches_its_discrete_time_closed_form(limit, formulation):
+    ref = _discrete_closed_form(50, math.inf if limit is None else limit)
+    for m in (1, 2, 5):
+        res = _run(_sampled_rotor(limit), 1.0, TS / m, formulation=formulation)
+        th = res.joint_coordinates("axle")[::m, 0]
+        np.testing.assert_allclose(th, ref, rtol=0, atol=1e-12)
+        # the torque is held between samples
+        tau = res.joint_torque("axle")[:, 0]
+        for k in range(3):
+            np.testing.assert_allclose(tau[k * m + 1:(k + 1) * m], tau[k * m + 1], rtol=1e-12)
+
+
+def test_sampled_pid_on_a_pendulum_converges_at_order_2_between_samples():
+    def pend():
+        mb = sd.ModelBuilder(gravity=(0, -9.81, 0))
+        mb.node("g", fixed=True)
+        mb.node("bar", (0.5, 0, 0), mass=2.0, inertia=(0.01, 0.1, 0.1))
+        mb.joint("pin", "hinge", "g", "bar", axis=(0, 0, 1), at=(0, 0, 0),
+                 control=sd.PID(30.0, 20.0, 3.0, target=0.5, limit=12.0, sample_time=TS))
+        return mb.build()
+    ref = _run(pend(), 1.0, TS / 64).joint_coordinates("pin")[::64, 0]
+    errs = [np.abs(_run(pend(), 1.0, TS / m).joint_coordinates("pin")[::m, 0] - ref).max()
+            for m in (2, 4, 8)]
+    orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert np.all(orders > 1.9), (errs, orders)
+    res = _run(pend(), 1.0, TS / 4)
+    assert res.stats["energy_balance_error"] < 1e-3 * res.stats["energy_scale"]
+
+
+@pytest.mark.parametrize("kw, field", [
+    (dict(step=0.003), "step"),
+    (dict(step=0.01, tol=1e-6), "tol"),
+    (dict(step=0.01, t_start=0.005), "t_start"),
+])
+def test_sampled_laws_need_steps_that_land_on_the_samples(kw, field):
+    step = kw.pop("step")
+    with pytest.raises(ModelError, match=f"field '{field}'.*sampled PID law"):
+        sd.simulate(_sampled_rotor(), 0.1, step, **kw)
+
+
+def test_sampled_law_in_a_model_file():
+    text = save_model(_sampled_rotor(4.0))
+    assert "sample_time: 0.02" in text
+    back, _ = load_model(text)
+    a, b = _run(_sampled_rotor(4.0), 0.2, 0.01), _run(back, 0.2, 0.01)
+    assert np.array_equal(a.H, b.H)
+    with pytest.raises(ModelError, match="sample_time"):
+        sd.PID(1.0, sample_time=0.0)

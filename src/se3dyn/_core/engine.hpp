@@ -87,6 +87,8 @@ struct Engine {
   // PID laws (joint_force.hpp): per controlled coordinate the input slot of its state
   // (z_n, e_n, h/2: 3 slots), written by the time loop (Stepper::controller_inputs)
   std::vector<int> ctrl_slot;
+  std::vector<double> ctrl_ts;  // (npid,) sample time of a sampled law, 0 for a continuous one
+  std::vector<int> ctrl_dof;    // (npid,) the controlled unknown
   int npid() const { return int(ctrl_slot.size()); }
   static constexpr int DRIVE = 5;
   std::vector<int> drive;

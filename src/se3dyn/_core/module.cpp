@@ -90,6 +90,8 @@ void build(Engine& E, const nb::dict& d) {
   E.is_joint_frame = ivec<char>(d, "frame_joint");
   E.drive = ivec<int>(d, "drive");  // (nd, Engine::DRIVE)
   E.ctrl_slot = ivec<int>(d, "ctrl_slot");  // (npid,)
+  E.ctrl_ts = dvec(d, "ctrl_ts");            // (npid,) sample times, 0: continuous
+  E.ctrl_dof = ivec<int>(d, "ctrl_dof");     // (npid,) controlled unknowns
   T.prescribed.assign(E.nq, 0);
   T.pframe.assign(T.F, 0);
   for (int i = 0; i < E.ndrive(); ++i) T.prescribed[E.drive[Engine::DRIVE * i]] = 1;
@@ -208,7 +210,7 @@ NB_MODULE(_engine, m) {
           [](Engine& E, CArr Hn, CArr alpha_n, CArr n, CArr v, CArr vd, CArr lam, CArr u,
              DArr H, DArr r, DArr phi, DArr alpha, nb::object psi, nb::object vals,
              nb::object energy, double cM, double cC, double cK, bool index2, double cv,
-             bool all_logs, nb::object arhs) {
+             bool all_logs, nb::object arhs, nb::object ctrl) {
             int F = E.T.F, nq = E.nq, nm = E.nm;
             E.load_frames(cptr(Hn, 16 * F, "Hn"));
             Engine::Out o{ptr(r, nq, "r"), ptr(phi, nm, "phi"), nullptr, ptr(alpha, nq, "alpha"),
@@ -229,6 +231,10 @@ NB_MODULE(_engine, m) {
               DArr p = nb::cast<DArr>(arhs);
               o.arhs = ptr(p, nm, "arhs");
             }
+            if (!ctrl.is_none()) {  // the PID states (2 npid,) of the iterate
+              DArr p = nb::cast<DArr>(ctrl);
+              o.ctrl = ptr(p, 2L * E.npid(), "ctrl");
+            }
             double fs = E.evaluate(cptr(alpha_n, nq, "alpha_n"), cptr(n, nq, "n"),
                                    cptr(v, nq, "v"), cptr(vd, nq, "vd"), cptr(lam, nm, "lam"),
                                    cptr(u, E.nu, "u"), cM, cC, cK, index2, cv,
@@ -239,7 +245,8 @@ NB_MODULE(_engine, m) {
           },
           "Hn"_a, "alpha_n"_a, "n"_a, "v"_a, "vd"_a, "lam"_a, "u"_a, "H"_a, "r"_a, "phi"_a,
           "alpha"_a, "psi"_a.none(), "vals"_a.none(), "energy"_a.none(), "cM"_a, "cC"_a, "cK"_a,
-          "index2"_a, "cv"_a, "all_logs"_a, "arhs"_a.none() = nb::none())
+          "index2"_a, "cv"_a, "all_logs"_a, "arhs"_a.none() = nb::none(),
+          "ctrl"_a.none() = nb::none())
       .def("residual_rows", [](Engine& E, CArr H, CArr alpha, CArr v, CArr vd, CArr lam,
                                CArr U, DArr r, long rows) {
         // r (rows, nq): the residual of the equations of motion (Eq. (36)) of every stored row:
@@ -397,10 +404,20 @@ NB_MODULE(_engine, m) {
              double* o = ptr(out, S.ctrl_out.size(), "out");
              std::copy(S.ctrl_out.begin(), S.ctrl_out.end(), o);
            })
+      .def("sample_jump",
+           [](Stepper& S, CArr ctrl_old, CArr v, DArr vd, DArr a, DArr lam) {
+             // after a converged step (step()): the switch of the sampled PID laws at its end
+             // (Stepper::sample_jump), vd, a, lam in place; returns the power change
+             Engine& E = *S.E;
+             return S.sample_jump(cptr(ctrl_old, 2L * E.npid(), "ctrl_old"),
+                                  cptr(v, E.nq, "v"), ptr(vd, E.nq, "vd"), ptr(a, E.nq, "a"),
+                                  ptr(lam, E.nm, "lam"));
+           })
       .def("controller_inputs",
-           [](const Stepper& S, CArr ctrl, double h, DArr u) {
-             // u (nu,) with the PID states of ctrl (2 npid,) for a step of size h, in place
-             S.controller_inputs(cptr(ctrl, 2L * S.E->npid(), "ctrl"), h,
+           [](const Stepper& S, CArr ctrl, double h, double t1, DArr u) {
+             // u (nu,) with the PID states of ctrl (2 npid,) for a step of size h to t1, in
+             // place
+             S.controller_inputs(cptr(ctrl, 2L * S.E->npid(), "ctrl"), h, t1,
                                  ptr(u, S.E->nu, "u"));
            })
       .def("memory_size", [](const Stepper& S) { return S.memory_size(); })

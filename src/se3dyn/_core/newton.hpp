@@ -106,6 +106,7 @@ struct Stepper {
   SparseLDLT lux;
   SparseLU luf;            // split: the full matrix, once the split contracted too slowly
   bool full_mode = false;  // split: iterating with the full matrix (part of the memory)
+  bool factored_full = false;  // the mode of the last successful factorisation
   // split: luf is analysed when first needed (ensure_luf), from the full matrix's pattern
   // (full_pattern: colptr, rowind, src) and the groups of its unknowns
   bool luf_ready = false;
@@ -318,6 +319,7 @@ struct Stepper {
   // factorises), the first factorisation of a run makes it.
   int probe_reference() {
     full_mode = false;
+    factored_full = false;
     probe();
     set_dropped();
     int code = lu.factor(vals.data());
@@ -388,6 +390,7 @@ struct Stepper {
       }
       ++ref_serial;
     }
+    if (code == 0) factored_full = full_mode;
     return code;
   }
 
@@ -606,14 +609,54 @@ struct Stepper {
     double *H, *alpha, *v, *vd, *a, *lam, *acc, *ctrl;
   };
 
-  // The inputs of a step of size h: u (nu) with the PID states (z_n, e_n, h/2) in their slots
-  // (joint_force.hpp), from ctrl (2 npid)
-  void controller_inputs(const double* ctrl, double h, double* u) const {
+  // After a converged step: the sampled PID laws that sampled at its end (ctrl_out against
+  // the step's ctrl_old: their held outputs change) switch their forces there, a jump of the
+  // accelerations (the velocities and positions are continuous). The state at t_{n+1} is made
+  // that after the switch, as a run would start from it: vd += dvd, a += dvd, lam += dlam with
+  // [M Phi_q^T; Phi_q 0] (dvd, dlam) = (dtau on the controlled coordinates, 0), solved with
+  // the step's last factorisation (M + O(h) there: dvd to O(h), so the next steps keep
+  // order 2; without this, the generalized-alpha variable a lags the switch: order 1).
+  // Returns the change of the actuators' power at t_{n+1}, sum dtau v.
+  double sample_jump(const double* ctrl_old, const double* v, double* vd, double* a,
+                     double* lam) {
+    const int nq = E->nq, nm = E->nm;
+    std::fill(rhs.begin(), rhs.end(), 0.0);
+    double dp = 0.0;
+    bool any = false;
+    for (int i = 0; i < E->npid(); ++i) {
+      if (E->ctrl_ts[i] <= 0) continue;
+      const double du = ctrl_out[2 * i] - ctrl_old[2 * i];
+      if (du == 0.0) continue;
+      const int d = E->ctrl_dof[i];
+      rhs[d] = du;
+      dp += du * v[d];
+      any = true;
+    }
+    if (!any) return 0.0;
+    // (with the factors there are: a step's last iteration may have switched the mode for the
+    // next factorisation, fall_back)
+    const bool mode = full_mode;
+    full_mode = factored_full;
+    solve(rhs.data());
+    full_mode = mode;
+    const double* dvd = (index2 && nm > 0) ? dm.data() : rhs.data();  // (index 2: v follow m)
+    for (int i = 0; i < nq; ++i) {
+      vd[i] += dvd[i];
+      a[i] += dvd[i];
+    }
+    for (int i = 0; i < nm; ++i) lam[i] += rhs[nq + i];
+    return dp;
+  }
+
+  // The inputs of a step of size h to t1: u (nu) with the PID states in their slots
+  // (joint_force.hpp), from ctrl (2 npid): (z_n, e_n, h/2) of a continuous law, (u_hold, I,
+  // t1) of a sampled one
+  void controller_inputs(const double* ctrl, double h, double t1, double* u) const {
     for (int i = 0; i < E->npid(); ++i) {
       double* z = u + E->ctrl_slot[i];
       z[0] = ctrl[2 * i];
       z[1] = ctrl[2 * i + 1];
-      z[2] = 0.5 * h;
+      z[2] = E->ctrl_ts[i] > 0 ? t1 : 0.5 * h;
     }
   }
   struct RunResult {
@@ -656,7 +699,7 @@ struct Stepper {
       const double* u = U + (long)i * nu;
       if (G.npid() > 0) {  // (the table's rows stay as they are: a copy with the PID states)
         std::copy(u, u + nu, ubuf.begin());
-        controller_inputs(c.ctrl, h, ubuf.data());
+        controller_inputs(c.ctrl, h, t1, ubuf.data());
         u = ubuf.data();
       }
       for (int q = 0; q < nq; ++q)
@@ -680,6 +723,8 @@ struct Stepper {
         c.acc[3 + k] += 0.5 * h * (c.acc[k] + en[P_ACTUATOR + k]);
         c.acc[k] = en[P_ACTUATOR + k];
       }
+      // (a sampled law switched at t1: the state after it, and its power)
+      if (G.npid() > 0) c.acc[0] += sample_jump(c.ctrl, v.data(), vd.data(), a.data(), lam.data());
       c.acc[6] = h;
       c.acc[7] = t1;
       std::copy(alpha.begin(), alpha.end(), c.alpha);

@@ -83,15 +83,6 @@ def _drive_start(s: System, t0: float, u: np.ndarray) -> tuple[np.ndarray, np.nd
     return u[slots[:, 1]], u[slots[:, 2]]
 
 
-def _pid_start(s: System, u: np.ndarray) -> np.ndarray:
-    """The PID states (z, e) at the start of a run (2 npid,): no integral yet, the error of the
-    initial coordinates against the targets at t0."""
-    z = np.zeros(2 * len(s.inputs.pid_slots))
-    for i, (ref, dof) in enumerate(s.inputs.pid_ref):
-        z[2 * i + 1] = s.alpha0[dof] - u[ref]
-    return z
-
-
 def _check_drive_velocities(s: System, v: np.ndarray, values: np.ndarray, dropped) -> None:
     """The projected initial velocities must satisfy the velocity constraints with the driven
     rates kept: else the drivers ask for a motion the joints do not allow (a coordinate a
@@ -345,6 +336,16 @@ class GeneralizedAlpha:
                              "to have them projected (reported)")
             ev = evaluate(s, H, HJ, s.alpha0, zero, v, vd0, lam0, inputs, (1.0, 0.0, 0.0),
                           accel=True, ws=ws)
+        # the index-3 layout; kept only when the steps use it too
+        keep = not self.index2
+        stp = _stepper(s, False, dropped, ws, keep=keep)
+        ctrl = np.zeros(2 * len(s.inputs.pid_slots))
+        if ctrl.size:  # PID laws: their states at t0 (a sampled law's first sample), in force
+            stp.controller_inputs(ctrl, 0.0, float(t0), inputs["u"])
+            ctrl = evaluate(s, H, HJ, s.alpha0, zero, v, vd0, lam0, inputs, ws=ws).ctrl
+            stp.controller_inputs(ctrl, 0.0, float(t0), inputs["u"])
+            ev = evaluate(s, H, HJ, s.alpha0, zero, v, vd0, lam0, inputs, (1.0, 0.0, 0.0),
+                          accel=True, ws=ws)
         # [M Phi_q^T; Phi_q 0][vd; lam] = [-r; arhs] with the acceleration-level constraints
         # Phi_q vd = arhs (the time derivative of Phi_q v = 0), by the compiled sparse LU; the
         # driven accelerations given (vd0: their rows and columns the identity's, their terms
@@ -355,9 +356,6 @@ class GeneralizedAlpha:
             rhs[nq:] -= np.asarray(A0[nq:][:, dd] @ vd0[dd]).ravel()
             rhs[dd] = 0.0
         rhs[nq + dropped] = 0.0
-        # the index-3 layout; kept only when the steps use it too
-        keep = not self.index2
-        stp = _stepper(s, False, dropped, ws, keep=keep)
         code = stp.solve_values(ev.values, rhs)
         if code != 0 or not np.all(np.isfinite(rhs)):
             raise SimulationError(f"t={t0:.6g} (initial accelerations): the iteration matrix "
@@ -370,7 +368,7 @@ class GeneralizedAlpha:
         return State(t=t0, H=H, HJ=HJ, v=v, vd=vd, a=vd.copy(),
                      lam=rhs[nq:].copy(), alpha=s.alpha0.copy(), power=power,
                      dropped=dropped, solver=_ws(s, ws).memory(stp) if keep else None,
-                     ctrl=_pid_start(s, inputs["u"]))
+                     ctrl=ctrl)
 
     @staticmethod
     def _project_velocity(s: System, solver: LinearSolver, values: np.ndarray,
@@ -427,7 +425,7 @@ class GeneralizedAlpha:
         u = inputs["u"]
         ctrl = np.array(st.ctrl, dtype=float)
         if ctrl.size:  # the PID states of the step's start in their input slots
-            stp.controller_inputs(ctrl, float(h), u)
+            stp.controller_inputs(ctrl, float(h), float(t1), u)
         status, it, er, ep, nfac, en = stp.step(
             Hall, c(st.alpha, float), c(st.v, float), c(st.vd, float), c(a_n, float),
             c(st.lam, float), u, float(h), am, af, g, b, self.tol_residual,
@@ -451,15 +449,18 @@ class GeneralizedAlpha:
         # leaving (1/6 - beta - (alpha_m - alpha_f) / 2) h^3 q^(3), with h q^(3) measured by
         # a_{n+1} - a_n (0.084 h^3 q^(3) at rho_inf = 0.9, 1/12 at 1)
         err = (1.0 / 6.0 - b - 0.5 * (am - af)) * h * h * (a - a_n)
-        if ctrl.size:
+        jump = 0.0
+        if ctrl.size:  # (the state after the switch of sampled laws at t1: newton.hpp)
+            old = ctrl.copy()
             stp.ctrl_into(ctrl)
+            jump = stp.sample_jump(old, v, vd, a, lam)
         new = State(t=t1, H=H, HJ=HJ, v=v, vd=vd, a=a, lam=lam, alpha=alpha,
                     dropped=st.dropped, h_last=h, solver=w.memory(stp), ctrl=ctrl)
         # energies and powers of the converged iterate (the compiled loop's too)
         e = dict(kinetic=en[0], potential=en[1], spring=en[2], power=np.array(en[3:6]))
         p = e["power"]
         # trapezoidal accumulation of the powers (second order, like the integrator)
-        new = dataclasses.replace(new, power=p,
+        new = dataclasses.replace(new, power=p + np.array([jump, 0.0, 0.0]),
                                   work_act=st.work_act + 0.5 * h * (st.power[0] + p[0]),
                                   work_ext=st.work_ext + 0.5 * h * (st.power[1] + p[1]),
                                   dissipated=st.dissipated + 0.5 * h * (st.power[2] + p[2]))

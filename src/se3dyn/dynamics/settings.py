@@ -119,6 +119,7 @@ initial_velocities :
         if initial_state is not None:
             k0 = _check_initial_state(s, initial_state, t_start, t_end, step, adaptive) or k0
         _check_size(s, span, step, output_every, opt["output_step"], adaptive, bool(store))
+        _check_sampled(s, t_start, step, adaptive)
         if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool):
             rho_inf = float(rho_inf)
         integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,
@@ -134,6 +135,26 @@ initial_velocities :
                    condense=bool(condense), global_error=global_error,
                    initial_state=initial_state, first_step=first_step, k0=k0,
                    integrator=integ)
+
+
+def _check_sampled(s: System, t_start: float, step: float, adaptive: bool) -> None:
+    """Sampled PID laws (``PID(sample_time=T)``) sample at the times ``k T``, which must be
+    ends of steps: fixed steps that divide T, from a start on that grid."""
+    ts = np.asarray(getattr(s, "dof_ts", np.zeros(0)))
+    for d in np.flatnonzero(ts > 0):
+        T = float(ts[d])
+        item = f"the sampled PID law on {s.labels[d]}"
+        if adaptive:
+            raise ModelError("simulate", "tol", "fixed steps (no tol): " + item + " samples at "
+                             f"multiples of {T:g} s, which adaptive steps do not land on",
+                             "adaptive steps")
+        for fld, val, what in (("step", T, step), ("t_start", t_start, T)):
+            q = val / what
+            if abs(q - round(q)) > 1e-9 * max(1.0, abs(q)):
+                raise ModelError("simulate", fld, (f"a step that divides the sample time "
+                                 f"{T:g} s of {item}" if fld == "step" else
+                                 f"a start at a multiple of the sample time {T:g} s of {item}"),
+                                 step if fld == "step" else t_start)
 
 
 def _global_error_setting(val, adaptive: bool) -> bool:

@@ -134,6 +134,9 @@ def model_file(mf):
         F("limit", mf.OneOf((mf.Num(exclusive_minimum=0), mf.Vec(None, 1, 6))), None,
           "Largest magnitude of the law's force/torque (a PID law; anti-windup: the integral "
           "holds while saturated). Absent: no saturation."),
+        F("sample_time", mf.Num(exclusive_minimum=0), None, "A sampled PID law: evaluated "
+          "at the times k sample_time only and held between them (zero-order hold), the "
+          "integral summed; the step must divide it. Absent: the continuous law."),
         F("target", mf.TimeFunc(), 0, "Target relative coordinates alpha_ref(t)."),
         F("target_rate", mf.TimeFunc(), "d target/dt", "Target rates (the derivative of "
           "`target` when absent)."),
@@ -144,7 +147,8 @@ def model_file(mf):
 
         if "control" in kw:
             law = dict(kw["control"].values)
-            kw["control"] = PID(**law) if ("ki" in law or "limit" in law) else PD(**law)
+            pid = any(f in law for f in ("ki", "limit", "sample_time"))
+            kw["control"] = PID(**law) if pid else PD(**law)
         mb.joint(name, kw.pop("type"), kw.pop("a"), kw.pop("b"), **kw)
 
     return mf.ElementSection(
@@ -232,7 +236,8 @@ def _universal_out(mf, name: str, parts: tuple[str, ...], model) -> dict:
 
             d["control"].update(_pid_out(PID(np.r_[c1.kp, c2.kp], np.r_[c1.ki, c2.ki],
                                              np.r_[c1.kd, c2.kd], 0.0, None,
-                                             np.r_[c1.limit, c2.limit]), item))
+                                             np.r_[c1.limit, c2.limit], c1.sample_time),
+                                         item))
         if c1.target_rate is not None:
             d["control"]["target_rate"] = source(c1.target_rate, "control.target_rate")
     return d
@@ -243,6 +248,8 @@ def _pid_out(c, item: str) -> dict:
     if not hasattr(c, "ki"):
         return {}
     out = {"ki": [float(x) for x in c.ki]}
+    if c.sample_time is not None:
+        out["sample_time"] = float(c.sample_time)
     lim = np.asarray(c.limit, dtype=float)
     if np.all(np.isfinite(lim)):
         out["limit"] = [float(x) for x in lim]

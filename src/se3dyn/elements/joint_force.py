@@ -60,7 +60,7 @@ def tables(s, lay) -> dict:
     return dict(frame=(M + ids).astype(np.int64), K=pad("dof_stiffness"),
                 ref=pad("dof_reference"), C=pad("dof_damping"), kp=pad("dof_kp"),
                 kd=pad("dof_kd"), ki=pad("dof_ki"), lim=pad("dof_limit"),
-                Ja=pad("dof_armature"),
+                Ja=pad("dof_armature"), ts=pad("dof_ts"),
                 zslot=np.array([slots["pid"].get(j, -1) for j in ids.tolist()], np.int64),
                 zidx=np.array([first_pid.get(j, -1) for j in ids.tolist()], np.int64),
                 tau=np.array([slots["tau"].get(j, -1) for j in ids.tolist()], np.int64),

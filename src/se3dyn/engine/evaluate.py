@@ -75,6 +75,8 @@ class Evaluation:
     psi: np.ndarray | None = None
     energy: np.ndarray | None = None
     arhs: np.ndarray | None = None
+    #: (2 npid,) the PID laws' states of the iterate (``State.ctrl``, joint_force.hpp)
+    ctrl: np.ndarray | None = None
 
 
 def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n: np.ndarray,
@@ -133,16 +135,17 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
         vals = np.empty(lay.nvals2 if idx2 else lay.nvals)
     energy = np.empty(6)
     arhs = np.empty(s.nm)
+    ctrl = np.zeros(2 * len(s.inputs.pid_slots))
     c = (0.0, 0.0, 0.0) if coef is None else coef
     u = np.ascontiguousarray(inputs["u"], dtype=float)
     f = lambda x: np.ascontiguousarray(x, dtype=float)  # noqa: E731
     fs = eng.evaluate(Hall, f(alpha_n), f(n), f(v), f(vd), f(lam), u, Hout, r, phi, alpha,
                       psi, vals, energy, float(c[0]), float(c[1]), float(c[2]), idx2,
                       float(stab["cv"]) if idx2 else 0.0, bool(full_alpha),
-                      arhs if accel else None)
+                      arhs if accel else None, ctrl)
     ev = Evaluation(H=Hout[:s.M], HJ=Hout[s.M:], r=r, phi=phi, alpha=alpha, f_scale=fs,
                     values=vals, psi=psi if (velocity or idx2) else None, energy=energy,
-                    arhs=arhs if accel else None)
+                    arhs=arhs if accel else None, ctrl=ctrl)
     ev.cache = dict(args=(Hn, HJn, alpha_n, n, v, vd, lam, inputs), full_alpha=full_alpha)
     return ev
 

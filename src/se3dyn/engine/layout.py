@@ -203,6 +203,8 @@ class Layout:
             xiprod=np.ascontiguousarray(xiprod, np.int64).reshape(-1, 6),
             drive=_drive_table(s),
             ctrl_slot=np.array(s.inputs.pid_slots, np.int64),
+            ctrl_ts=np.array([s.dof_ts[d] for _, d in s.inputs.pid_ref], float),
+            ctrl_dof=np.array([d for _, d in s.inputs.pid_ref], np.int64),
             **_log_tables(s, self.frame_A, self.F, self._logs))
         rg = self._blocks_in_value_order()
         self.groups2, self.groups3 = self._lu_groups(rg, con_c, con_f)

@@ -136,6 +136,7 @@ class System(LayoutCounts):
     dof_ki: np.ndarray  # PID integral gains
     dof_limit: np.ndarray  # PID output limits (inf: none)
     dof_armature: np.ndarray  # inertia on joint coordinates (reflected rotor inertia)
+    dof_ts: np.ndarray  # sample times of sampled PID laws (0: continuous)
     dof_is_joint: np.ndarray  # (nq,) bool
     #: (nq,) relative coordinates in the initial configuration: the joints' ``initial`` values
     #: (absolute coordinates), zero elsewhere
@@ -375,6 +376,7 @@ def _dof_tables(joints, joint_dofadr: np.ndarray, nq: int) -> dict:
     dof_kd = np.zeros(nq)
     dof_ki = np.zeros(nq)
     dof_armature = np.zeros(nq)
+    dof_ts = np.zeros(nq)
     dof_limit = np.full(nq, np.inf)
     dof_is_joint = np.zeros(nq, dtype=bool)
     alpha0 = np.zeros(nq)
@@ -396,8 +398,10 @@ def _dof_tables(joints, joint_dofadr: np.ndarray, nq: int) -> dict:
             if hasattr(j.control, "ki"):  # PID
                 dof_ki[d] = j.control.ki
                 dof_limit[d] = j.control.limit
+                dof_ts[d] = j.control.sample_time or 0.0
     return dict(dof_stiffness=dof_K, dof_reference=dof_ref, dof_damping=dof_C, dof_kp=dof_kp,
-                dof_kd=dof_kd, dof_ki=dof_ki, dof_limit=dof_limit, dof_armature=dof_armature,
+                dof_kd=dof_kd, dof_ki=dof_ki, dof_limit=dof_limit, dof_ts=dof_ts,
+                dof_armature=dof_armature,
                 dof_is_joint=dof_is_joint,
                 alpha0=alpha0)
 

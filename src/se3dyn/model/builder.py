@@ -429,7 +429,8 @@ class ModelBuilder:
                                                                   "control.limit")
                     sub_pd = PID(part(control.kp, i, "control.kp"),
                                  part(control.ki, i, "control.ki"),
-                                 part(control.kd, i, "control.kd"), tgt, rate, lim)
+                                 part(control.kd, i, "control.kd"), tgt, rate, lim,
+                                 control.sample_time)
                 else:
                     sub_pd = PD(part(control.kp, i, "control.kp"),
                                 part(control.kd, i, "control.kd"), tgt, rate)
@@ -942,7 +943,8 @@ def _control_law(control: PD | PID, k: int, item: str) -> PD | PID:
     ki = _kvec(control.ki, k, item, "control.ki", nonneg=True)
     lim = (np.full(k, np.inf) if control.limit is None
            else _limits(control.limit, k, item, "control.limit"))
-    return PID(kp, ki, kd, tgt, rate, lim)
+    ts = None if control.sample_time is None else float(control.sample_time)
+    return PID(kp, ki, kd, tgt, rate, lim, ts)
 
 
 def marker_offset(node: NodeSpec, at: np.ndarray | None, offset: np.ndarray | None,

@@ -23,6 +23,7 @@ body with several joints then needs a single node; without ``at`` a joint is exa
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -92,6 +93,11 @@ class PID:
         Target rates; derivative of ``target`` if omitted.
     limit : float or array_like (k,), optional
         Largest magnitude of the law's force or torque (> 0); None: no saturation.
+    sample_time : float, optional
+        A sampled (digital) controller: the law is evaluated at the times ``k sample_time``
+        only, from the state there, and its output held until the next (zero-order hold),
+        with the integral summed as ``I_k = I_(k-1) + sample_time e_k``. The step of a run
+        must divide it (fixed steps). None: the continuous law.
     """
 
     kp: Any
@@ -100,6 +106,7 @@ class PID:
     target: Any = 0.0
     target_rate: Any = None
     limit: Any = None
+    sample_time: Any = None
 
     def __post_init__(self):
         for fld in ("kp", "ki", "kd"):
@@ -110,6 +117,12 @@ class PID:
             v = self.limit
             _limits(v, int(np.size(v)) if isinstance(v, list | tuple | np.ndarray) else 1,
                     "PID", "limit")
+        if self.sample_time is not None:
+            ts = self.sample_time
+            if (isinstance(ts, bool) or not isinstance(ts, int | float | np.floating)
+                    or not (math.isfinite(ts) and ts > 0)):
+                raise ModelError("PID", "sample_time", "a positive time in s (or None: a "
+                                 "continuous law)", ts)
         as_timefunc(self.target, "PID", "target")
         if self.target_rate is not None:
             as_timefunc(self.target_rate, "PID", "target_rate")

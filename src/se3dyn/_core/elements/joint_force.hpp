@@ -35,6 +35,7 @@ struct JointForces : ElementBatch {
   std::vector<double> K, ref, C, kp, kd;    // (n, 6), first k used
   std::vector<double> ki, lim;              // (n, 6) PID integral gains, output limits (inf)
   std::vector<double> Ja;                   // (n, 6) armature: inertia on the coordinates
+  std::vector<double> ts;                   // (n, 6) sample time of a sampled PID law, or 0
   std::vector<int> zslot, zidx;             // (n,) PID: first input slot (3 per coordinate:
                                             // z_n, e_n, h/2) and first state index, or -1
   std::vector<int> tau, pref, prate;        // (n,) first input slot (k consecutive) or -1
@@ -71,6 +72,7 @@ struct JointForces : ElementBatch {
     ki = t.real("ki");
     lim = t.real("lim");
     Ja = t.real("Ja");
+    ts = t.real("ts");
     zslot = t.ints<int>("zslot");
     zidx = t.ints<int>("zidx");
     tau = t.ints<int>("tau");
@@ -187,6 +189,7 @@ struct JointForces : ElementBatch {
     const double* zs = X.u + zslot[e] + 3 * c;  // z_n, e_n, h/2
     const double err = alpha - X.u[pref[e] + c];
     const double gi = ki[6 * e + c], L = lim[6 * e + c];
+    if (ts[6 * e + c] > 0) return sampled(X, e, c, err, pd, wk, wd);
     double z = zs[0] + zs[2] * (zs[1] + err);
     double out = pd - gi * z;
     wk[c] += gi * zs[2];
@@ -200,6 +203,33 @@ struct JointForces : ElementBatch {
       X.ctrl[2 * (zidx[e] + c) + 1] = err;
     }
     return out;
+  }
+
+  // A sampled PID law (the header of se3dyn.model.specs.PID): the output held over the step,
+  // u_hold (no tangent); at a sample time t_{n+1} = k T the law of the iterate's state, held
+  // from the next step on: I_k = I_(k-1) + T e_k, u_k = sat(-kp e_k - ki I_k - kd e'_k), the
+  // sum held while saturated outward (anti-windup). State slots: u_hold, I, t_{n+1}.
+  double sampled(Context& X, int e, int c, double err, double pd, double* wk,
+                 double* wd) const {
+    const double* zs = X.u + zslot[e] + 3 * c;
+    const double T = ts[6 * e + c], gi = ki[6 * e + c], L = lim[6 * e + c];
+    wk[c] = wd[c] = 0.0;
+    const double t1 = zs[2], k = std::round(t1 / T);
+    double u = zs[0], I = zs[1];
+    if (std::fabs(t1 - k * T) <= 1e-9 * std::fmax(T, std::fabs(t1))) {
+      double In = I + T * err, out = pd - gi * In;
+      if (std::fabs(out) > L) {
+        if (-gi * T * err * out > 0) In = I;
+        out = out > 0 ? L : -L;
+      }
+      u = out;
+      I = In;
+    }
+    if (X.ctrl) {
+      X.ctrl[2 * (zidx[e] + c)] = u;
+      X.ctrl[2 * (zidx[e] + c) + 1] = I;
+    }
+    return zs[0];
   }
 
   // Gauss-Jordan inverse of a k x k matrix (ld 6) with partial pivoting
