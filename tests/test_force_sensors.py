@@ -183,6 +183,25 @@ def test_pid_effort_is_the_law_with_its_integral_state():
                                atol=1e-12 * np.abs(act).max())
 
 
+def test_sampled_pid_effort_is_held_between_samples():
+    # a digital PID (sample time 10 steps): the effort is constant over each sample period and
+    # changes at the samples k T (a row at k T holds the new output); the run's actuator work
+    # is the held effort times the trapezoid of the rate, step by step
+    T, h = 0.01, 1e-3
+    r = sd.simulate(_rod(0.0, control=PID(kp=60.0, ki=40.0, kd=5.0, target=0.3, sample_time=T)),
+                    t_end=0.2, step=h)
+    act = r.actuator_effort("hinge")[:, 0]
+    period = np.floor(r.t / T + 1e-9).astype(int)
+    for p in range(int(period.max())):
+        held = act[period == p]
+        assert len(held) == 10 and np.all(held == held[0]), p
+    assert np.all(np.diff(act)[np.diff(period) > 0] != 0)  # a new output at every sample
+    v = r.joint_velocities("hinge")[:, 0]
+    W = np.concatenate([[0.0], np.cumsum(0.5 * np.diff(r.t) * act[:-1] * (v[1:] + v[:-1]))])
+    np.testing.assert_allclose(W, r.work_actuators, rtol=0,
+                               atol=1e-12 * np.abs(r.work_actuators).max())
+
+
 # -------------------------------------------------------------------------------------------------
 # point spring-dampers
 # -------------------------------------------------------------------------------------------------
