@@ -535,15 +535,21 @@ def _vec(v: Any, n: int, item: str, fld: str, *, allow_none: bool = False) -> np
     return _bounded(a, item, fld, v)
 
 
-def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.ndarray:
+def _k_array(v: Any, k: int, item: str, fld: str, expected: str) -> np.ndarray:
+    """``v`` as an array (k,): one number for all k, or k numbers (ModelError otherwise)."""
     try:
         a = np.asarray(v, dtype=float)
     except (TypeError, ValueError):
-        raise ModelError(item, fld, f"a number or {k} numbers", v) from None
+        raise ModelError(item, fld, expected, v) from None
     if a.ndim == 0:
         a = np.full(k, float(a))
     if a.shape != (k,):
-        raise ModelError(item, fld, f"a number or {k} numbers (one per relative coordinate)", v)
+        raise ModelError(item, fld, expected, v)
+    return a
+
+
+def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.ndarray:
+    a = _k_array(v, k, item, fld, f"a number or {k} numbers (one per relative coordinate)")
     if not np.all(np.isfinite(a)):
         raise ModelError(item, fld, "finite numbers", v)
     if nonneg and np.any(a < 0):
@@ -553,14 +559,10 @@ def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.nd
 
 def _limits(v: Any, k: int, item: str, fld: str) -> np.ndarray:
     """Output limits (k,) of a control law: positive numbers, inf for none."""
-    try:
-        a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError):
-        raise ModelError(item, fld, f"a positive number or {k} (inf: no limit)", v) from None
-    if a.ndim == 0:
-        a = np.full(k, float(a))
-    if a.shape != (k,) or np.any(np.isnan(a)) or np.any(a <= 0):
-        raise ModelError(item, fld, f"a positive number or {k} (inf: no limit)", v)
+    expected = f"a positive number or {k} (inf: no limit)"
+    a = _k_array(v, k, item, fld, expected)
+    if np.any(np.isnan(a)) or np.any(a <= 0):
+        raise ModelError(item, fld, expected, v)
     return a
 
 
