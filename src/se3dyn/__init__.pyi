@@ -12,6 +12,8 @@ from se3dyn.analysis.statics import StaticResult as StaticResult
 from se3dyn.analysis.statics import static_equilibrium as static_equilibrium
 from se3dyn.dynamics.integrator import GeneralizedAlpha as GeneralizedAlpha
 from se3dyn.dynamics.run import simulate as simulate
+from se3dyn.dynamics.simulator import Simulator as Simulator
+from se3dyn.dynamics.simulator import SimulatorState as SimulatorState
 from se3dyn.dynamics.state import State as State
 from se3dyn.engine.system import System as System
 from se3dyn.engine.system import compile_model as compile_model

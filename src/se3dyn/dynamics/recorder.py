@@ -228,12 +228,15 @@ class _Recorder:
                 self.first = self._block(0, 1)
             self._move_last_to_front()
 
-    def uncondense(self) -> None:
+    def uncondense(self, U: np.ndarray | None = None, inputs: dict | None = None) -> None:
         """The run goes on with the rigid joints kept: the rows held become the model's own
-        (their rigid joints' multipliers computed now), and so will the next ones."""
+        (their rigid joints' multipliers computed now, with the rows' inputs ``U`` (n, nu),
+        by default the model's, and the pending checkpoint's with ``inputs``), and so will the
+        next ones."""
         c, n, cap = self.cond, self.n, len(self.t)
         rows = c.expand_rows(self.H[:n], self.v[:n], self.vd[:n], self.alpha[:n], self.lam[:n])
-        c.fill_rows(self.t[:n], rows[0], rows[3], rows[1], rows[2], rows[4], self.full_ws)
+        c.fill_rows(self.t[:n], rows[0], rows[3], rows[1], rows[2], rows[4], self.full_ws,
+                    U=None if U is None else U[:n])
         for name, arr in zip(("H", "v", "vd", "alpha", "lam"), rows, strict=True):
             new = np.zeros((cap,) + arr.shape[1:])
             new[:n] = arr
@@ -241,11 +244,18 @@ class _Recorder:
         if self.pending is not None:
             self.pending = dataclasses.replace(self.pending,
                                                state=c.expand(self.pending.state,
-                                                              self.full_ws))
+                                                              self.full_ws, inputs))
         self.s = self.out_system = c.full
         self.cond = None
         s = self.s
         self.row_bytes = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
+
+    def truncate(self, n: int) -> None:
+        """Keep the first ``n`` rows only (a :class:`~se3dyn.dynamics.simulator.Simulator`
+        restored to an earlier state); the summary is made again from them."""
+        self.n = self.total = self.sent = n
+        self.summarized = 0
+        self.summary = dict(e0=None, balance=0.0, energy=0.0, constraint=0.0, iterations=0)
 
     def _move_last_to_front(self) -> None:
         """(store=False) Keep only the last row, at the front of the buffer."""

@@ -27,12 +27,16 @@ class _Inputs:
     ``u[0:3]`` is gravity; then per load its force (3) and torque (3) components, per actuated
     joint its k actuator values, per controlled joint its k PD targets and k target rates.
     ``kind`` (nu,) tells each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD
-    target rate), for load stepping in statics.
+    target rate), for load stepping in statics. ``names`` lists, per input a user may set
+    (:class:`se3dyn.dynamics.simulator.Simulator`), ``(kind, item, field, slot, k)``: kind
+    ``"gravity"``, ``"load"`` or ``"joint"``, the item's name, the field (``"force"``,
+    ``"torque"``, ``"actuator"``, ``"target"``, ``"target_rate"``; None for gravity).
     """
 
     def __init__(self, d: dict, model: Model):
         nidx = {n: i for i, n in enumerate(d["node_names"])}
         self.sources = []  # (slot, k, time function, item, what, its rate is the input)
+        self.names = [("gravity", None, None, 0, 3)]
         kind = [0, 0, 0]
         self.load_slots = []
         for ld in model.loads:
@@ -40,10 +44,12 @@ class _Inputs:
             if ld.force is not None:
                 fs = len(kind)
                 self.sources.append((fs, 3, ld.force, f"load '{ld.name}'", "force", False))
+                self.names.append(("load", ld.name, "force", fs, 3))
                 kind += [1] * 3
             if ld.torque is not None:
                 ts = len(kind)
                 self.sources.append((ts, 3, ld.torque, f"load '{ld.name}'", "torque", False))
+                self.names.append(("load", ld.name, "torque", ts, 3))
                 kind += [1] * 3
             i = nidx[ld.node]
             R0, x0 = d["node_H0"][i, :3, :3], d["node_H0"][i, :3, 3]
@@ -56,15 +62,18 @@ class _Inputs:
             if js.actuator is not None:
                 item = f"joint '{js.name}' actuator"
                 self.joint_slots.append((len(kind), k, "tau", j))
+                self.names.append(("joint", js.name, "actuator", len(kind), k))
                 self.sources.append((len(kind), k, js.actuator, item, "value", False))
                 kind += [2] * k
             if js.control is not None:
                 item = f"joint '{js.name}' control target"
                 tgt, rt = js.control.target, js.control.target_rate
                 self.joint_slots.append((len(kind), k, "ref", j))
+                self.names.append(("joint", js.name, "target", len(kind), k))
                 self.sources.append((len(kind), k, tgt, item, "target", False))
                 kind += [3] * k
                 self.joint_slots.append((len(kind), k, "rate", j))
+                self.names.append(("joint", js.name, "target_rate", len(kind), k))
                 if rt is None:
                     self.sources.append((len(kind), k, tgt, item, "target rate", True))
                 else:
