@@ -368,7 +368,7 @@ redundant, newton, initial_velocities, condense :
         st = state.state
         k = _check_initial_state(run.s, st, self.t_start, math.inf, self.h, False)
         if k != state.steps:
-            raise ModelError("Simulator.restore", "state", f"a state at t_start + steps step",
+            raise ModelError("Simulator.restore", "state", "a state at t_start + steps step",
                              f"steps={state.steps}, t={st.t!r}")
         self._load(st)
         self._k = k
@@ -443,8 +443,8 @@ redundant, newton, initial_velocities, condense :
         """The inputs of the rows ``n0 <= r < count`` the compiled loop stored (the steps at
         multiples of ``output_every`` and, ``last``, the step ``done``), kept beside them for
         the multipliers of condensed rigid joints."""
-        if count == n0:
-            return
+        if count == n0 or self._run.cond is None or not len(self._run.cond.rigid):
+            return  # (nothing reads them)
         if len(self._U_rows) < len(self._run.rec.t):
             self._U_rows = np.resize(self._U_rows, (len(self._run.rec.t), self._hold.size))
         oe = self._oe
