@@ -185,17 +185,23 @@ class _Recorder:
         sm["iterations"] = max(sm["iterations"], int(c[:, 6].max()))
         self.summarized = hi
 
-    def _block(self, lo: int, hi: int, stats: dict | None = None, copy: bool = True
-               ) -> Results:
-        c = self.scal[lo:hi]
-        cp = (lambda x: x[lo:hi].copy()) if copy else (lambda x: x[lo:hi])  # noqa: E731
-        rows = dict(t=cp(self.t), H=cp(self.H), v=cp(self.v), vd=cp(self.vd),
-                    lam=cp(self.lam), alpha=cp(self.alpha))
+    def _block(self, lo: int, hi: int, stats: dict | None = None, copy: bool = True,
+               rows: np.ndarray | None = None) -> Results:
+        """Rows ``lo <= r < hi`` (or the rows of the index array ``rows``) as results of the
+        model's system."""
+        if rows is not None:
+            c = self.scal[rows]
+            cp = lambda x: x[rows]  # noqa: E731  (a copy)
+        else:
+            c = self.scal[lo:hi]
+            cp = (lambda x: x[lo:hi].copy()) if copy else (lambda x: x[lo:hi])  # noqa: E731
+        arr = dict(t=cp(self.t), H=cp(self.H), v=cp(self.v), vd=cp(self.vd),
+                   lam=cp(self.lam), alpha=cp(self.alpha))
         if self.cond is not None:
-            rows["H"], rows["v"], rows["vd"], rows["alpha"], rows["lam"] = (
-                self.cond.expand_rows(rows["H"], rows["v"], rows["vd"], rows["alpha"],
-                                      rows["lam"]))
-        out = Results(system=self.out_system, **rows,
+            arr["H"], arr["v"], arr["vd"], arr["alpha"], arr["lam"] = (
+                self.cond.expand_rows(arr["H"], arr["v"], arr["vd"], arr["alpha"],
+                                      arr["lam"]))
+        out = Results(system=self.out_system, **arr,
                       kinetic=c[:, 0].copy(), potential=c[:, 1].copy(), spring=c[:, 2].copy(),
                       work_actuators=c[:, 3].copy(), work_loads=c[:, 4].copy(),
                       dissipation=c[:, 5].copy(), iterations=c[:, 6].astype(int),

@@ -30,6 +30,7 @@ from se3dyn.dynamics.settings import RunSettings, _check_initial_state
 from se3dyn.dynamics.state import State
 from se3dyn.engine.inputs import _sample, input_table, step_inputs
 from se3dyn.engine.system import System, system_of
+from se3dyn.engine.workspace import Workspace
 from se3dyn.errors import ModelError, NewtonError, SimulationError, close_matches
 from se3dyn.results.channels import escape_name, get_channel
 from se3dyn.results.results import Results
@@ -43,8 +44,12 @@ __all__ = ["Simulator", "SimulatorState"]
 #: taken, blocks start at multiples of it, as in ``simulate``).
 _TABLE = 1024
 
-_UNITS = {"gravity": "m/s^2", "force": "N", "torque": "N m", "actuator": "N m | N",
-          "target": "rad | m", "target_rate": "rad/s | m/s"}
+#: Channels that are stored scalars of a row: their column of the recorder's ``scal``
+#: (``se3dyn.dynamics.recorder.SCALARS``; -1: the time).
+_STORED = {"time": -1, "energy/kinetic": 0, "energy/potential": 1, "energy/spring": 2,
+           "energy/work_actuators": 3, "energy/work_loads": 4, "energy/dissipation": 5,
+           "solver/iterations": 6, "solver/residual": 7, "solver/constraint": 8}
+
 
 
 @dataclasses.dataclass(frozen=True)
@@ -229,6 +234,7 @@ redundant, newton, initial_velocities, condense :
                         float(s.length_scale), integ.max_iter, integ.newton == "modified", KMAX)
         self._readers: dict = {}
         self._rows = None  # the two-row results of read(), made when first needed
+        self._read_ws = None
 
     def _table_row(self, t: float) -> np.ndarray:
         """The inputs of a step to ``t`` one by one (where the block's table could not be
@@ -521,16 +527,17 @@ redundant, newton, initial_velocities, condense :
             return st
         return run.cond.expand(st, None, dict(u=self._u_cur.copy()))
 
-    def _block(self, lo: int, hi: int) -> Results:
-        """Rows ``lo <= r < hi`` of the recorder (the model's own), the multipliers of the
-        condensed rigid joints computed with the rows' own inputs when first asked for."""
+    def _block(self, lo: int, hi: int, rows: np.ndarray | None = None, ws=None) -> Results:
+        """Rows ``lo <= r < hi`` (or ``rows``) of the recorder as the model's own, the
+        multipliers of the condensed rigid joints computed with the rows' own inputs when
+        first asked for (in the workspace ``ws`` of the model's system, a new one if None)."""
         rec = self._run.rec
-        out = rec._block(lo, hi)
+        out = rec._block(lo, hi, rows=rows)
         cond = rec.cond
         if cond is not None and len(cond.rigid):
-            U = self._U_rows[lo:hi].copy()
+            U = self._U_rows[lo:hi].copy() if rows is None else self._U_rows[rows]
             out.defer_multipliers(lambda r: cond.fill_rows(r.t, r.H, r.alpha, r.v, r.vd,
-                                                           r.__dict__["_lam"], U=U))
+                                                           r.__dict__["_lam"], ws, U=U))
         return out
 
     def _reader(self, channel: str):
@@ -539,6 +546,12 @@ redundant, newton, initial_velocities, condense :
         entry of the state (the same number) found once through the same channel."""
         get_channel(self._two_rows(), channel)  # (an unknown name: its error, here)
         parts = str(channel).split("/")
+        col = _STORED.get(channel)
+        if col is not None:  # a stored scalar of the row: the number itself
+            rec = self._run.rec
+            if col < 0:
+                return lambda: float(self._acc[7])
+            return lambda: float(rec.scal[self._cur, col])
         if len(parts) == 4 and parts[0] == "joint" and parts[2] in ("alpha", "velocity"):
             s = self._model_system
             idx = np.arange(s.nq, dtype=float)[None]
@@ -561,13 +574,10 @@ redundant, newton, initial_velocities, condense :
         """The first row and the current one (channels relative to the first row, as
         displacements, read as in :meth:`results`)."""
         if self._rows is None:
-            rows = self._block(0, 1) if self._cur == 0 else None
-            if rows is None:
-                a, b = self._block(0, 1), self._block(self._cur, self._cur + 1)
-                rows = Results(system=a.system, **{
-                    f.name: np.concatenate([getattr(a, f.name), getattr(b, f.name)])
-                    for f in dataclasses.fields(Results) if f.name not in ("system", "stats")})
-            self._rows = rows
+            if self._read_ws is None:  # (the reads' own: results() may go to other threads)
+                self._read_ws = Workspace(self._model_system)
+            self._rows = self._block(0, 0, rows=np.array(sorted({0, self._cur})),
+                                     ws=self._read_ws)
         return self._rows
 
     def _restore_rows(self, state: SimulatorState) -> None:
