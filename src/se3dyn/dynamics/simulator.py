@@ -453,6 +453,9 @@ redundant, newton, initial_velocities, condense :
             return  # (nothing reads them)
         if len(self._U_rows) < len(self._run.rec.t):
             self._U_rows = np.resize(self._U_rows, (len(self._run.rec.t), self._hold.size))
+        if last and count - n0 == 1:  # (one step: its row)
+            self._U_rows[n0] = U[done - 1]
+            return
         oe = self._oe
         g = np.arange(((b0 + j) // oe + 1) * oe, b0 + done + 1, oe)
         if last and (b0 + done) % oe:
