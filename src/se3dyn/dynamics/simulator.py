@@ -311,7 +311,7 @@ redundant, newton, initial_velocities, condense :
         if spec is None:
             raise self._unknown_input(name)
         slot, k, rate = spec
-        if k == 1 and type(value) is float and math.isfinite(value):  # the controller's path
+        if k == 1 and isinstance(value, float) and math.isfinite(value):  # (a controller's)
             self._hold[slot] = value
             self._mask[slot] = True
         else:
