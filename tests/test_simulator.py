@@ -425,3 +425,26 @@ def test_a_failing_condensed_step_goes_on_with_the_rigid_joints_kept():
     # the motion after it: the unreduced model's, within the O(h^2) by which the index-2
     # projection of a body split into rigidly joined nodes differs (docs/design.md)
     assert np.abs(res.H - ref.H).max() < 1e-5
+
+
+def test_a_held_pd_target_is_a_fixed_set_point():
+    """A PD law whose model target ramps (rate 0.05 rad/s) held at 0.3 rad: the rotor comes to
+    rest at 0.3 (a held target's rate is 0); with the ramp's rate it would rest at
+    0.3 + kd rate / kp = 0.3025. Holding the rate too moves the rest point there."""
+    J, kp, kd = 0.05, 100.0, 5.0  # (critically damped: kd = 2 sqrt(kp J) = 4.47)
+    mb = sd.ModelBuilder(gravity=(0.0, 0.0, 0.0))
+    mb.node("ground", fixed=True)
+    mb.node("disc", mass=1.0, inertia=(J, J / 2, J / 2))
+    mb.joint("shaft", "hinge", "ground", "disc", axis=(1.0, 0.0, 0.0),
+             control=sd.PD(kp=kp, kd=kd, target=sd.Ramp(0.5, 0.0, 10.0)))
+    sim = sd.Simulator(mb.build(), step=1e-3)
+    sim.set_input("joint/shaft/target", 0.3)
+    sim.advance(1.5)
+    assert sim.read("joint/shaft/alpha/0") == pytest.approx(0.3, abs=1e-9)
+    assert abs(sim.read("joint/shaft/velocity/0")) < 1e-8
+    sim.set_input("joint/shaft/target_rate", 0.05)
+    sim.advance(3.0)
+    assert sim.read("joint/shaft/alpha/0") == pytest.approx(0.3 + kd * 0.05 / kp, abs=1e-9)
+    sim.clear_input("joint/shaft/target_rate")  # (the target still held: its rate 0 again)
+    sim.advance(4.5)
+    assert sim.read("joint/shaft/alpha/0") == pytest.approx(0.3, abs=1e-9)
