@@ -251,9 +251,11 @@ def test_a_held_input_acts_from_the_next_step_on():
     before = sim.read("joint/1/alpha/0"), sim.read("energy/work_actuators")
     sim.set_input("joint/1/actuator", 0.5)
     assert (sim.read("joint/1/alpha/0"), sim.read("energy/work_actuators")) == before
+    assert sim.input_value("joint/1/actuator") == [0.015]  # (the model's: this state's)
     w0 = sim.read("joint/1/velocity/0")
     sim.step()
     w1 = sim.read("joint/1/velocity/0")
+    assert sim.input_value("joint/1/actuator") == [0.5]
     # trapezoidal actuator work of the step: h/2 (p0 + p1), p1 = 0.5 w1 (the held torque)
     p0 = 0.015 * w0
     work = sim.read("energy/work_actuators") - before[1]

@@ -278,6 +278,14 @@ redundant, newton, initial_velocities, condense :
         return {n: np.array(v, dtype=float).reshape(self._inputs[n][1])
                 for n, v in self._held.items()}
 
+    def input_value(self, name: str) -> np.ndarray:
+        """The values (k,) of the input ``name`` with which the current state was computed (the
+        held value or the model's time function at its time; at the start the model's)."""
+        if name not in self._inputs:
+            raise self._unknown_input(name)
+        slot, k, _ = self._inputs[name]
+        return self._u_cur[slot:slot + k].copy()
+
     def step(self) -> None:
         """Take one step (to ``t + step``)."""
         self._go(self._k + 1)

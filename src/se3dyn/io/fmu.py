@@ -75,6 +75,7 @@ def export_fmu(model: Model | str | os.PathLike, path: str | os.PathLike, *,
     pythonfmu is not installed (``pip install se3dyn[fmu]``).
     """
     from se3dyn.dynamics.simulator import Simulator
+    from se3dyn.engine.system import system_of
     from se3dyn.io.modelfile import load_model, save_model
     from se3dyn.results.channels import channel_unit, list_channels
 
@@ -102,7 +103,7 @@ def export_fmu(model: Model | str | os.PathLike, path: str | os.PathLike, *,
     for ch in outputs:
         sim.read(ch)  # (an unknown channel: its error, naming it)
     units = {ch: channel_unit(ch, res) for ch in outputs}
-    inputs = _inputs(sim, units)
+    inputs = _inputs(sim, system_of(model), units)
     ident = re.sub(r"\W", "_", model.name or "model")
     ident = ident if re.match(r"[A-Za-z]", ident) else f"model_{ident}"
     cfg = dict(settings={**settings, "step": sim.h}, outputs=outputs,
@@ -141,17 +142,16 @@ def export_fmu(model: Model | str | os.PathLike, path: str | os.PathLike, *,
     return path
 
 
-def _inputs(sim, units: dict) -> list[tuple[str, list[str], list[float]]]:
-    """(name, component variable names, start values: the model's at t_start) of the
-    simulator's inputs; their units into ``units`` (by input name)."""
+def _inputs(sim, s, units: dict) -> list[tuple[str, list[str], list[float]]]:
+    """(name, component variable names, start values: the model's at t_start) of the inputs
+    of the simulator ``sim`` of the system ``s``; their units into ``units`` (by name)."""
     from se3dyn.results.channels import joint_units, unescape_name
 
-    s = sim._model_system
     k = np.asarray(s.joint_k, dtype=int)
     start, ju = np.cumsum(k) - k, joint_units(s)
     coord = {name: ju[start[j]:start[j] + k[j]] for j, name in enumerate(s.joint_names)}
     out = []
-    for name, (slot, n, _) in sim._inputs.items():
+    for name, n in sim.inputs.items():
         parts = name.split("/")
         if parts[0] != "joint":  # gravity, load forces and torques
             comps = [f"{name}/{c}" for c in "xyz"]
@@ -161,7 +161,7 @@ def _inputs(sim, units: dict) -> list[tuple[str, list[str], list[float]]]:
             base = (coord.get(unescape_name(parts[1])) or ("rad",))[0] or "rad"
             units[name] = {"actuator": "N m" if base == "rad" else "N", "target": base,
                            "target_rate": f"{base}/s"}[parts[-1]]
-        out.append((name, comps, [float(x) for x in sim._u_cur[slot:slot + n]]))
+        out.append((name, comps, [float(x) for x in sim.input_value(name)]))
     return out
 
 
