@@ -388,7 +388,7 @@ class GeneralizedAlpha:
 
     # -----------------------------------------------------------------------------------------
     def step(self, s: System, st: State, h: float, solver: LinearSolver | None = None,
-             ws=None) -> tuple[State, StepInfo]:
+             ws=None, inputs: dict | None = None) -> tuple[State, StepInfo]:
         """Advance one step of size h; raises :class:`NewtonError` when Newton fails.
 
         The Newton iterations run in the compiled engine (``se3dyn/_core/newton.hpp``, one
@@ -398,12 +398,14 @@ class GeneralizedAlpha:
         ``dv = gamma' dm``, ``dvd = beta' dm``. Rows: dynamics / beta' (Eq. (39)), constraints
         (Eq. (40)) and, for index 2, velocity constraints / gamma'; all O(1) whatever h.
         ``solver`` is accepted for compatibility and not used; ``ws`` is the
-        :class:`~se3dyn.engine.workspace.Workspace` of the run (the system's default one otherwise).
+        :class:`~se3dyn.engine.workspace.Workspace` of the run (the system's default one otherwise);
+        ``inputs``: those of the step (:func:`~se3dyn.engine.inputs.step_inputs`; the model's
+        at ``t + h`` by default, others from :class:`~se3dyn.dynamics.simulator.Simulator`).
         """
         am, af, g, b = self.params
         t1 = st.t + h
         try:
-            inputs = step_inputs(s, t1)
+            inputs = step_inputs(s, t1) if inputs is None else inputs
         except SimulationError as exc:
             raise SimulationError(f"step h={h:.6g} to {exc}") from None
         # a_n approximates vd(t_n + (alpha_m - alpha_f) h) (Arnold & Brüls 2007): after a
