@@ -130,6 +130,11 @@ def _check_one(path: str, rank_max: int) -> None:
               "coordinates: " + ", ".join(f"{d.name} on joint {d.joint!r} " + ", ".join(
                   f"coordinate {i} by {k}" for _, i, k in d.targets) for d in model.drives[:8])
               + (", ..." if len(model.drives) > 8 else "") + ")")
+    if model.couplings:
+        print(f"  couplings: {len(model.couplings)} (" + ", ".join(
+            f"{c.name}: {c.follower[0]!r} = {c.ratio:g} {c.leader[0]!r}"
+            + (f" + {c.offset:g}" if c.offset else "") for c in model.couplings[:8])
+            + (", ..." if len(model.couplings) > 8 else "") + ")")
     kinds: dict[str, int] = {}
     for j in model.joints:
         kinds[j.type] = kinds.get(j.type, 0) + 1

@@ -420,7 +420,7 @@ def _reduced_model(s, nidx: dict, root: np.ndarray, roots: list, rigid: np.ndarr
     return Model(nodes=tuple(nodes), joints=tuple(joints), loads=tuple(loads),
                  gravity=model.gravity, composites=model.composites, name=model.name,
                  springs=springs, visuals=(), beams=model.beams, bushings=bushings,
-                 drives=model.drives)
+                 drives=model.drives, couplings=model.couplings)
 
 
 def _maps(s, r, roots: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -403,6 +403,25 @@ class DriveSpec:
 
 
 @dataclass(frozen=True)
+class CouplingSpec:
+    """An exact linear coupling of two joint coordinates, ``alpha_b = ratio alpha_a + offset``
+    (gears, racks, belts, URDF ``<mimic>``; :meth:`se3dyn.ModelBuilder.coupling`).
+
+    Attributes
+    ----------
+    name : str
+    leader, follower : tuple (joint as given, coordinate index, compiled joint, index there)
+    ratio, offset : float
+    """
+
+    name: str
+    leader: tuple
+    follower: tuple
+    ratio: float
+    offset: float
+
+
+@dataclass(frozen=True)
 class Model:
     """A validated, immutable model. Build it with :class:`ModelBuilder`."""
 
@@ -421,6 +440,8 @@ class Model:
     markers: tuple[MarkerSpec, ...] = ()
     #: prescribed motion of joint coordinates
     drives: tuple[DriveSpec, ...] = ()
+    #: exact couplings of joint coordinates
+    couplings: tuple[CouplingSpec, ...] = ()
 
     def __post_init__(self):
         # immutable for good: the arrays of every spec are read-only (a model compiles once,
