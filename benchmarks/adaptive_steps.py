@@ -11,8 +11,8 @@ whose published reference is given to 1e-14):
 * the adaptive run (initial step min(1e-3, T / 1000), results on 200 output times by dense
   output);
 * its global error: the largest over the output times of the mass-weighted error of the node
-  frames (:meth:`se3dyn.dynamics.stepcontrol.ErrorNorm.frames`: per body the RMS over its mass of the
-  position errors of its material points; the norm ``tol`` is given in) against a fixed-step
+  frames (:meth:`se3dyn.dynamics.stepcontrol.ErrorNorm.frames`: per body the RMS over its mass
+  of the position errors of its material points; the norm ``tol`` is given in) against a fixed-step
   run at h = T / 64000 (T / 256000 for the oscillator and A01, whose tightest runs need
   40,000 steps: at T / 64000 the reference's own error was 43 % of A01's at tol = 1e-5);
 * ``sum``: the sum of the accepted local error estimates (``stats["error_estimate"]``);

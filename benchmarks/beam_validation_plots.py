@@ -3,9 +3,9 @@
 Writes, from fresh computations with se3dyn:
 
 * ``docs/beam-rollup.png``: a cantilever (L = 1, EI = 100) under a material end moment
-  M = f 2 pi EI / L, f = 0.25, 0.4, 0.75, 1 (GJ = 50), 16 elements, ``static_equilibrium``: the nodes against
-  the exact Euler-Bernoulli circles of radius EI / M (the roll-up benchmark, e.g. Simo & Vu-Quoc
-  1986, Sec. 7.1).
+  M = f 2 pi EI / L, f = 0.25, 0.4, 0.75, 1 (GJ = 50), 16 elements, ``static_equilibrium``: the
+  nodes against the exact Euler-Bernoulli circles of radius EI / M (the roll-up benchmark, e.g.
+  Simo & Vu-Quoc 1986, Sec. 7.1).
 * ``docs/beam-convergence.png``: (left) the small-tip-force deflection error against Timoshenko's
   P L^3/(3 EI) + P L/(GA) for n = 1 ... 32 elements, with the slope -2 line; (right) the flexible
   slider-crank (``examples/slider_crank_flexible.yaml``, 1 s, h = 1/6400 s): largest difference
@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def rollup(ax) -> None:
     L, EI, n = 1.0, 100.0, 16
-    for f, c in zip((0.25, 0.4, 0.75, 1.0), ("C0", "C1", "C2", "C3")):
+    for f, c in zip((0.25, 0.4, 0.75, 1.0), ("C0", "C1", "C2", "C3"), strict=True):
         M = f * 2 * math.pi * EI / L
         mb = sd.ModelBuilder()
         mb.node("root", fixed=True)

@@ -235,8 +235,8 @@ def fresh(code: str) -> dict:
 def interp_time(err: float, errs: list[float], times: list[float]) -> float | None:
     """Time at error ``err`` by log-log interpolation between runs with neighbouring errors
     (None outside their range)."""
-    pts = sorted(zip(errs, times))
-    for (e0, t0), (e1, t1) in zip(pts, pts[1:]):
+    pts = sorted(zip(errs, times, strict=False))
+    for (e0, t0), (e1, t1) in zip(pts, pts[1:], strict=False):
         if e0 <= err <= e1 and e1 > e0:
             w = (math.log(err) - math.log(e0)) / (math.log(e1) - math.log(e0))
             return math.exp(math.log(t0) + w * (math.log(t1) - math.log(t0)))
@@ -288,9 +288,9 @@ def main(argv: list[str]) -> int:
     print(f"  largest tip deflection {scale:.5f} m (se3dyn reference); tip at t = 1 s: se3dyn "
           f"{np.array2string(R_se3[-1], precision=6)}, EXUDYN "
           f"{np.array2string(R_exu[-1], precision=6)}")
-    print(f"  EXUDYN reference: its defaults with newton.absoluteTolerance = {REF_ABS_TOL:g} and the"
-          f" sparse solver; {ref_exu.get('step_index')} steps, {ref_exu.get('newton_iterations')}"
-          f" Newton iterations")
+    print(f"  EXUDYN reference: its defaults with newton.absoluteTolerance = {REF_ABS_TOL:g} and "
+          f"the sparse solver; {ref_exu.get('step_index')} steps, "
+          f"{ref_exu.get('newton_iterations')} Newton iterations")
     print(f"  the two references differ by {agree_end:.2e} of the largest deflection at t = 1 s, "
           f"{agree:.2e} at most over the run; wall {ref_se3['wall_s']:.1f} s (se3dyn), "
           f"{ref_exu['wall_s']:.1f} s (EXUDYN)")
@@ -321,7 +321,7 @@ def main(argv: list[str]) -> int:
                 continue
             walls, run = [], None
             try:
-                for k in range(a.repeats):
+                for _ in range(a.repeats):
                     t0 = time.perf_counter()
                     run = fn(n)
                     walls.append(run["wall_s"])

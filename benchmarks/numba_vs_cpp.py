@@ -91,8 +91,9 @@ def main(argv=None) -> int:
             rows["process"] = [run(case, engine, src, env, 5) for _ in range(3)]
             res[f"{case}/{engine}"] = rows
             p = rows["process"]
-            print(f"{case:13s} {engine:6s} cold first simulate {rows['cold']['first_simulate_s']:8.3f} s"
-                  f" (process {rows['cold']['process_wall_s']:7.2f} s) | new process first "
+            print(f"{case:13s} {engine:6s} cold first simulate "
+                  f"{rows['cold']['first_simulate_s']:8.3f} s (process "
+                  f"{rows['cold']['process_wall_s']:7.2f} s) | new process first "
                   f"simulate {statistics.median(x['first_simulate_s'] for x in p):7.3f} s, import "
                   f"{statistics.median(x['import_s'] for x in p):6.3f} s | warm "
                   f"{statistics.median(w for x in p for w in x['warm_s']):7.3f} s", flush=True)

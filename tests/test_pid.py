@@ -243,3 +243,67 @@ def test_sampled_law_in_a_model_file():
     assert np.array_equal(a.H, b.H)
     with pytest.raises(ModelError, match="sample_time"):
         sd.PID(1.0, sample_time=0.0)
+
+
+def _controlled_arm():
+    """Three links: a driven shoulder, a continuous PID elbow, a sampled PID wrist."""
+    mb = sd.ModelBuilder(gravity=(0, -9.81, 0))
+    mb.node("g", fixed=True)
+    for i in range(3):
+        mb.node(f"l{i}", (0.3 * i + 0.15, 0, 0), mass=1.0, inertia=(1e-3, 8e-3, 8e-3))
+    mb.joint("shoulder", "hinge", "g", "l0", axis=(0, 0, 1), at=(0, 0, 0))
+    mb.joint("elbow", "hinge", "l0", "l1", axis=(0, 0, 1), at=(0.3, 0, 0),
+             control=sd.PID(40.0, 30.0, 2.0, target=0.4, limit=10.0), armature=0.01)
+    mb.joint("wrist", "hinge", "l1", "l2", axis=(0, 0, 1), at=(0.6, 0, 0),
+             control=sd.PID(20.0, 10.0, 1.0, target=-0.3, sample_time=0.004))
+    mb.drive("motor", "shoulder", position=sd.Sine(0.5, 0.5))
+    return mb.build()
+
+
+def test_controlled_run_resumes_from_a_results_file_and_ignores_the_thread_count(tmp_path):
+    from se3dyn.io.h5 import ResultsWriter, read_results
+
+    s = sd.compile_model(_controlled_arm())
+    full = _run(s, 1.0, 1e-3)
+    path = tmp_path / "r.h5"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Se3dynWarning)
+        with ResultsWriter(path, s, flush_interval=0.0) as w:
+            sd.simulate(s, 0.6, 1e-3, on_rows=w.add_rows, store=False)
+        w = ResultsWriter.resume(path, s)
+        assert w.checkpoint.state.ctrl.size == 4
+        with w:
+            sd.simulate(s, 1.0, 1e-3, initial_state=w.checkpoint, on_rows=w.add_rows,
+                        store=False)
+    back = read_results(path)
+    for f in ("H", "v", "vd", "lam", "alpha"):
+        assert np.array_equal(getattr(back, f), getattr(full, f)), f
+    try:
+        for n in (1, 2):
+            sd.set_threads(n)
+            other = _run(sd.compile_model(_controlled_arm()), 1.0, 1e-3)
+            for f in ("H", "v", "vd", "lam"):
+                assert np.array_equal(getattr(other, f), getattr(full, f)), (n, f)
+    finally:
+        sd.set_threads()
+
+
+def test_simulator_steps_drives_and_control_laws_as_simulate_does():
+    model = _controlled_arm()
+    full = _run(model, 0.5, 1e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Se3dynWarning)
+        sim = sd.Simulator(model, step=1e-3)
+        sim.advance(0.2)
+        mid = sim.state
+        sim.advance(0.5)
+        a = sim.results()
+        other = sd.Simulator(model, step=1e-3)
+        other.restore(mid)
+        for _ in range(300):
+            other.step()
+        b = other.results()
+    for f in ("H", "v", "vd", "lam"):
+        assert np.array_equal(getattr(a, f), getattr(full, f)), f
+        assert np.array_equal(getattr(b, f)[-1], getattr(full, f)[-1]), f
+    assert np.array_equal(a.stats["final_state"].ctrl, full.stats["final_state"].ctrl)

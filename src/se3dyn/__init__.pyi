@@ -12,6 +12,8 @@ from se3dyn.analysis.statics import StaticResult as StaticResult
 from se3dyn.analysis.statics import static_equilibrium as static_equilibrium
 from se3dyn.dynamics.integrator import GeneralizedAlpha as GeneralizedAlpha
 from se3dyn.dynamics.run import simulate as simulate
+from se3dyn.dynamics.simulator import Simulator as Simulator
+from se3dyn.dynamics.simulator import SimulatorState as SimulatorState
 from se3dyn.dynamics.state import State as State
 from se3dyn.engine.system import System as System
 from se3dyn.engine.system import compile_model as compile_model
@@ -21,6 +23,7 @@ from se3dyn.errors import ModelError as ModelError
 from se3dyn.errors import NewtonError as NewtonError
 from se3dyn.errors import Se3dynError as Se3dynError
 from se3dyn.errors import SimulationError as SimulationError
+from se3dyn.io.fmu import export_fmu as export_fmu
 from se3dyn.model import examples as examples
 from se3dyn.model.builder import ModelBuilder as ModelBuilder
 from se3dyn.model.joint_types import JOINT_TYPES as JOINT_TYPES

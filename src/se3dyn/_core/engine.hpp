@@ -90,6 +90,15 @@ struct Engine {
   std::vector<double> ctrl_ts;  // (npid,) sample time of a sampled law, 0 for a continuous one
   std::vector<int> ctrl_dof;    // (npid,) the controlled unknown
   int npid() const { return int(ctrl_slot.size()); }
+  // couplings alpha_b = ratio alpha_a + offset (se3dyn.ModelBuilder.coupling): per coupling
+  // the leader's and the follower's unknowns, the ratio and the offset; the merges of the
+  // follower's matrix column and row into the leader's, (src, dst) values and factor, columns
+  // first, for the index-3 and the index-2 matrix (se3dyn.engine.layout)
+  std::vector<int> cpl_lead, cpl_follow;
+  std::vector<double> cpl_ratio, cpl_offset;
+  std::vector<long> merge3, merge2;  // (., 2) src, dst
+  std::vector<double> mfac3, mfac2;
+  int ncpl() const { return int(cpl_lead.size()); }
   static constexpr int DRIVE = 5;
   std::vector<int> drive;
   int ndrive() const { return int(drive.size() / DRIVE); }

@@ -92,9 +92,18 @@ void build(Engine& E, const nb::dict& d) {
   E.ctrl_slot = ivec<int>(d, "ctrl_slot");  // (npid,)
   E.ctrl_ts = dvec(d, "ctrl_ts");            // (npid,) sample times, 0: continuous
   E.ctrl_dof = ivec<int>(d, "ctrl_dof");     // (npid,) controlled unknowns
+  E.cpl_lead = ivec<int>(d, "cpl_lead");
+  E.cpl_follow = ivec<int>(d, "cpl_follow");
+  E.cpl_ratio = dvec(d, "cpl_ratio");
+  E.cpl_offset = dvec(d, "cpl_offset");
+  E.merge3 = ivec<long>(d, "merge3");
+  E.merge2 = ivec<long>(d, "merge2");
+  E.mfac3 = dvec(d, "mfac3");
+  E.mfac2 = dvec(d, "mfac2");
   T.prescribed.assign(E.nq, 0);
   T.pframe.assign(T.F, 0);
   for (int i = 0; i < E.ndrive(); ++i) T.prescribed[E.drive[Engine::DRIVE * i]] = 1;
+  for (int b : E.cpl_follow) T.prescribed[b] = 1;  // (a follower: like a driven unknown)
   for (int f = 0; f < T.F; ++f)
     for (int c = 0; c < T.k[f]; ++c) T.pframe[f] |= T.driven(f, c);
   for (nb::handle h : nb::cast<nb::list>(item(d, "elements"))) {
@@ -454,6 +463,7 @@ NB_MODULE(_engine, m) {
             if (vals.size() != S.vals.size()) throw std::invalid_argument("solve_values: vals");
             if (rhs.size() != size_t(S.N)) throw std::invalid_argument("solve_values: rhs");
             std::copy(vals.data(), vals.data() + vals.size(), S.vals.begin());
+            S.apply_merges();
             int code = S.factor();
             if (code == 0) S.solve(rhs.data());
             return code;

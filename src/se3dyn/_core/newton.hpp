@@ -122,6 +122,7 @@ struct Stepper {
   std::vector<double> energy = std::vector<double>(N_ENERGY);  // (N_ENERGY,) of the last iterate
   std::vector<double> effort;  // (nd,) the drivers' forces of the last iterate (take_efforts)
   std::vector<double> ctrl_out;  // (2 npid,) PID states (z, e) of the last iterate
+  std::vector<double> cforce;    // (ncpl,) the couplings' forces on their followers
   // solver memory (see the header): the matrix values of the last full factorisation, the
   // reference of the refactorisations' pivot sequence (none kept while it is the generic
   // matrix's, ref_probe), and a serial number of it (Python side). Never changed once made:
@@ -153,8 +154,11 @@ struct Stepper {
         dropped[E->nq + i] = 1;
         if (index2) dropped[E->nq + E->nm + i] = 1;
       }
-    // a driven unknown: its row and column the identity's (its value is the driver's: step())
+    // a driven unknown: its row and column the identity's (its value is the driver's: step());
+    // a coupling's follower likewise (its value follows the leader's: follow())
     for (int i = 0; i < E->ndrive(); ++i) dropped[E->drive[Engine::DRIVE * i]] = 1;
+    for (int b : E->cpl_follow) dropped[b] = 1;
+    cforce.assign(E->ncpl(), 0.0);
     effort.assign(E->ndrive(), 0.0);
     ctrl_out.assign(2L * E->npid(), 0.0);
     for (int c = 0; c < N; ++c)
@@ -365,6 +369,30 @@ struct Stepper {
                   nullptr};
     G.evaluate(an.data(), n.data(), v.data(), vd.data(), lam.data(), u.data(), 1.0, 0.7, 0.3,
                stab, 0.6, false, o);
+    apply_merges();
+  }
+
+  // Couplings (engine.hpp): the follower's column and row of the matrix added to the
+  // leader's (columns first: the (b, b) entry reaches (a, a) with ratio^2), before the
+  // identity replaces them (set_dropped); after every evaluation of the matrix, never on a
+  // solver memory's values (merged already)
+  void apply_merges() {
+    const bool two = index2 && vals.size() == size_t(E->nvals2);
+    const std::vector<long>& m = two ? E->merge2 : E->merge3;
+    const std::vector<double>& f = two ? E->mfac2 : E->mfac3;
+    for (size_t i = 0; i < f.size(); ++i) vals[m[2 * i + 1]] += f[i] * vals[m[2 * i]];
+  }
+
+  // The followers' increment, rate and acceleration from the leaders' (abelian joints:
+  // alpha = alpha_n + n): alpha_b = ratio alpha_a + offset and its derivatives
+  void follow(const double* alpha_n, double* n, double* v, double* vd) const {
+    for (int i = 0; i < E->ncpl(); ++i) {
+      const int a = E->cpl_lead[i], b = E->cpl_follow[i];
+      const double r = E->cpl_ratio[i];
+      n[b] = r * (alpha_n[a] + n[a]) + E->cpl_offset[i] - alpha_n[b];
+      v[b] = r * v[a];
+      vd[b] = r * vd[a];
+    }
   }
 
   // dropped (redundant) equations: identity rows and columns
@@ -448,6 +476,12 @@ struct Stepper {
   // force added, effort = r_d) are taken out of the residual, whose rows there are the
   // identity's (init); the convergence test sees the others only.
   void take_efforts() {
+    for (int i = 0; i < E->ncpl(); ++i) {  // the follower's equation added to the leader's
+      const int a = E->cpl_lead[i], b = E->cpl_follow[i];
+      cforce[i] = r[b];
+      r[a] += E->cpl_ratio[i] * r[b];
+      r[b] = 0.0;
+    }
     const int nd = E->ndrive();
     for (int i = 0; i < nd; ++i) {
       const int d = E->drive[Engine::DRIVE * i];
@@ -481,6 +515,7 @@ struct Stepper {
     double bp = (1 - am) / (b * h * h * (1 - af));
     double gp = g / (b * h);
     prescribe(alpha_n, u, gp, n, v, vd);
+    follow(alpha_n, n, v, vd);
     double cM = 1.0, cC = gp / bp, cK = 1.0 / bp, cv = 1.0 / gp;
     StepInfo info;
     int it = 0;
@@ -516,6 +551,7 @@ struct Stepper {
       o.vals = with_matrix ? vals.data() : nullptr;
       double fs = G.evaluate(alpha_n, n, v, vd, lam, u, cM, cC, cK, stab, cv, false, o);
       take_efforts();
+      if (with_matrix) apply_merges();
       o.vals = nullptr;
       measure(fs);
       if (!(std::isfinite(er) && std::isfinite(ep))) { info.status = NONFINITE; break; }
@@ -535,6 +571,7 @@ struct Stepper {
           o.vals = vals.data();
           G.evaluate(alpha_n, n, v, vd, lam, u, cM, cC, cK, stab, cv, false, o);
           take_efforts();
+          apply_merges();
           o.vals = nullptr;
         }
         info.factorisations++;
@@ -560,6 +597,7 @@ struct Stepper {
         vd[i] += bp * rhs[i];
       }
       for (int i = 0; i < nm; ++i) lam[i] += bp * rhs[nq + i];
+      follow(alpha_n, n, v, vd);
       ++it;
       if (dn_prev > 0 && dnmax > 1e-12 * nmax) {
         double theta = dnmax / dn_prev;

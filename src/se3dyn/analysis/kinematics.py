@@ -347,6 +347,10 @@ def kinematics(model_or_system: Model | System, drivers: Mapping | None, times, 
         dead point), with the time and the worst item.
     """
     s = _as_system(model_or_system, "kinematics")
+    if s.model.couplings:
+        raise ModelError("kinematics", "model", "a model without couplings (kinematics does not "
+                         "take them yet)", ", ".join(repr(c.name) for c in s.model.couplings),
+                         hint="simulate drives the mechanism with them (ModelBuilder.drive)")
     drv = _drivers(s, drivers)
     if np.any(s.dof_ki > 0):
         warnings.warn(Se3dynWarning(

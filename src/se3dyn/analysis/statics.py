@@ -205,7 +205,11 @@ class _Newton:
         while True:
             ev = evaluate(s, H, HJ, alpha, n, z, z, lam, inputs, None, full_alpha=True)
             dd, at = self.held
-            effort, r = ev.r[dd].copy(), ev.r.copy()
+            r = ev.r.copy()
+            ca, cb, cr = s.cpl_lead, s.cpl_follow, s.cpl_ratio
+            np.add.at(r, ca, cr * r[cb])  # (a coupling's follower on its leader: engine.hpp)
+            r[cb] = 0.0
+            effort = r[dd].copy()
             r[dd] = 0.0  # (a driven coordinate's row: its value, the driver's force)
             fs = max(ev.f_scale, 1e-300)
             er_vec = np.abs(r) / fs
@@ -232,11 +236,13 @@ class _Newton:
             S = np.block([[cs[:, None] * K * cs, cs[:, None] * PT * rs],
                           [rs[:, None] * B * cs, np.zeros((nm, nm))]])
             rhs = -np.concatenate([cs * r, rs * ev.phi])
+            _eliminate_followers(s, S, cs)
             S[dd] = 0.0  # driven coordinates: their rows the identity's, their values given
             S[dd, dd] = 1.0
             rhs[dd] = miss / cs[dd]
             d = self._linear_solve(S, rhs, it)
             dn = cs * d[:nq]
+            dn[cb] = cr * dn[ca]
             dl = rs * d[nq:]
             # a crude trust region: at most 1 rad (or L) per iteration
             big = float(np.abs(d[:nq]).max(initial=0.0))
@@ -403,6 +409,19 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
                         efforts=efforts)
 
 
+def _eliminate_followers(s: System, S: np.ndarray, cs: np.ndarray) -> None:
+    """The couplings' followers out of the scaled static tangent ``S`` (in place, as the time
+    loop's matrix, engine.hpp): a follower's column added to its leader's and its row to the
+    leader's (``n_b = ratio n_a``, in the scaled unknowns ``x = n / cs``), then the identity's."""
+    for a, b, r in zip(s.cpl_lead, s.cpl_follow, s.cpl_ratio, strict=True):
+        f = r * cs[a] / cs[b]
+        S[:, a] += f * S[:, b]
+        S[a, :] += f * S[b, :]
+        S[b, :] = 0.0
+        S[:, b] = 0.0
+        S[b, b] = 1.0
+
+
 def _mechanism_message(where: str, motion: str, extra: str = "") -> str:
     return (f"static_equilibrium: {where}: the static tangent matrix is singular - the "
             f"equilibrium is not unique or is unstable {extra}: a free motion has no stiffness "
@@ -421,10 +440,12 @@ def _stability(s: System, newton: _Newton, H, HJ, alpha, lam, inputs):
     ev = evaluate(s, H, HJ, alpha, z, z, z, lam, inputs, None, full_alpha=True)
     K, _, B = newton.blocks(ev, (0.0, 0.0, 1.0))
     cs, rs = newton.cs, newton.rs
-    dofs = newton.held[0]  # (driven and PID-held coordinates do not move)
-    held = np.zeros((len(dofs), s.nq))
+    dofs = newton.held[0]  # (driven and PID-held coordinates do not move; followers follow)
+    held = np.zeros((len(dofs) + len(s.cpl_follow), s.nq))
     held[np.arange(len(dofs)), dofs] = 1.0
-    _, N = _null_space(np.vstack([rs[:, None] * B * cs, held]), _RCOND)
+    held[len(dofs) + np.arange(len(s.cpl_follow)), s.cpl_follow] = 1.0
+    held[len(dofs) + np.arange(len(s.cpl_follow)), s.cpl_lead] = -s.cpl_ratio
+    _, N = _null_space(np.vstack([rs[:, None] * B * cs, held * cs]), _RCOND)
     if N.shape[1] == 0:
         return None, None
     Kr = N.T @ (cs[:, None] * K * cs) @ N

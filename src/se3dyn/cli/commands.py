@@ -19,6 +19,7 @@ traceback.
     se3dyn export RESULTS --csv FILE [CHANNEL...]
     se3dyn export RESULTS --gltf FILE.glb
     se3dyn view RESULTS [-o FILE.html] [--model MODEL] [--channel PATTERN] [--trace NODE]
+    se3dyn export-fmu MODEL -o FILE.fmu [--step H] [--out-channel CHANNEL...]
 """
 
 from __future__ import annotations
@@ -129,6 +130,11 @@ def _check_one(path: str, rank_max: int) -> None:
               "coordinates: " + ", ".join(f"{d.name} on joint {d.joint!r} " + ", ".join(
                   f"coordinate {i} by {k}" for _, i, k in d.targets) for d in model.drives[:8])
               + (", ..." if len(model.drives) > 8 else "") + ")")
+    if model.couplings:
+        print(f"  couplings: {len(model.couplings)} (" + ", ".join(
+            f"{c.name}: {c.follower[0]!r} = {c.ratio:g} {c.leader[0]!r}"
+            + (f" + {c.offset:g}" if c.offset else "") for c in model.couplings[:8])
+            + (", ..." if len(model.couplings) > 8 else "") + ")")
     kinds: dict[str, int] = {}
     for j in model.joints:
         kinds[j.type] = kinds.get(j.type, 0) + 1
@@ -789,6 +795,25 @@ def cmd_export(args) -> int:
     return 0
 
 
+def cmd_export_fmu(args) -> int:
+    """Export a model file as an FMI 2.0 co-simulation FMU (se3dyn.io.fmu): inputs are the
+    stepping simulator's inputs, outputs the channels given (default: joint coordinates and
+    rates, marker positions)."""
+    from se3dyn.errors import Se3dynError
+    from se3dyn.io.fmu import SIMULATOR_SETTINGS, export_fmu
+
+    model, settings = _load(args.model)
+    if args.step is not None:
+        settings["step"] = args.step
+    try:
+        path = export_fmu(model, args.output, outputs=args.outputs or None,
+                          **{k: v for k, v in settings.items() if k in SIMULATOR_SETTINGS})
+    except Se3dynError as exc:
+        raise _Usage(str(exc)) from None
+    print(f"wrote {path}")
+    return 0
+
+
 def _viewer(func: str, res, *args, **kwargs):
     """Call se3dyn.viewer.<func>; its input errors become one-line usage errors."""
     from se3dyn import viewer
@@ -1046,6 +1071,17 @@ def _view_args(vw) -> None:
     vw.set_defaults(func=cmd_view)
 
 
+def _export_fmu_args(ef) -> None:
+    ef.add_argument("model")
+    ef.add_argument("-o", "--output", required=True, help="the FMU file to write (.fmu)")
+    ef.add_argument("--step", type=float, help="the simulator's step (default: the model "
+                    "file's simulation step); communication steps must be multiples of it")
+    ef.add_argument("--out-channel", dest="outputs", action="append", metavar="CHANNEL",
+                    help="a results channel to output (repeatable; default: every joint "
+                    "coordinate and rate and every marker position)")
+    ef.set_defaults(func=cmd_export_fmu)
+
+
 # the subcommands: help line, and the declaration of their arguments
 _COMMANDS = {
     "check": ("validate model files; counts and rank analysis", _check_args),
@@ -1058,6 +1094,8 @@ _COMMANDS = {
     "plot": ("plot channels against time (PNG)", _plot_args),
     "export": ("export channels to CSV, or the motion to glTF", _export_args),
     "view": ("3D viewer page (HTML) of a results file", _view_args),
+    "export-fmu": ("export a model as an FMI 2.0 co-simulation FMU (pythonfmu)",
+                   _export_fmu_args),
 }
 
 

@@ -238,17 +238,19 @@ class Condensation:
         :attr:`se3dyn.results.results.Results.lam`), in blocks of rows."""
         self.fill_rows(res.t, res.H, res.alpha, res.v, res.vd, res.__dict__["_lam"])
 
-    def fill_rows(self, t, H, alpha, v, vd, lam, ws=None) -> None:
-        """The same for rows of the full system given as arrays (``lam`` (n, nm) in place)."""
+    def fill_rows(self, t, H, alpha, v, vd, lam, ws=None, U=None) -> None:
+        """The same for rows of the full system given as arrays (``lam`` (n, nm) in place);
+        ``U`` (n, nu): the rows' inputs (default: the model's time functions at ``t``)."""
         from se3dyn.engine.inputs import input_table
         from se3dyn.engine.workspace import Workspace
 
         ws = ws or Workspace(self.full)
         for lo in range(0, len(t), 4096):
             sl = slice(lo, lo + 4096)
-            U, _ = input_table(self.full, np.asarray(t[sl], float))
+            U_sl = (input_table(self.full, np.asarray(t[sl], float))[0] if U is None
+                    else np.ascontiguousarray(U[sl], float))
             self.rigid_multipliers(H[sl], self.joint_frames(H[sl]), alpha[sl], v[sl], vd[sl],
-                                   lam[sl], U, ws)
+                                   lam[sl], U_sl, ws)
 
     def rigid_multipliers(self, H, HJ, alpha, v, vd, lam, U, ws=None) -> None:
         """Fill in the multipliers of the condensed rigid joints of rows (n, ...) of the full
@@ -418,7 +420,7 @@ def _reduced_model(s, nidx: dict, root: np.ndarray, roots: list, rigid: np.ndarr
     return Model(nodes=tuple(nodes), joints=tuple(joints), loads=tuple(loads),
                  gravity=model.gravity, composites=model.composites, name=model.name,
                  springs=springs, visuals=(), beams=model.beams, bushings=bushings,
-                 drives=model.drives)
+                 drives=model.drives, couplings=model.couplings)
 
 
 def _maps(s, r, roots: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

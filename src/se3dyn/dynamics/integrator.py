@@ -83,6 +83,21 @@ def _drive_start(s: System, t0: float, u: np.ndarray) -> tuple[np.ndarray, np.nd
     return u[slots[:, 1]], u[slots[:, 2]]
 
 
+def _check_couplings(s: System) -> None:
+    """Every coupling must hold in the initial configuration: ``alpha_b0 = ratio alpha_a0 +
+    offset`` (the joints' ``initial`` values, zero by default)."""
+    for c, a, b, r, o in zip(s.model.couplings, s.cpl_lead, s.cpl_follow, s.cpl_ratio,
+                             s.cpl_offset, strict=True):
+        want = r * s.alpha0[a] + o
+        if abs(s.alpha0[b] - want) > 1e-9 * max(1.0, abs(want)):
+            raise ModelError(f"coupling '{c.name}'", "offset",
+                             f"{s.alpha0[b] - r * s.alpha0[a]:.9g}: the follower's initial "
+                             f"coordinate {s.alpha0[b]:.9g} minus ratio times the leader's "
+                             f"{s.alpha0[a]:.9g}", f"{o:.9g}",
+                             hint="give that offset, or the joints initial values that "
+                                  "satisfy the coupling")
+
+
 def _check_drive_velocities(s: System, v: np.ndarray, values: np.ndarray, dropped) -> None:
     """The projected initial velocities must satisfy the velocity constraints with the driven
     rates kept: else the drivers ask for a motion the joints do not allow (a coordinate a
@@ -308,6 +323,7 @@ class GeneralizedAlpha:
                              f"{len(names)} redundant: " + ", ".join(names[:12])
                              + (" ..." if len(names) > 12 else ""),
                              hint="remove the duplicated freedom or use redundant='drop'")
+        _check_couplings(s)
         v = np.zeros(nq)
         v[s.node_dofidx] = s.node_v0[s.node_free]
         H, HJ = s.node_H0.copy(), s.joint_H0.copy()
@@ -319,8 +335,11 @@ class GeneralizedAlpha:
         lam0 = np.zeros(nm)
         ev = evaluate(s, H, HJ, s.alpha0, zero, v, vd0, lam0, inputs, (1.0, 0.0, 0.0),
                       accel=True, ws=ws)
-        if nm and np.any(v != 0):
+        if nm and (np.any(v != 0) or s.cpl_follow.size):
+            rates = v[dd].copy()
             v = self._project_velocity(s, LinearSolver(s, drop=dropped), ev.values, v)
+            v[dd] = rates  # (exactly: the projection holds them to its round-off)
+            v[s.cpl_follow] = s.cpl_ratio * v[s.cpl_lead]  # (exactly, as the steps keep it)
             _check_drive_velocities(s, v, ev.values, dropped)
             if self.initial_velocities == "strict":
                 changed = _velocity_changes(s, v)
@@ -351,6 +370,9 @@ class GeneralizedAlpha:
         # driven accelerations given (vd0: their rows and columns the identity's, their terms
         # in the residual and on the right-hand side)
         rhs = np.concatenate([-ev.r, ev.arhs])
+        ca, cb, cr = s.cpl_lead, s.cpl_follow, s.cpl_ratio
+        np.add.at(rhs, ca, cr * rhs[cb])  # (a follower's equation on its leader's: engine.hpp)
+        rhs[cb] = 0.0
         if dd.size:
             A0 = LinearSolver(s, drop=dropped).matrix(ev.values)
             rhs[nq:] -= np.asarray(A0[nq:][:, dd] @ vd0[dd]).ravel()
@@ -361,6 +383,7 @@ class GeneralizedAlpha:
             raise SimulationError(f"t={t0:.6g} (initial accelerations): the iteration matrix "
                                   f"is singular: {_singular_start_cause(s)}")
         vd = rhs[:nq] + vd0 if dd.size else rhs[:nq].copy()  # (-0.0 stays -0.0 without drives)
+        vd[cb] = cr * vd[ca]
         power = ev.energy[3:6].copy()  # powers at t0 (velocity-level: vd does not enter)
         if dd.size:  # and the drivers' (their forces at the consistent state, as newton.hpp)
             ev1 = evaluate(s, H, HJ, s.alpha0, zero, v, vd, rhs[nq:], inputs, ws=ws)
@@ -384,11 +407,12 @@ class GeneralizedAlpha:
         A = sp.csr_matrix(A) if sp.issparse(A) else A
         nq = s.nq
         return project_velocities(s, A[:nq, :nq], A[nq:, :nq], v0, dropped=solver.drop,
-                                  prescribed=s.drive_dof)[0]
+                                  prescribed=s.drive_dof, couplings=(
+                                      s.cpl_lead, s.cpl_follow, s.cpl_ratio))[0]
 
     # -----------------------------------------------------------------------------------------
     def step(self, s: System, st: State, h: float, solver: LinearSolver | None = None,
-             ws=None) -> tuple[State, StepInfo]:
+             ws=None, inputs: dict | None = None) -> tuple[State, StepInfo]:
         """Advance one step of size h; raises :class:`NewtonError` when Newton fails.
 
         The Newton iterations run in the compiled engine (``se3dyn/_core/newton.hpp``, one
@@ -398,12 +422,14 @@ class GeneralizedAlpha:
         ``dv = gamma' dm``, ``dvd = beta' dm``. Rows: dynamics / beta' (Eq. (39)), constraints
         (Eq. (40)) and, for index 2, velocity constraints / gamma'; all O(1) whatever h.
         ``solver`` is accepted for compatibility and not used; ``ws`` is the
-        :class:`~se3dyn.engine.workspace.Workspace` of the run (the system's default one otherwise).
+        :class:`~se3dyn.engine.workspace.Workspace` of the run (the system's default one otherwise);
+        ``inputs``: those of the step (:func:`~se3dyn.engine.inputs.step_inputs`; the model's
+        at ``t + h`` by default, others from :class:`~se3dyn.dynamics.simulator.Simulator`).
         """
         am, af, g, b = self.params
         t1 = st.t + h
         try:
-            inputs = step_inputs(s, t1)
+            inputs = step_inputs(s, t1) if inputs is None else inputs
         except SimulationError as exc:
             raise SimulationError(f"step h={h:.6g} to {exc}") from None
         # a_n approximates vd(t_n + (alpha_m - alpha_f) h) (Arnold & Brüls 2007): after a

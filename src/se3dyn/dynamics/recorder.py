@@ -185,17 +185,23 @@ class _Recorder:
         sm["iterations"] = max(sm["iterations"], int(c[:, 6].max()))
         self.summarized = hi
 
-    def _block(self, lo: int, hi: int, stats: dict | None = None, copy: bool = True
-               ) -> Results:
-        c = self.scal[lo:hi]
-        cp = (lambda x: x[lo:hi].copy()) if copy else (lambda x: x[lo:hi])  # noqa: E731
-        rows = dict(t=cp(self.t), H=cp(self.H), v=cp(self.v), vd=cp(self.vd),
-                    lam=cp(self.lam), alpha=cp(self.alpha))
+    def _block(self, lo: int, hi: int, stats: dict | None = None, copy: bool = True,
+               rows: np.ndarray | None = None) -> Results:
+        """Rows ``lo <= r < hi`` (or the rows of the index array ``rows``) as results of the
+        model's system."""
+        if rows is not None:
+            c = self.scal[rows]
+            cp = lambda x: x[rows]  # noqa: E731  (a copy)
+        else:
+            c = self.scal[lo:hi]
+            cp = (lambda x: x[lo:hi].copy()) if copy else (lambda x: x[lo:hi])  # noqa: E731
+        arr = dict(t=cp(self.t), H=cp(self.H), v=cp(self.v), vd=cp(self.vd),
+                   lam=cp(self.lam), alpha=cp(self.alpha))
         if self.cond is not None:
-            rows["H"], rows["v"], rows["vd"], rows["alpha"], rows["lam"] = (
-                self.cond.expand_rows(rows["H"], rows["v"], rows["vd"], rows["alpha"],
-                                      rows["lam"]))
-        out = Results(system=self.out_system, **rows,
+            arr["H"], arr["v"], arr["vd"], arr["alpha"], arr["lam"] = (
+                self.cond.expand_rows(arr["H"], arr["v"], arr["vd"], arr["alpha"],
+                                      arr["lam"]))
+        out = Results(system=self.out_system, **arr,
                       kinetic=c[:, 0].copy(), potential=c[:, 1].copy(), spring=c[:, 2].copy(),
                       work_actuators=c[:, 3].copy(), work_loads=c[:, 4].copy(),
                       dissipation=c[:, 5].copy(), iterations=c[:, 6].astype(int),
@@ -228,12 +234,15 @@ class _Recorder:
                 self.first = self._block(0, 1)
             self._move_last_to_front()
 
-    def uncondense(self) -> None:
+    def uncondense(self, U: np.ndarray | None = None, inputs: dict | None = None) -> None:
         """The run goes on with the rigid joints kept: the rows held become the model's own
-        (their rigid joints' multipliers computed now), and so will the next ones."""
+        (their rigid joints' multipliers computed now, with the rows' inputs ``U`` (n, nu),
+        by default the model's, and the pending checkpoint's with ``inputs``), and so will the
+        next ones."""
         c, n, cap = self.cond, self.n, len(self.t)
         rows = c.expand_rows(self.H[:n], self.v[:n], self.vd[:n], self.alpha[:n], self.lam[:n])
-        c.fill_rows(self.t[:n], rows[0], rows[3], rows[1], rows[2], rows[4], self.full_ws)
+        c.fill_rows(self.t[:n], rows[0], rows[3], rows[1], rows[2], rows[4], self.full_ws,
+                    U=None if U is None else U[:n])
         for name, arr in zip(("H", "v", "vd", "alpha", "lam"), rows, strict=True):
             new = np.zeros((cap,) + arr.shape[1:])
             new[:n] = arr
@@ -241,11 +250,18 @@ class _Recorder:
         if self.pending is not None:
             self.pending = dataclasses.replace(self.pending,
                                                state=c.expand(self.pending.state,
-                                                              self.full_ws))
+                                                              self.full_ws, inputs))
         self.s = self.out_system = c.full
         self.cond = None
         s = self.s
         self.row_bytes = 8 * (1 + 16 * s.M + 3 * s.nq + s.nm + 9)
+
+    def truncate(self, n: int) -> None:
+        """Keep the first ``n`` rows only (a :class:`~se3dyn.dynamics.simulator.Simulator`
+        restored to an earlier state); the summary is made again from them."""
+        self.n = self.total = self.sent = n
+        self.summarized = 0
+        self.summary = dict(e0=None, balance=0.0, energy=0.0, constraint=0.0, iterations=0)
 
     def _move_last_to_front(self) -> None:
         """(store=False) Keep only the last row, at the front of the buffer."""

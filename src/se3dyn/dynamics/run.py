@@ -425,14 +425,16 @@ class _Run:
         self.s, self.st, self.ws, self.solver, self.cond = s, st, ws, solver, cond
         self.model_system, self.ws_full, self.rec, self.stats = model_system, ws_full, rec, stats
 
-    def uncondense(self) -> None:
+    def uncondense(self, U: np.ndarray | None = None, inputs: dict | None = None) -> None:
         """A step of the reduced system failed: the run goes on with the rigid joints kept (a
-        condensed run never fails where the model itself goes on; stats say from when)."""
+        condensed run never fails where the model itself goes on; stats say from when).
+        ``U``, ``inputs``: the inputs of the stored rows and of the state when they are not
+        the model's (:class:`~se3dyn.dynamics.simulator.Simulator`)."""
         cond, ws_full, model_system = self.cond, self.ws_full, self.model_system
         self.c_st = None  # (another norm from here)
         self.stats["condensed_until"] = self.st.t
-        full = dataclasses.replace(cond.expand(self.st, ws_full), solver=None)
-        self.rec.uncondense()
+        full = dataclasses.replace(cond.expand(self.st, ws_full, inputs), solver=None)
+        self.rec.uncondense(U, inputs)
         if self.gest is not None:
             self.gest.replace(stepcontrol.ErrorNorm(model_system),
                               dataclasses.replace(cond.expand(self.gest.coarse, ws_full),

@@ -29,7 +29,10 @@ class _Inputs:
     driven coordinate its prescribed position (position drivers), rate and acceleration.
     ``kind`` (nu,) tells each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD
     target rate, 5 driven position, 6 driven rate, 7 driven acceleration, 8 PID state), for
-    load stepping in statics.
+    load stepping in statics. ``names`` lists, per input a user may set
+    (:class:`se3dyn.dynamics.simulator.Simulator`), ``(kind, item, field, slot, k)``: kind
+    ``"gravity"``, ``"load"`` or ``"joint"``, the item's name, the field (``"force"``,
+    ``"torque"``, ``"actuator"``, ``"target"``, ``"target_rate"``; None for gravity).
     """
 
     def __init__(self, d: dict, model: Model):
@@ -37,6 +40,7 @@ class _Inputs:
         # (slot, k, time function, item, what, the derivative that is the input: 0 the value,
         # 1 the rate, 2 the second derivative)
         self.sources = []
+        self.names = [("gravity", None, None, 0, 3)]
         kind = [0, 0, 0]
         self.load_slots = []
         for ld in model.loads:
@@ -44,10 +48,12 @@ class _Inputs:
             if ld.force is not None:
                 fs = len(kind)
                 self.sources.append((fs, 3, ld.force, f"load '{ld.name}'", "force", 0))
+                self.names.append(("load", ld.name, "force", fs, 3))
                 kind += [1] * 3
             if ld.torque is not None:
                 ts = len(kind)
                 self.sources.append((ts, 3, ld.torque, f"load '{ld.name}'", "torque", 0))
+                self.names.append(("load", ld.name, "torque", ts, 3))
                 kind += [1] * 3
             i = nidx[ld.node]
             R0, x0 = d["node_H0"][i, :3, :3], d["node_H0"][i, :3, 3]
@@ -65,15 +71,18 @@ class _Inputs:
             if js.actuator is not None:
                 item = f"joint '{js.name}' actuator"
                 self.joint_slots.append((len(kind), k, "tau", j))
+                self.names.append(("joint", js.name, "actuator", len(kind), k))
                 self.sources.append((len(kind), k, js.actuator, item, "value", 0))
                 kind += [2] * k
             if js.control is not None:
                 item = f"joint '{js.name}' control target"
                 tgt, rt = js.control.target, js.control.target_rate
                 self.joint_slots.append((len(kind), k, "ref", j))
+                self.names.append(("joint", js.name, "target", len(kind), k))
                 self.sources.append((len(kind), k, tgt, item, "target", 0))
                 kind += [3] * k
                 self.joint_slots.append((len(kind), k, "rate", j))
+                self.names.append(("joint", js.name, "target_rate", len(kind), k))
                 if rt is None:
                     self.sources.append((len(kind), k, tgt, item, "target rate", 1))
                 else:

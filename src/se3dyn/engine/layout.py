@@ -180,6 +180,7 @@ class Layout:
         elements = []
         for key, mod in REGISTRY.items():
             elements.append((key, mod.tables(s, self)))
+        self._coupling_blocks(s)
         self.nvals = self.n
         # --- index-2 blocks
         for key, mod in REGISTRY.items():
@@ -191,6 +192,7 @@ class Layout:
         xiprod = self._xiprod(touch)
         xc = self.xi_groups(con_c)
         self.blocks(xc, xc)
+        self._coupling_blocks(s)
         self.nvals2 = self.n
         self.tables = dict(
             nq=nq, nm=nm, nu=s.inputs.nu, nvals=self.nvals, nvals2=self.nvals2,
@@ -202,12 +204,54 @@ class Layout:
             velprod=np.ascontiguousarray(velprod, np.int64).reshape(-1, 6),
             xiprod=np.ascontiguousarray(xiprod, np.int64).reshape(-1, 6),
             drive=_drive_table(s),
+            cpl_lead=s.cpl_lead, cpl_follow=s.cpl_follow, cpl_ratio=s.cpl_ratio,
+            cpl_offset=s.cpl_offset,
             ctrl_slot=np.array(s.inputs.pid_slots, np.int64),
             ctrl_ts=np.array([s.dof_ts[d] for _, d in s.inputs.pid_ref], float),
             ctrl_dof=np.array([d for _, d in s.inputs.pid_ref], np.int64),
             **_log_tables(s, self.frame_A, self.F, self._logs))
         rg = self._blocks_in_value_order()
         self.groups2, self.groups3 = self._lu_groups(rg, con_c, con_f)
+        self.tables.update(self._merges(s))
+
+    def _coupling_blocks(self, s) -> None:
+        """Register the blocks the couplings' merges write (engine.hpp): for every block in a
+        follower's column group the same block in its leader's column group, then likewise for
+        the rows (after the columns: the blocks the column merges made count too)."""
+        if not len(s.cpl_follow):
+            return
+        fa = self.frame_groups(self._frame_of_unknown(s.cpl_lead))
+        fb = self.frame_groups(self._frame_of_unknown(s.cpl_follow))
+        G3 = 3 * self._G
+        for axis in (1, 0):  # columns, then rows
+            self._merge()
+            rg, cg = self._sk // G3, self._sk % G3
+            for ga, gb in zip(fa, fb, strict=True):
+                if axis == 1:
+                    sel = cg == gb
+                    self.blocks(rg[sel], ga)
+                else:
+                    sel = rg == gb
+                    self.blocks(ga, cg[sel])
+
+    def _frame_of_unknown(self, dofs) -> np.ndarray:
+        """The frame (joint frame) of joint unknowns."""
+        d = np.asarray(dofs, np.int64)
+        first = np.asarray(self.frame_dof, np.int64)
+        k = np.asarray(self.frame_k, np.int64)
+        f = np.flatnonzero(k > 0)
+        owner = f[np.searchsorted(first[f], d, side="right") - 1]
+        return owner
+
+    def _merges(self, s) -> dict:
+        """The couplings' merges of values (src, dst) and factors, columns first, for the
+        index-3 (``merge3``) and the index-2 matrix (``merge2``)."""
+        out = {}
+        for tag, index2 in (("3", False), ("2", True)):
+            rows, cols = self.entries(index2) if len(s.cpl_follow) else (None, None)
+            out["merge" + tag], out["mfac" + tag] = _merge_list(
+                rows, cols, s.cpl_lead, s.cpl_follow, s.cpl_ratio)
+        return out
 
     def _velprod(self, touch: tuple) -> np.ndarray:
         """Register the index-2 blocks ``-(cM M + cC C_T) B_n^T`` (dynamic rows, xi columns) and
@@ -503,3 +547,28 @@ def _drive_table(s) -> np.ndarray:
     slots = np.array(s.inputs.drive_slots, np.int64).reshape(-1, 3)
     return np.ascontiguousarray(np.column_stack([s.drive_dof, s.drive_kind, slots]),
                                 np.int64).reshape(-1, 5)
+
+
+def _merge_list(rows, cols, lead, follow, ratio) -> tuple[np.ndarray, np.ndarray]:
+    """(src, dst) value pairs (., 2) and factors of the couplings' merges over the values at
+    (rows, cols): every value in a follower's column into its leader's column, then every
+    value in a follower's row into its leader's row (engine.hpp, ``Stepper::apply_merges``)."""
+    if not len(follow):
+        return np.zeros((0, 2), np.int64), np.zeros(0)
+    N = int(max(rows.max(), cols.max())) + 1
+    key = rows * N + cols
+    order = np.argsort(key)
+    skey = key[order]
+    src, dst, fac = [], [], []
+    for axis in (1, 0):
+        for a, b, r in zip(lead, follow, ratio, strict=True):
+            sel = np.flatnonzero((cols if axis else rows) == b)
+            k = (rows[sel] * N + a) if axis else (a * N + cols[sel])
+            i = np.searchsorted(skey, k)
+            if np.any(i >= len(skey)) or np.any(skey[np.minimum(i, len(skey) - 1)] != k):
+                raise KeyError("coupling merge: a block not registered")  # (a layout bug)
+            src.append(sel)
+            dst.append(order[i])
+            fac.append(np.full(len(sel), float(r)))
+    return (np.ascontiguousarray(np.column_stack([np.concatenate(src), np.concatenate(dst)]),
+                                 np.int64), np.concatenate(fac))

@@ -37,7 +37,7 @@ def _held_rows(s: System, v0: np.ndarray) -> np.ndarray:
 
 
 def project_velocities(s: System, Wm, B, v0: np.ndarray, *, L: float | None = None,
-                       dropped=(), prescribed=()) -> tuple[np.ndarray, bool]:
+                       dropped=(), prescribed=(), couplings=None) -> tuple[np.ndarray, bool]:
     """Initial velocities satisfying the velocity constraints ``B v = 0``, keeping the given
     speeds.
 
@@ -76,6 +76,9 @@ def project_velocities(s: System, Wm, B, v0: np.ndarray, *, L: float | None = No
     prescribed : sequence of int
         Unknowns whose given velocities are kept exactly, never released (driven joint
         coordinates, :meth:`se3dyn.ModelBuilder.drive`).
+    couplings : (leaders, followers, ratios) arrays, optional
+        Velocity constraints ``v_b = ratio v_a`` of coupled coordinates
+        (:meth:`se3dyn.ModelBuilder.coupling`), rows added to ``B``.
 
     Returns
     -------
@@ -103,6 +106,12 @@ def project_velocities(s: System, Wm, B, v0: np.ndarray, *, L: float | None = No
         return v0, True
     rows = np.setdiff1d(np.arange(nm), np.asarray(dropped, dtype=np.int64))
     Bs = _row_scale(s, L)[rows, None] * (B[rows].toarray() if sp.issparse(B) else B[rows])
+    if couplings is not None and len(couplings[0]):
+        a, b, r = (np.asarray(x) for x in couplings)
+        C = np.zeros((len(a), nq))
+        C[np.arange(len(a)), b] = 1.0
+        C[np.arange(len(a)), a] = -r
+        Bs = np.vstack([Bs, C])
     if not np.all(np.isfinite(Bs)):
         raise SimulationError("initial velocities: the velocity constraints are not finite")
     # first the whole problem as one sparse solve (milliseconds); the rank-revealing dense

@@ -155,6 +155,12 @@ class System(LayoutCounts):
     drive_dof: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     drive_kind: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     drive_of: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: couplings (ModelBuilder.coupling), one entry each: the leader's and the follower's
+    #: unknowns, ``alpha_follower = ratio alpha_leader + offset``
+    cpl_lead: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    cpl_follow: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    cpl_ratio: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cpl_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def N(self) -> int:
@@ -246,7 +252,7 @@ def compile_model(model: Model) -> System:
 
 def _drive_tables(model: Model, joint_dofadr: np.ndarray) -> dict:
     """``drive_dof``, ``drive_kind`` and ``drive_of`` of the driven coordinates, drive by drive
-    (:class:`~se3dyn.model.specs.DriveSpec`)."""
+    (:class:`~se3dyn.model.specs.DriveSpec`), and the couplings' tables (``cpl_*``)."""
     jidx = {j.name: i for i, j in enumerate(model.joints)}
     dof, kind, of = [], [], []
     for d, dr in enumerate(model.drives):
@@ -254,8 +260,14 @@ def _drive_tables(model: Model, joint_dofadr: np.ndarray) -> dict:
             dof.append(int(joint_dofadr[jidx[jname]]) + i)
             kind.append(0 if k == "position" else 1)
             of.append(d)
+    ends = [[int(joint_dofadr[jidx[c.leader[2]]]) + c.leader[3],
+             int(joint_dofadr[jidx[c.follower[2]]]) + c.follower[3]] for c in model.couplings]
+    ends = np.array(ends, np.int64).reshape(-1, 2)
     return dict(drive_dof=np.array(dof, np.int64), drive_kind=np.array(kind, np.int64),
-                drive_of=np.array(of, np.int64))
+                drive_of=np.array(of, np.int64), cpl_lead=ends[:, 0].copy(),
+                cpl_follow=ends[:, 1].copy(),
+                cpl_ratio=np.array([c.ratio for c in model.couplings], float),
+                cpl_offset=np.array([c.offset for c in model.couplings], float))
 
 
 def _number_nodes(nodes, labels: list, items: list) -> dict:

@@ -760,6 +760,8 @@ FIELDS: dict[str, tuple[Field, ...]] = {
               "gyroscope (outputs only, no effect on the motion)."),
         Field("drives", Named("drive"), {}, "Prescribed motion of joint coordinates, by "
               "name (rheonomic drivers; the force or torque they supply is an output)."),
+        Field("couplings", Named("coupling"), {}, "Exact couplings of joint coordinates by "
+              "name (gears, racks, belts, mimic joints): follower = ratio leader + offset."),
         Field("simulation", Section("simulation"), {}, "Simulation settings, returned by "
               "`load_model` as a dict for `se3dyn.simulate(model, **settings)`."),
     ),
@@ -822,6 +824,18 @@ FIELDS: dict[str, tuple[Field, ...]] = {
               "joint with several coordinates."),
         Field("velocity", ByIndex(), None, "Instead of `position` (per coordinate): its rate "
               "v(t), the position integrated by the time loop."),
+    ),
+    "coupling": (
+        Field("leader", Str(ref="joint"), None, "The leading joint (abelian; required).", True),
+        Field("follower", Str(ref="joint"), None, "The following joint (abelian; required).",
+              True),
+        Field("ratio", Num(), 1, "alpha_follower = ratio alpha_leader + offset (a gear pair: "
+              "minus the ratio of the teeth numbers; nonzero)."),
+        Field("offset", Num(), 0, "The offset (rad or m)."),
+        Field("leader_coordinate", Num(integer=True, minimum=0), 0, "The leader's coordinate "
+              "(joints with several)."),
+        Field("follower_coordinate", Num(integer=True, minimum=0), 0, "The follower's "
+              "coordinate (joints with several)."),
     ),
     "simulation": (
         Field("t_end", Num(), None, "Final time (s)."),
@@ -907,6 +921,10 @@ _SECTION_DOC = {
              "follow the given functions of time exactly, beside the free motion of the rest; "
              "the driving force or torque is `Results.drive_effort(name)` and the channel "
              "`drive/<name>/effort` (see `ModelBuilder.drive`).",
+    "coupling": "An entry of `couplings:` (key: the coupling name). The follower's coordinate "
+                "moves with the leader's exactly; the coupling's force on the follower is "
+                "`Results.coupling_force(name)` and the channel `coupling/<name>/force` (see "
+                "`ModelBuilder.coupling`).",
     "simulation": "The `simulation:` mapping: keyword arguments of `se3dyn.simulate`.",
     "constant": "Time function `{constant: {...}}`.",
     "step": "Time function `{step: {...}}`.",
@@ -1152,6 +1170,7 @@ def _build(ctx: _Ctx, top: _Obj) -> tuple[Model, dict]:
          lambda name, kw: mb.visual(name, kw.pop("node"), kw.pop("shape"), **kw)),
         ("markers", "marker", lambda name, kw: mb.marker(name, kw.pop("node"), **kw)),
         ("drives", "drive", lambda name, kw: mb.drive(name, kw.pop("joint"), **kw)),
+        ("couplings", "coupling", lambda name, kw: mb.coupling(name, **kw)),
     )
     for sec, kind, add in sections:
         for obj in v.get(sec, []):
@@ -1275,6 +1294,17 @@ def _marker_out(model: Model, mk) -> dict:
     return d
 
 
+def _coupling_out(c) -> dict:
+    """A coupling as given to the builder."""
+    d: dict[str, Any] = {"leader": c.leader[0], "follower": c.follower[0], "ratio": c.ratio}
+    if c.offset:
+        d["offset"] = c.offset
+    for fld, end in (("leader_coordinate", c.leader), ("follower_coordinate", c.follower)):
+        if end[1]:
+            d[fld] = end[1]
+    return d
+
+
 def _drive_out(model: Model, d) -> dict:
     """A drive as given to the builder (a dict by index for a joint of several coordinates)."""
     out: dict[str, Any] = {"joint": d.joint}
@@ -1325,6 +1355,8 @@ def save_model(model: Model, path: str | os.PathLike | None = None,
         doc["markers"] = {mk.name: _marker_out(model, mk) for mk in model.markers}
     if model.drives:
         doc["drives"] = {d.name: _drive_out(model, d) for d in model.drives}
+    if model.couplings:
+        doc["couplings"] = {c.name: _coupling_out(c) for c in model.couplings}
     if settings:
         known = {f.name: f for f in FIELDS["simulation"]}
         sim = {}

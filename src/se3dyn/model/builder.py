@@ -20,6 +20,7 @@ from se3dyn.model.specs import (
     PID,
     BeamSpec,
     BushingSpec,
+    CouplingSpec,
     DriveSpec,
     JointSpec,
     LoadSpec,
@@ -72,6 +73,7 @@ class ModelBuilder:
         self._beams: dict[str, BeamSpec] = {}
         self._markers: dict[str, MarkerSpec] = {}
         self._drives: dict[str, DriveSpec] = {}
+        self._couplings: dict[str, CouplingSpec] = {}
 
     @classmethod
     def from_model(cls, model: Model) -> ModelBuilder:
@@ -92,7 +94,7 @@ class ModelBuilder:
                             ("_loads", model.loads), ("_springs", model.springs),
                             ("_bushings", model.bushings), ("_visuals", model.visuals),
                             ("_beams", model.beams), ("_markers", model.markers),
-                            ("_drives", model.drives)):
+                            ("_drives", model.drives), ("_couplings", model.couplings)):
             getattr(mb, attr).update((sp.name, sp) for sp in specs)
         mb._composites.update(model.composites)
         return mb
@@ -848,7 +850,8 @@ class ModelBuilder:
         if both:
             raise ModelError(item, "velocity", "coordinates not given a position", both,
                              f"coordinate {both[0]} has both a position and a velocity")
-        taken = {t[:2]: d.name for d in self._drives.values() for t in d.targets}
+        taken = {t[:2]: f"drive {d.name!r}" for d in self._drives.values() for t in d.targets}
+        taken.update({c.follower[2:]: f"coupling {c.name!r}" for c in self._couplings.values()})
         targets, functions = [], []
         for i in sorted(set(given["position"]) | set(given["velocity"])):
             kind = "position" if i in given["position"] else "velocity"
@@ -856,25 +859,87 @@ class ModelBuilder:
             if tgt[:2] in taken:
                 raise ModelError(item, kind, "a coordinate no other drive prescribes",
                                  f"coordinate {i} of joint {joint!r}",
-                                 f"drive {taken[tgt[:2]]!r} prescribes it already")
+                                 f"{taken[tgt[:2]]} prescribes it already")
             targets.append(tgt)
             functions.append(given[kind][i])
         self._drives[name] = DriveSpec(name, joint, given["position"], given["velocity"],
                                        tuple(targets), tuple(functions))
 
-    def _drive_parts(self, item: str, joint: Any) -> list[tuple[str, int]]:
-        """The (joint, index) of every coordinate of a driven joint (the hinges of a
-        universal joint), checking it exists and is abelian."""
+    def coupling(self, name: str, *, leader: str, follower: str, ratio: float = 1.0,
+                 offset: float = 0.0, leader_coordinate: int = 0,
+                 follower_coordinate: int = 0) -> None:
+        """Couple two joint coordinates exactly: ``alpha_follower = ratio alpha_leader +
+        offset`` (a gear pair: ``ratio = -z_leader / z_follower``; a rack and pinion: the
+        pinion's radius; a belt; URDF ``<mimic>``).
+
+        The follower's coordinate is not an unknown of the step: it moves with the leader's,
+        position, rate and acceleration, at every step (the follower's equation of motion is
+        added to the leader's, as the coupling's virtual work says). The force or torque the
+        coupling applies to the follower is an exact output (:meth:`Results.coupling_force`,
+        channel ``coupling/<name>/force``); the leader receives ``-ratio`` times it. An ideal
+        coupling does no work.
+
+        Parameters
+        ----------
+        name : str
+            Unique coupling name.
+        leader, follower : str
+            Abelian joints defined before (a universal joint's coordinates by index).
+        ratio, offset : float
+            ``alpha_follower = ratio alpha_leader + offset`` (absolute coordinates: zero in
+            the initial configuration, or the joints' ``initial`` values there).
+        leader_coordinate, follower_coordinate : int
+            The coordinates of joints with several.
+        """
+        _check_name("coupling", name)
+        item = f"coupling {name!r}"
+        if name in self._couplings:
+            raise ModelError(item, "name", "a unique coupling name", name, "defined twice")
+        ends = []
+        for fld, joint, i in (("leader", leader, leader_coordinate),
+                              ("follower", follower, follower_coordinate)):
+            parts = self._drive_parts(item, joint, fld)
+            if isinstance(i, bool) or not isinstance(i, int | np.integer) or not (
+                    0 <= i < len(parts)):
+                raise ModelError(item, f"{fld}_coordinate",
+                                 f"a coordinate index 0 to {len(parts) - 1}", i)
+            ends.append((joint, int(i), *parts[int(i)]))
+        if ends[0][2:] == ends[1][2:]:
+            raise ModelError(item, "follower", "a coordinate other than the leader's",
+                             follower)
+        for fld, v in (("ratio", ratio), ("offset", offset)):
+            if isinstance(v, bool) or not isinstance(v, int | float | np.floating) or not \
+                    math.isfinite(v) or abs(v) > MAX_ABS:
+                raise ModelError(item, fld, "a finite number", v)
+        if ratio == 0:
+            raise ModelError(item, "ratio", "a nonzero ratio", ratio)
+        taken = {t[:2]: f"drive {d.name!r}" for d in self._drives.values() for t in d.targets}
+        taken.update({c.follower[2:]: f"coupling {c.name!r}" for c in self._couplings.values()})
+        if ends[1][2:] in taken:
+            raise ModelError(item, "follower", "a coordinate nothing else prescribes",
+                             f"coordinate {ends[1][1]} of joint {ends[1][0]!r}",
+                             f"{taken[ends[1][2:]]} prescribes it already")
+        if any(c.leader[2:] == ends[1][2:] for c in self._couplings.values()) or \
+                ends[0][2:] in taken and taken[ends[0][2:]].startswith("coupling"):
+            raise ModelError(item, "leader", "couplings that do not chain (a follower leading "
+                             "another coupling, or a leader that follows one)", leader)
+        self._couplings[name] = CouplingSpec(name, ends[0], ends[1], float(ratio),
+                                             float(offset))
+
+    def _drive_parts(self, item: str, joint: Any, fld: str = "joint") -> list[tuple[str, int]]:
+        """The (joint, index) of every coordinate of a driven (or coupled) joint (the hinges of
+        a universal joint), checking it exists and is abelian."""
         names = list(self._joints) + list(self._composites)
         if not isinstance(joint, str) or joint not in names:
-            raise ModelError(item, "joint", "the name of a joint defined before the drive",
+            what = item.split()[0]
+            raise ModelError(item, fld, f"the name of a joint defined before the {what}",
                              joint, _unknown("joint", joint, names)
                              if isinstance(joint, str) else None)
         if joint in self._composites:
             return [(p, 0) for p in self._composites[joint]]
         js = self._joints[joint]
         if js.k == 0 or not is_abelian(js.A):
-            raise ModelError(item, "joint", "an abelian joint with coordinates (hinge, "
+            raise ModelError(item, fld, "an abelian joint with coordinates (hinge, "
                              "prismatic, cylindrical, screw, universal)",
                              f"{joint!r} ({js.type})",
                              "a rigid joint has no coordinate" if js.k == 0 else
@@ -927,7 +992,8 @@ class ModelBuilder:
                      visuals=tuple(self._visuals.values()),
                      bushings=tuple(self._bushings.values()), beams=tuple(self._beams.values()),
                      markers=tuple(self._markers.values()),
-                     drives=tuple(self._drives.values()))
+                     drives=tuple(self._drives.values()),
+                     couplings=tuple(self._couplings.values()))
 
 
 def _control_law(control: PD | PID, k: int, item: str) -> PD | PID:

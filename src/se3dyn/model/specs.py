@@ -403,6 +403,25 @@ class DriveSpec:
 
 
 @dataclass(frozen=True)
+class CouplingSpec:
+    """An exact linear coupling of two joint coordinates, ``alpha_b = ratio alpha_a + offset``
+    (gears, racks, belts, URDF ``<mimic>``; :meth:`se3dyn.ModelBuilder.coupling`).
+
+    Attributes
+    ----------
+    name : str
+    leader, follower : tuple (joint as given, coordinate index, compiled joint, index there)
+    ratio, offset : float
+    """
+
+    name: str
+    leader: tuple
+    follower: tuple
+    ratio: float
+    offset: float
+
+
+@dataclass(frozen=True)
 class Model:
     """A validated, immutable model. Build it with :class:`ModelBuilder`."""
 
@@ -421,6 +440,8 @@ class Model:
     markers: tuple[MarkerSpec, ...] = ()
     #: prescribed motion of joint coordinates
     drives: tuple[DriveSpec, ...] = ()
+    #: exact couplings of joint coordinates
+    couplings: tuple[CouplingSpec, ...] = ()
 
     def __post_init__(self):
         # immutable for good: the arrays of every spec are read-only (a model compiles once,
@@ -535,15 +556,21 @@ def _vec(v: Any, n: int, item: str, fld: str, *, allow_none: bool = False) -> np
     return _bounded(a, item, fld, v)
 
 
-def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.ndarray:
+def _k_array(v: Any, k: int, item: str, fld: str, expected: str) -> np.ndarray:
+    """``v`` as an array (k,): one number for all k, or k numbers (ModelError otherwise)."""
     try:
         a = np.asarray(v, dtype=float)
     except (TypeError, ValueError):
-        raise ModelError(item, fld, f"a number or {k} numbers", v) from None
+        raise ModelError(item, fld, expected, v) from None
     if a.ndim == 0:
         a = np.full(k, float(a))
     if a.shape != (k,):
-        raise ModelError(item, fld, f"a number or {k} numbers (one per relative coordinate)", v)
+        raise ModelError(item, fld, expected, v)
+    return a
+
+
+def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.ndarray:
+    a = _k_array(v, k, item, fld, f"a number or {k} numbers (one per relative coordinate)")
     if not np.all(np.isfinite(a)):
         raise ModelError(item, fld, "finite numbers", v)
     if nonneg and np.any(a < 0):
@@ -553,14 +580,10 @@ def _kvec(v: Any, k: int, item: str, fld: str, *, nonneg: bool = False) -> np.nd
 
 def _limits(v: Any, k: int, item: str, fld: str) -> np.ndarray:
     """Output limits (k,) of a control law: positive numbers, inf for none."""
-    try:
-        a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError):
-        raise ModelError(item, fld, f"a positive number or {k} (inf: no limit)", v) from None
-    if a.ndim == 0:
-        a = np.full(k, float(a))
-    if a.shape != (k,) or np.any(np.isnan(a)) or np.any(a <= 0):
-        raise ModelError(item, fld, f"a positive number or {k} (inf: no limit)", v)
+    expected = f"a positive number or {k} (inf: no limit)"
+    a = _k_array(v, k, item, fld, expected)
+    if np.any(np.isnan(a)) or np.any(a <= 0):
+        raise ModelError(item, fld, expected, v)
     return a
 
 

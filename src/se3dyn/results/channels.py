@@ -20,6 +20,7 @@ A channel is one scalar time history, shape (n,), named by a path (see ``docs/re
     drive/<drive>/effort/<i>                        N m or N (per driven coordinate, several)
     drive/<drive>/power                             W   (sum of effort * rate)
     spring/<spring>/force|length|rate               N, m, m/s (point spring-damper)
+    coupling/<coupling>/force                       N m or N (on the follower's coordinate)
     marker/<marker>/position/x|y|z                  m
     marker/<marker>/rotation/R11 .. R33             -   (marker axes in the inertial frame)
     marker/<marker>/velocity/material|inertial/x|y|z|wx|wy|wz      m/s, rad/s
@@ -160,6 +161,7 @@ def list_channels(res: Results) -> list[str]:
         out.append(f"{e}/power")
     for name in _spring_entries(res):
         out += [f"spring/{escape_name(name)}/{q}" for q in _SPRING]
+    out += [f"coupling/{escape_name(n)}/force" for n in _coupling_names(res)]
     mks = [escape_name(mk.name) for mk in marker_specs(s)]
     for i, mk in enumerate(mks):
         out += _marker_entries(f"marker/{mk}")
@@ -196,6 +198,12 @@ def _drive_entries(res: Results) -> list[tuple[str, int]]:
     """(name, number of driven coordinates) of every drive of the model behind ``res``."""
     s = model_system(res.system)
     return [(d.name, len(d.targets)) for d in getattr(getattr(s, "model", None), "drives", ())]
+
+
+def _coupling_names(res: Results) -> list[str]:
+    """The couplings of the model behind ``res``."""
+    s = model_system(res.system)
+    return [c.name for c in getattr(getattr(s, "model", None), "couplings", ())]
 
 
 def _drive_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
@@ -349,6 +357,11 @@ def get_channel(res: Results, name: str) -> np.ndarray:
             f = {"force": res.spring_damper_force, "length": res.spring_damper_length,
                  "rate": res.spring_damper_rate}[parts[2]]
             return f(spring)
+        if parts[0] == "coupling" and len(parts) == 3 and parts[2] == "force":
+            cpl = unescape_name(parts[1])
+            if cpl not in _coupling_names(res):
+                raise _unknown(res, name, f"no coupling {cpl!r}")
+            return res.coupling_force(cpl)
         if len(parts) in (3, 4) and parts[0] == "drive":
             return np.array(_drive_channel(res, name, parts), dtype=float)
         if len(parts) in (4, 5) and parts[0] == "marker":
@@ -399,6 +412,8 @@ def channel_unit(name: str, res: Results | None = None) -> str:
         return ""
     if parts[0] == "spring" and len(parts) == 3:
         return _SPRING.get(parts[2], "")
+    if parts[0] == "coupling" and len(parts) == 3:
+        return "N m | N"
     if parts[0] == "drive" and len(parts) >= 3:
         return "W" if parts[2] == "power" else _drive_unit(res, parts)
     if parts[0] == "marker" and len(parts) >= 4:

@@ -65,9 +65,9 @@ def pid_joints(model) -> list[int]:
 def part_model(model, part: str):
     """A copy of ``model`` whose joints keep only the force elements of ``part`` (the others
     zero or absent, and no armature), without the elements that never act on joint
-    coordinates (loads, point spring-dampers, bushings, beams) nor drives: the same nodes,
-    joints and numbering of the unknowns, so its residual's joint rows are ``g_j`` of that part
-    alone."""
+    coordinates (loads, point spring-dampers, bushings, beams) nor drives and couplings: the
+    same nodes, joints and numbering of the unknowns, so its residual's joint rows are ``g_j``
+    of that part alone."""
     if part not in PARTS:
         raise ValueError(f"part: expected one of {PARTS}, got {part!r}")
     joints = []
@@ -79,7 +79,7 @@ def part_model(model, part: str):
         else:
             joints.append(replace(j, actuator=None, control=None, armature=None))
     return replace(model, joints=tuple(joints), loads=(), springs=(), bushings=(), beams=(),
-                   drives=())
+                   drives=(), couplings=())
 
 
 def _part_system(s, part: str):

@@ -335,6 +335,26 @@ class Results:
         names = [d.name for d in drives]
         if name not in names:
             raise _unknown("drive", name, names, "none: the model has no drives")
+        return self._prescribed_rows(s)[:, :len(s.drive_dof)][
+            :, s.drive_of == names.index(name)].copy()
+
+    def coupling_force(self, name: str) -> np.ndarray:
+        """Force or torque a coupling (``ModelBuilder.coupling``) applies to its follower's
+        coordinate, shape (n,): N m for an angle, N for a translation, positive along it; the
+        leader receives ``-ratio`` times it (an ideal coupling does no work).
+
+        Exact, as :meth:`drive_effort`: the residual of the follower's equation of motion
+        (Eq. (36)) at the stored state, without the coupling."""
+        s = model_system(self.system)
+        cpl = getattr(getattr(s, "model", None), "couplings", ())
+        names = [c.name for c in cpl]
+        if name not in names:
+            raise _unknown("coupling", name, names, "none: the model has no couplings")
+        return self._prescribed_rows(s)[:, len(s.drive_dof) + names.index(name)].copy()
+
+    def _prescribed_rows(self, s) -> np.ndarray:
+        """The residual rows (n, nd + ncpl) of the driven coordinates and the couplings'
+        followers at the stored rows, computed once (the compiled kernels)."""
         cache = self.__dict__.setdefault("_drive_r", {})
         if id(s) not in cache:
             from se3dyn.engine.system import joint_frames, residual_rows
@@ -343,8 +363,8 @@ class Results:
             r = residual_rows(s, np.asarray(self.t, float), H, joint_frames(s, H), self.alpha,
                               self.v, self.vd, self.lam)
             cache.clear()
-            cache[id(s)] = r[:, s.drive_dof]
-        return cache[id(s)][:, s.drive_of == names.index(name)].copy()
+            cache[id(s)] = r[:, np.concatenate([s.drive_dof, s.cpl_follow])]
+        return cache[id(s)]
 
     # ------------------------------------------------------------------------------------------
     # Force sensors: the parts of the joints' force elements, point spring-dampers
