@@ -30,6 +30,7 @@ from se3dyn.model.joint_types import JOINT_TYPES as JOINT_TYPES
 from se3dyn.model.specs import PD as PD
 from se3dyn.model.specs import PID as PID
 from se3dyn.model.specs import JointSpec as JointSpec
+from se3dyn.model.specs import Law as Law
 from se3dyn.model.specs import LoadSpec as LoadSpec
 from se3dyn.model.specs import Model as Model
 from se3dyn.model.specs import NodeSpec as NodeSpec

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <functional>
 #include <vector>
 
 #include <map>
@@ -99,6 +100,15 @@ struct Engine {
   std::vector<long> merge3, merge2;  // (., 2) src, dst
   std::vector<double> mfac3, mfac2;
   int ncpl() const { return int(cpl_lead.size()); }
+  // Laws of the user's (se3dyn.ModelBuilder.joint(torque=lambda t, q, v: ...)): a callback
+  // evaluated once per evaluation, before the element kernels, on the calling thread, with the
+  // time (input slot law_t), the iterate's coordinates and velocities (nq); it writes per law
+  // its force (k), d force / d q (k x k) and d force / d v (k x k) to law_out, which the joint
+  // force kernel reads (joint_force.hpp). A probe fills law_out with generic numbers instead.
+  std::function<void(double, const double*, const double*, double*)> law_cb;
+  std::vector<double> law_out;
+  int law_t = -1;
+  bool law_probe = false;
   static constexpr int DRIVE = 5;
   std::vector<int> drive;
   int ndrive() const { return int(drive.size() / DRIVE); }
@@ -366,6 +376,7 @@ struct Engine {
                   bool index2, double cv, bool all_logs, Out o) {
     update_frames(n, v, vd, o.vals != nullptr);
     coordinates(alpha_n, n, o.alpha, all_logs);
+    if (law_cb && !law_probe && !law_out.empty()) law_cb(u[law_t], o.alpha, v, law_out.data());
     std::fill(o.r, o.r + nq, 0.0);
     std::fill(o.phi, o.phi + nm, 0.0);
     if (o.psi) std::fill(o.psi, o.psi + nm, 0.0);
@@ -390,6 +401,7 @@ struct Engine {
     X.T = &T;
     X.S = &S;
     X.coords = o.alpha;
+    X.law = law_out.empty() ? nullptr : law_out.data();
     X.vq = v;
     X.vdq = vd;
     X.lam = lam;

@@ -92,6 +92,8 @@ void build(Engine& E, const nb::dict& d) {
   E.ctrl_slot = ivec<int>(d, "ctrl_slot");  // (npid,)
   E.ctrl_ts = dvec(d, "ctrl_ts");            // (npid,) sample times, 0: continuous
   E.ctrl_dof = ivec<int>(d, "ctrl_dof");     // (npid,) controlled unknowns
+  E.law_out.assign(nb::cast<long>(item(d, "law_size")), 0.0);  // (the user's laws)
+  E.law_t = nb::cast<int>(item(d, "law_t"));
   E.cpl_lead = ivec<int>(d, "cpl_lead");
   E.cpl_follow = ivec<int>(d, "cpl_follow");
   E.cpl_ratio = dvec(d, "cpl_ratio");
@@ -213,6 +215,22 @@ NB_MODULE(_engine, m) {
         build(*E, d);
       })
       .def_ro("nq", &Engine::nq)
+      .def("set_laws",
+           [](Engine& E, nb::callable fn) {
+             // the user's laws (Engine::law_cb): fn(t, alpha (nq,), v (nq,), out) in Python,
+             // called with the GIL (the compiled loop runs without it); an exception there is
+             // the callback's to record: it writes NaN, the step fails and says why
+             E.law_cb = [fn, &E](double t, const double* alpha, const double* v, double* out) {
+               nb::gil_scoped_acquire gil;
+               using A = nb::ndarray<nb::numpy, double, nb::ndim<1>>;
+               size_t nq = size_t(E.nq), no = E.law_out.size();
+               auto view = [](double* p, size_t n) {  // (views, not copies: out is written)
+                 return nb::cast(A(p, {n}), nb::rv_policy::reference);
+               };
+               fn(t, view(const_cast<double*>(alpha), nq), view(const_cast<double*>(v), nq),
+                  view(out, no));
+             };
+           })
       .def_ro("nm", &Engine::nm)
       .def(
           "evaluate",

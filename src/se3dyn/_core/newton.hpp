@@ -362,6 +362,8 @@ struct Stepper {
     }
     for (auto* a : {&an, &n, &v, &vd, &lam, &u})
       for (double& c : *a) c = rnd();
+    for (double& c : G.law_out) c = rnd();  // (the user's laws: generic values, not called)
+    G.law_probe = true;
     for (double& c : n) c *= 0.3;
     G.load_frames(H4.data());
     bool stab = index2 && nm > 0;
@@ -369,6 +371,7 @@ struct Stepper {
                   nullptr};
     G.evaluate(an.data(), n.data(), v.data(), vd.data(), lam.data(), u.data(), 1.0, 0.7, 0.3,
                stab, 0.6, false, o);
+    G.law_probe = false;
     apply_merges();
   }
 

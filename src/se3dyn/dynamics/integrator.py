@@ -514,7 +514,10 @@ class GeneralizedAlpha:
                 item = s.items[i]
             else:  # pragma: no cover
                 where = item = "?"
-        if not (np.isfinite(rmax) and np.isfinite(pmax)):
+        law = s.pattern.pop("law_error", None)
+        if law is not None:  # (the non-finite values are the failed law's)
+            why = f"the law of {law}"
+        if not (np.isfinite(rmax) and np.isfinite(pmax)) and law is None:
             why += " (non-finite values: an overflow; check the magnitudes of the model's numbers)"
         msg = (f"Newton failed at t={t:.9g} (step h={h:.3g}) after {it} iterations: {why}; "
                f"residual {rmax:.3e} (relative, tol {self.tol_residual:.1e}), constraint "

@@ -188,6 +188,12 @@ def _joint_out(mf, j) -> dict:
     if j.actuator is not None:
         k = _act_key(j.type)
         d[k] = tf_out(j.actuator, item, k)
+    if getattr(j, "law", None) is not None:
+        from se3dyn.errors import ModelError
+
+        raise ModelError(item, _act_key(j.type), "a built-in time function to write a model "
+                         "file", "a law f(t, q, v) in Python", "a Python function cannot be "
+                         "saved; keep such a model in Python")
     if j.control is not None:
         c = j.control
         d["control"] = {"kp": py(c.kp), "kd": py(c.kd),

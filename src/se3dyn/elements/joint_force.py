@@ -32,6 +32,8 @@ def tables(s, lay) -> dict:
     Ja = np.asarray(s.dof_armature)[jd_dof]
     used = np.zeros(m, bool)
     used[jd_joint[(K != 0) | (D != 0) | (Ja != 0)]] = True
+    law_off = {s.joint_names.index(name): off for name, _, _, off in law_table(s)[0]}
+    used[np.array(list(law_off), np.int64)] = True
     used[np.array(list(slots["tau"]) + list(slots["ref"]), np.int64)] = True
     used &= jk > 0
     ids = np.flatnonzero(used)
@@ -61,6 +63,7 @@ def tables(s, lay) -> dict:
                 ref=pad("dof_reference"), C=pad("dof_damping"), kp=pad("dof_kp"),
                 kd=pad("dof_kd"), ki=pad("dof_ki"), lim=pad("dof_limit"),
                 Ja=pad("dof_armature"), ts=pad("dof_ts"),
+                lidx=np.array([law_off.get(j, -1) for j in ids.tolist()], np.int64),
                 zslot=np.array([slots["pid"].get(j, -1) for j in ids.tolist()], np.int64),
                 zidx=np.array([first_pid.get(j, -1) for j in ids.tolist()], np.int64),
                 tau=np.array([slots["tau"].get(j, -1) for j in ids.tolist()], np.int64),
@@ -122,3 +125,16 @@ def examples(rng):
                  actuator=Sine(tuple(rng.normal(size=3)), 1.3), **kw)
         out.append(mb.build())
     return out
+
+
+def law_table(s) -> tuple[list, int]:
+    """Per law ``(joint name, unknowns (k,), Law, offset)`` in the engine's buffer (k + 2 k^2
+    values each: the force, d/dq, d/dv) and the buffer's size."""
+    out, off = [], 0
+    for j, js in enumerate(s.model.joints):
+        if getattr(js, "law", None) is None:
+            continue
+        k = int(s.joint_k[j])
+        out.append((js.name, int(s.joint_dofadr[j]) + np.arange(k), js.law, off))
+        off += k + 2 * k * k
+    return out, off

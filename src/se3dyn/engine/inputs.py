@@ -111,9 +111,31 @@ class _Inputs:
                     slots.append(len(kind))
                     kind.append(kd)
                 self.drive_slots.append(tuple(slots))
+        # the time itself, for the user's laws f(t, q, v) (engine.hpp, Engine::law_t), kind 9
+        self.time_slot = -1
+        if any(getattr(js, "law", None) is not None for js in model.joints):
+            self.time_slot = len(kind)
+            self.sources.append((len(kind), 1, _Time(), "the model", "time", 0))
+            kind.append(9)
         self.kind = np.array(kind, np.int64)
         self.nu = len(kind)
         self.gravity = np.asarray(model.gravity, float)
+
+
+class _Time:
+    """The time function ``t`` (the input slot of the time: the user's laws read it)."""
+
+    def __call__(self, t):
+        return float(t)
+
+    def rate(self, t):
+        return 1.0
+
+    def accel(self, t):
+        return 0.0
+
+    def sample(self, times):
+        return np.array(times, dtype=float)
 
 
 #: the function of a time function that gives its value, rate or second derivative

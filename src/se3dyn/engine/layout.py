@@ -209,6 +209,7 @@ class Layout:
             ctrl_slot=np.array(s.inputs.pid_slots, np.int64),
             ctrl_ts=np.array([s.dof_ts[d] for _, d in s.inputs.pid_ref], float),
             ctrl_dof=np.array([d for _, d in s.inputs.pid_ref], np.int64),
+            law_size=_law_size(s), law_t=int(s.inputs.time_slot),
             **_log_tables(s, self.frame_A, self.F, self._logs))
         rg = self._blocks_in_value_order()
         self.groups2, self.groups3 = self._lu_groups(rg, con_c, con_f)
@@ -538,6 +539,13 @@ def _by_shape(b: np.ndarray):
 def layout(s) -> Layout:
     """The :class:`Layout` of a compiled system (see the module docstring)."""
     return Layout(s)
+
+
+def _law_size(s) -> int:
+    """Values of the user's laws' buffer (engine.hpp, ``Engine::law_out``)."""
+    from se3dyn.elements.joint_force import law_table
+
+    return law_table(s)[1]
 
 
 def _drive_table(s) -> np.ndarray:

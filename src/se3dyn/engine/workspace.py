@@ -55,6 +55,11 @@ class Workspace:
         self.s = s
         self.layout = layout_of(s)
         self.engine = compiled().Engine(self.layout.tables)
+        from se3dyn.engine.laws import law_callback
+
+        cb = law_callback(s)
+        if cb is not None:  # (the user's laws f(t, q, v): engine.hpp, Engine::law_cb)
+            self.engine.set_laws(cb)
         self._steppers: dict = {}
         self._memo: dict = {}  # id(stepper) -> (stepper, its serials, SolverMemory it holds)
 

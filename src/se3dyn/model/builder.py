@@ -36,6 +36,7 @@ from se3dyn.model.specs import (
     _sym6,
     _unknown,
     _vec,
+    state_law,
 )
 from se3dyn.model.timefunc import Component, as_timefunc
 from se3dyn.model.visuals import VisualSpec, make_visual
@@ -319,6 +320,10 @@ class ModelBuilder:
         if len(acts) > 1:
             raise ModelError(item, acts[1][0], "only one of actuator/torque/force", acts[1][1])
         act_field, act = acts[0] if acts else ("actuator", None)
+        law = state_law(act)
+        if law is not None and type == "universal":
+            raise ModelError(item, act_field, "a function of t (a law f(t, q, v) on the hinges of "
+                             "a universal joint: give each hinge its own joint)", act)
         p = _vec(at, 3, item, "at", allow_none=True)
         if type == "universal":
             self._universal(name, node_a, node_b, axes, stiffness, reference, damping,
@@ -336,11 +341,12 @@ class ModelBuilder:
                 raise ModelError(item, key, f"a value (required for a {type} joint)", None)
         A_ = jt.make_A(item, **params)
         self._add_joint(name, type, node_a, node_b, params, A_, stiffness, reference, damping,
-                        act_field, act, control, at=p, initial=initial, armature=armature)
+                        act_field, None if law else act, control, at=p, initial=initial,
+                        armature=armature, law=law)
 
     def _add_joint(self, name, type, node_a, node_b, params, A_, stiffness, reference, damping,
                    act_field, act, control, composite=None, at=None, initial=None,
-                   armature=None):
+                   armature=None, law=None):
         item = f"joint {name!r} ({type})"
         if name in self._joints:
             raise ModelError(f"joint {composite!r}" if composite else item, "name",
@@ -384,9 +390,11 @@ class ModelBuilder:
                 raise ModelError(item, "armature", "an abelian joint (its coordinates' rates are "
                                  "the rotor's)", type)
             arm = _kvec(armature, k, item, "armature", nonneg=True)
+        if law is not None:
+            _check_law(law, k, A_, item, act_field, init)
         self._joints[name] = JointSpec(name, type, node_a, node_b, params, A_, K, a0, C, tau, pd,
                                        composite, None if at is None else at.copy(), init,
-                                       armature=arm)
+                                       armature=arm, law=law)
 
     def _universal(self, name, node_a, node_b, axes, stiffness, reference, damping, act_field,
                    act, control, at=None, initial=None, armature=None):
@@ -994,6 +1002,22 @@ class ModelBuilder:
                      markers=tuple(self._markers.values()),
                      drives=tuple(self._drives.values()),
                      couplings=tuple(self._couplings.values()))
+
+
+def _check_law(law, k: int, A_: np.ndarray, item: str, fld: str, init) -> None:
+    """A law of the user's must suit an abelian joint and give k finite forces at the start
+    (t = 0, the initial coordinates, zero rates)."""
+    if not is_abelian(A_):
+        raise ModelError(item, fld, "an abelian joint for a law f(t, q, v) on its coordinates",
+                         "a non-abelian joint")
+    q = np.zeros(k) if init is None else np.array(init, dtype=float)
+    try:
+        f = np.asarray(law.fn(0.0, q, np.zeros(k)), dtype=float)
+    except Exception as exc:  # user code: anything
+        raise ModelError(item, fld, "a law f(t, q, v) that can be evaluated at t = 0",
+                         f"{type(exc).__name__}: {exc}") from None
+    if f.size not in (1, k) or not np.all(np.isfinite(f)):
+        raise ModelError(item, fld, f"a law f(t, q, v) giving {k} finite value(s)", f)
 
 
 def _control_law(control: PD | PID, k: int, item: str) -> PD | PID:

@@ -129,6 +129,47 @@ class PID:
 
 
 @dataclass(frozen=True)
+class Law:
+    """An actuator law of the user's on an abelian joint's coordinates: ``tau = fn(t, q, v)``
+    (q, v: the joint's k coordinates and rates, absolute; tau (k,) along them).
+
+    Written in Python, it is called from the compiled time loop once per Newton iteration
+    (the engine's callback, with the GIL), with its tangents ``d tau / d q`` and
+    ``d tau / d v`` from ``jacobian(t, q, v) -> (k x k, k x k)`` or by central differences of
+    ``fn`` (4 k more calls: steps ``1e-7 max(1, |x|)``), so Newton keeps its speed. Its
+    cost is Python's: docs/control.md. ``torque=lambda t, q, v: ...`` makes one.
+    """
+
+    fn: Any = field(compare=False)
+    jacobian: Any = field(default=None, compare=False)
+
+    def __post_init__(self):
+        if not callable(self.fn):
+            raise ModelError("Law", "fn", "a callable fn(t, q, v)", self.fn)
+        if self.jacobian is not None and not callable(self.jacobian):
+            raise ModelError("Law", "jacobian", "a callable jacobian(t, q, v) or None",
+                             self.jacobian)
+
+
+def state_law(v: Any) -> Law | None:
+    """``v`` as a :class:`Law` when it is one or a callable of three positional arguments
+    (t, q, v); None otherwise (a time function, a number, ...)."""
+    if isinstance(v, Law):
+        return v
+    if isinstance(v, TimeFunction) or not callable(v):
+        return None
+    import inspect
+
+    try:
+        params = list(inspect.signature(v).parameters.values())
+    except (TypeError, ValueError):
+        return None
+    pos = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)
+           and p.default is p.empty]
+    return Law(v) if len(pos) == 3 else None
+
+
+@dataclass(frozen=True)
 class NodeSpec:
     """A node: a frame in SE(3) (Eq. (1)) with optional rigid-body inertia at it (Eq. (49)).
 
@@ -214,6 +255,8 @@ class JointSpec:
     frames: tuple | None = None
     #: (k,) inertia on the joint's coordinates (reflected rotor inertia), or None
     armature: np.ndarray | None = None
+    #: an actuator law of the user's on the joint's coordinates, f(t, q, v), or None
+    law: Law | None = None
 
     @property
     def k(self) -> int:

@@ -48,7 +48,8 @@ struct Context {
   bool phi_rows = true;
   double fscale = 0;     // magnitude of the forces entering r (for relative tolerances)
   double* energy;        // (N_ENERGY,) or nullptr
-  double* ctrl = nullptr;  // (2 npid,) PID states (z, e) of the iterate (joint_force.hpp) or nullptr
+  double* ctrl = nullptr;
+  const double* law = nullptr;  // (.,) the user's laws' forces and tangents (engine.hpp)  // (2 npid,) PID states (z, e) of the iterate (joint_force.hpp) or nullptr
 
   // Where the velocity-level block at offset `off` of vals goes: into velv, or nowhere
   // (nullptr: not an index-2 matrix, or a block no index-2 product uses)

@@ -36,6 +36,7 @@ struct JointForces : ElementBatch {
   std::vector<double> ki, lim;              // (n, 6) PID integral gains, output limits (inf)
   std::vector<double> Ja;                   // (n, 6) armature: inertia on the coordinates
   std::vector<double> ts;                   // (n, 6) sample time of a sampled PID law, or 0
+  std::vector<int> lidx;                    // (n,) the user's law: its offset in Context::law
   std::vector<int> zslot, zidx;             // (n,) PID: first input slot (3 per coordinate:
                                             // z_n, e_n, h/2) and first state index, or -1
   std::vector<int> tau, pref, prate;        // (n,) first input slot (k consecutive) or -1
@@ -75,6 +76,7 @@ struct JointForces : ElementBatch {
     ts = t.real("ts");
     zslot = t.ints<int>("zslot");
     zidx = t.ints<int>("zidx");
+    lidx = t.ints<int>("lidx");
     tau = t.ints<int>("tau");
     pref = t.ints<int>("pref");
     prate = t.ints<int>("prate");
@@ -116,6 +118,7 @@ struct JointForces : ElementBatch {
         wd[c] = kd[6 * e + c];
         if (zslot[e] >= 0) pd = pid(X, e, c, al[c], pd, wk, wd);
         double ta = tau[e] >= 0 ? X.u[tau[e] + c] : 0.0;
+        if (lidx[e] >= 0 && X.law) ta += X.law[lidx[e] + c];  // (the user's law f(t, q, v))
         tpd[c] = ta + pd;
         g[c] = fs[c] + C[6 * e + c] * v[c] - tpd[c] + Ja[6 * e + c] * X.vdq[d + c];
         X.r[d + c] += g[c];
@@ -176,6 +179,15 @@ struct JointForces : ElementBatch {
           for (int c = 0; c < k; ++c) Bk[6 * i + c] *= X.cK;
       }
       for (int c = 0; c < k; ++c) Bc[7 * c] += X.cM * Ja[6 * e + c];  // (velocity level)
+      if (lidx[e] >= 0 && X.law) {  // the user's law: -d f / d q, -d f / d v (k x k)
+        const double* Jq = X.law + lidx[e] + k;
+        const double* Jv = Jq + k * k;
+        for (int i = 0; i < k; ++i)
+          for (int c = 0; c < k; ++c) {
+            Bk[6 * i + c] -= X.cK * Jq[k * i + c];
+            Bc[6 * i + c] -= X.cC * Jv[k * i + c];
+          }
+      }
       double Bt[36];
       for (int i = 0; i < 36; ++i) Bt[i] = Bk[i] + Bc[i];
       add_block(X.vals, off[e], k, k, Bt, 1.0);
