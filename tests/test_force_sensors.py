@@ -202,6 +202,21 @@ def test_sampled_pid_effort_is_held_between_samples():
                                atol=1e-12 * np.abs(r.work_actuators).max())
 
 
+def test_effort_of_a_law_of_the_users_is_the_law_at_the_stored_rows():
+    # an actuator law f(t, q, v) (a Python callable, called by the engine): the effort at every
+    # stored row is the law evaluated there, and the torque sensor reads it minus the spring
+    r = sd.simulate(_rod(0.0, stiffness=2.0,
+                         actuator=lambda t, q, v: -20.0 * (q - 0.3 * t) - 2.0 * v + 5.0),
+                    t_end=0.5, step=1e-2, tol_residual=1e-13)
+    q, v = r.joint_coordinates("hinge"), r.joint_velocities("hinge")
+    act = r.actuator_effort("hinge")
+    np.testing.assert_allclose(act, -20.0 * (q - 0.3 * r.t[:, None]) - 2.0 * v + 5.0,
+                               rtol=1e-14, atol=1e-13)
+    np.testing.assert_allclose(r.joint_torque("hinge"), act - 2.0 * q, rtol=0,
+                               atol=1e-9 * np.abs(act).max())
+    assert "joint/hinge/actuator/0" in list_channels(r)
+
+
 # -------------------------------------------------------------------------------------------------
 # point spring-dampers
 # -------------------------------------------------------------------------------------------------

@@ -8,9 +8,10 @@ equations of motion (Eq. (36)) are ``A^T lambda + g_j = 0`` with the force eleme
     g_j = K (alpha - alpha_ref) + C v - tau(t) - PD,   PD = -kp (alpha - target(t))
                                                              - kd (v - target_rate(t))
 
-(springs Eq. (62), dampers Eq. (64), actuators Eq. (66), PD and PID laws; a joint's armature
-adds the inertia ``J_a dv/dt``; on non-abelian joints the spring acts on the log coordinates,
-``T_A(alpha)^-T K (alpha - alpha_ref)``, see ``se3dyn/_core/elements/joint_force.hpp``).
+(springs Eq. (62), dampers Eq. (64), actuators Eq. (66) (time functions or the user's laws
+``f(t, q, v)``), PD and PID laws; a joint's armature adds the inertia ``J_a dv/dt``; on
+non-abelian joints the spring acts on the log coordinates, ``T_A(alpha)^-T K (alpha -
+alpha_ref)``, see ``se3dyn/_core/elements/joint_force.hpp``).
 Rather than writing these formulas a second time, each part is the residual that the same
 kernels give for a copy of the model holding that part only (:func:`part_model`), at the
 stored rows with zero multipliers (:func:`se3dyn.engine.system.residual_rows`): the joint rows
@@ -51,8 +52,9 @@ _PART_SYSTEMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 def has_part(joint, part: str) -> bool:
     """Whether a :class:`~se3dyn.model.specs.JointSpec` has force elements of ``part``."""
-    if part == "actuator":  # (control: a PD or a PID law)
-        return joint.actuator is not None or joint.control is not None
+    if part == "actuator":  # (control: a PD or a PID law; law: the user's f(t, q, v))
+        return (joint.actuator is not None or joint.control is not None
+                or getattr(joint, "law", None) is not None)
     return bool(np.any(np.asarray(joint.stiffness) != 0) or np.any(np.asarray(joint.damping)
                                                                      != 0))
 
@@ -77,7 +79,7 @@ def part_model(model, part: str):
             joints.append(replace(j, stiffness=z, reference=z.copy(), damping=z.copy(),
                                   armature=None))
         else:
-            joints.append(replace(j, actuator=None, control=None, armature=None))
+            joints.append(replace(j, actuator=None, control=None, armature=None, law=None))
     return replace(model, joints=tuple(joints), loads=(), springs=(), bushings=(), beams=(),
                    drives=(), couplings=())
 

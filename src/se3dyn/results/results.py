@@ -406,8 +406,9 @@ class Results:
                                 + Ja[d:d + k] * np.asarray(self.vd, float)[:, d:d + k])
 
     def actuator_effort(self, name: str) -> np.ndarray:
-        """Generalized force that a joint's actuator (``actuator=``, Eq. (66)) and control law
-        (``control=``: PD or PID) apply along its coordinates, shape (n, k): ``tau(t) - kp
+        """Generalized force that a joint's actuator (``actuator=``, Eq. (66): a time function
+        or a law ``f(t, q, v)``) and control law (``control=``: PD or PID) apply along its
+        coordinates, shape (n, k): ``tau(t) - kp
         (alpha - target(t)) - kd (v - target_rate(t))`` (a PID law: ``- ki z`` more, saturated),
         N m for an angle and N for a translation, positive in the sense of increasing
         coordinates (as :meth:`drive_effort`).
