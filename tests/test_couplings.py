@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
+from _results_file import run_and_read
 from se3dyn.errors import ModelError, Se3dynWarning
 from se3dyn.io.modelfile import load_model, save_model
 from se3dyn.results.channels import channel_unit, get_channel, list_channels
@@ -89,8 +90,6 @@ def test_rack_and_pinion():
 
 
 def test_model_file_channels_and_results_files(tmp_path):
-    from se3dyn.io.h5 import ResultsWriter, read_results
-
     model = _gears(gravity=True)
     text = save_model(model)
     assert "couplings:" in text
@@ -98,14 +97,8 @@ def test_model_file_channels_and_results_files(tmp_path):
     a, b = _run(model, 0.2, 1e-2), _run(back, 0.2, 1e-2)
     assert np.array_equal(a.H, b.H) and np.array_equal(a.lam, b.lam)
     assert "coupling/gear/force" in list_channels(a)
-    s = sd.compile_model(model)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        with ResultsWriter(tmp_path / "r.h5", s, settings={"t_end": 0.2, "step": 1e-2}) as w:
-            res = sd.simulate(s, 0.2, 1e-2, on_output=w.append)
-            w.close(res.stats)
-    np.testing.assert_array_equal(get_channel(read_results(tmp_path / "r.h5"),
-                                              "coupling/gear/force"),
+    res, back = run_and_read(model, 0.2, tmp_path / "r.h5")
+    np.testing.assert_array_equal(get_channel(back, "coupling/gear/force"),
                                   get_channel(res, "coupling/gear/force"))
 
 

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
+from _results_file import run_and_read
 from se3dyn.errors import ModelError, Se3dynWarning
-from se3dyn.io.h5 import ResultsWriter, read_results
 from se3dyn.io.modelfile import load_model, save_model
 from se3dyn.results.channels import channel_unit, get_channel, list_channels
 
@@ -323,14 +323,7 @@ def test_model_file_drive_of_several_coordinates_and_errors():
 
 
 def test_drive_channels_and_units_from_memory_and_from_a_results_file(tmp_path):
-    model = _driven_slider_crank()
-    s = sd.compile_model(model)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        with ResultsWriter(tmp_path / "r.h5", s, settings={"t_end": 0.1, "step": 1e-2}) as w:
-            res = sd.simulate(s, 0.1, 1e-2, on_output=w.append)
-            w.close(res.stats)
-    back = read_results(tmp_path / "r.h5")
+    res, back = run_and_read(_driven_slider_crank(), 0.1, tmp_path / "r.h5")
     names = [c for c in list_channels(res) if c.startswith("drive/")]
     assert names == ["drive/motor/effort", "drive/motor/power"]
     assert names == [c for c in list_channels(back) if c.startswith("drive/")]

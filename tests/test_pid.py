@@ -307,3 +307,25 @@ def test_simulator_steps_drives_and_control_laws_as_simulate_does():
         assert np.array_equal(getattr(a, f), getattr(full, f)), f
         assert np.array_equal(getattr(b, f)[-1], getattr(full, f)[-1]), f
     assert np.array_equal(a.stats["final_state"].ctrl, full.stats["final_state"].ctrl)
+
+
+def test_a_geared_motor_is_the_law_scaled_by_the_ratio_with_the_reflected_inertia():
+    N, Jr, L = 5.0, 0.004, 2.0
+
+    def rotor(**kw):
+        mb = sd.ModelBuilder()
+        mb.node("g", fixed=True)
+        mb.node("rotor", mass=1.0, inertia=(J, J, J))
+        mb.joint("axle", "hinge", "g", "rotor", axis=(0, 0, 1), **kw)
+        return mb.build()
+
+    geared = rotor(control=sd.PID(KP, KI, KD, target=R, limit=L, gear=N, rotor_inertia=Jr))
+    same = rotor(control=sd.PID(N * KP, N * KI, N * KD, target=R, limit=N * L),
+                 armature=N * N * Jr)
+    a, b = _run(geared, 1.0, 1e-2), _run(same, 1.0, 1e-2)
+    assert np.array_equal(a.H, b.H) and np.array_equal(a.v, b.v)
+    assert np.abs(a.joint_torque("axle")).max() <= N * L * (1 + 1e-12)
+    back, _ = load_model(save_model(geared))
+    assert np.array_equal(_run(back, 1.0, 1e-2).H, a.H)
+    with pytest.raises(ModelError, match="PID.*gear"):
+        sd.PID(1.0, gear=0.0)

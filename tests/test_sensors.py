@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
+from _results_file import run_and_read
 from se3dyn.errors import ModelError
-from se3dyn.io.h5 import ResultsWriter, read_results
 from se3dyn.io.modelfile import ModelFileError, loads_model, save_model
 from se3dyn.lie import exp_so3, log_so3
 from se3dyn.results.channels import channel_unit, get_channel, list_channels
@@ -247,11 +247,7 @@ def test_markers_round_trip_through_a_model_file():
 
 def _run_and_read(model, t_end: float, path):
     """A run at h = 1e-2 streamed into a results file: (results in memory, read back)."""
-    s = sd.compile_model(model)
-    with ResultsWriter(path, s, settings={"t_end": t_end, "step": 1e-2}) as w:
-        res = sd.simulate(s, t_end, 1e-2, on_output=w.append)
-        w.close(res.stats)
-    return res, read_results(path)
+    return run_and_read(model, t_end, path)
 
 
 def test_marker_channels_equal_in_memory_and_from_a_results_file(tmp_path):

@@ -675,7 +675,7 @@ def cmd_info(args) -> int:
 
 def cmd_types(args) -> int:
     """The joint types and element types with their model-file fields."""
-    from se3dyn.io.modelfile import ELEMENT_SECTIONS
+    from se3dyn.io.modelfile import ELEMENT_SECTIONS, FIELDS
     from se3dyn.model.joint_types import JOINT_SYNONYMS, JOINT_TYPES
 
     print("joint types (joints: type):")
@@ -689,11 +689,23 @@ def cmd_types(args) -> int:
               + (f"; also called {', '.join(syn)}" if syn else ""))
     print("element types (model-file sections; docs/model-file.md has every field):")
     for es in ELEMENT_SECTIONS:
-        req = [f.name for f in es.fields if f.required]
-        opt = [f.name for f in es.fields if not f.required]
-        print(f"  {es.key}: {es.doc}")
-        print(f"      required: {', '.join(req) or 'none'}; optional: {', '.join(opt)}")
+        _section_fields(es.key, es.doc, es.fields)
+    print("outputs and motion (model-file sections):")
+    top = {f.name: f for f in FIELDS["model"]}
+    for key, kind in (("markers", "marker"), ("drives", "drive"), ("couplings", "coupling")):
+        _section_fields(key, top[key].doc, FIELDS[kind])
+    print("control laws (joints: control): PD (kp, kd, target, target_rate), PID (kp, ki, kd, "
+          "target, target_rate, limit, sample_time); laws of your own in Python: "
+          "torque=lambda t, q, v: ...")
     return 0
+
+
+def _section_fields(key: str, doc: str, fields) -> None:
+    """A model-file section and its required and optional fields (se3dyn types)."""
+    req = [f.name for f in fields if f.required]
+    opt = [f.name for f in fields if not f.required]
+    print(f"  {key}: {doc}")
+    print(f"      required: {', '.join(req) or 'none'}; optional: {', '.join(opt)}")
 
 
 def cmd_plot(args) -> int:

@@ -134,6 +134,10 @@ def model_file(mf):
         F("limit", mf.OneOf((mf.Num(exclusive_minimum=0), mf.Vec(None, 1, 6))), None,
           "Largest magnitude of the law's force/torque (a PID law; anti-windup: the integral "
           "holds while saturated). Absent: no saturation."),
+        F("gear", mf.Num(), 1, "A PID law driving a motor behind a gear of this ratio: the "
+          "law's output and limit are the motor's torque, the joint gets gear times it."),
+        F("rotor_inertia", mf.Num(minimum=0), 0, "The motor's rotor inertia (a PID law): the "
+          "joint carries gear^2 times it."),
         F("sample_time", mf.Num(exclusive_minimum=0), None, "A sampled PID law: evaluated "
           "at the times k sample_time only and held between them (zero-order hold), the "
           "integral summed; the step must divide it. Absent: the continuous law."),
@@ -147,7 +151,8 @@ def model_file(mf):
 
         if "control" in kw:
             law = dict(kw["control"].values)
-            pid = any(f in law for f in ("ki", "limit", "sample_time"))
+            pid = any(f in law for f in ("ki", "limit", "sample_time", "gear",
+                                         "rotor_inertia"))
             kw["control"] = PID(**law) if pid else PD(**law)
         mb.joint(name, kw.pop("type"), kw.pop("a"), kw.pop("b"), **kw)
 
@@ -242,8 +247,8 @@ def _universal_out(mf, name: str, parts: tuple[str, ...], model) -> dict:
 
             d["control"].update(_pid_out(PID(np.r_[c1.kp, c2.kp], np.r_[c1.ki, c2.ki],
                                              np.r_[c1.kd, c2.kd], 0.0, None,
-                                             np.r_[c1.limit, c2.limit], c1.sample_time),
-                                         item))
+                                             np.r_[c1.limit, c2.limit], c1.sample_time,
+                                             c1.gear, c1.rotor_inertia), item))
         if c1.target_rate is not None:
             d["control"]["target_rate"] = source(c1.target_rate, "control.target_rate")
     return d
@@ -256,6 +261,10 @@ def _pid_out(c, item: str) -> dict:
     out = {"ki": [float(x) for x in c.ki]}
     if c.sample_time is not None:
         out["sample_time"] = float(c.sample_time)
+    if c.gear != 1.0:
+        out["gear"] = float(c.gear)
+    if c.rotor_inertia:
+        out["rotor_inertia"] = float(c.rotor_inertia)
     lim = np.asarray(c.limit, dtype=float)
     if np.all(np.isfinite(lim)):
         out["limit"] = [float(x) for x in lim]

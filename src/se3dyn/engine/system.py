@@ -404,12 +404,18 @@ def _dof_tables(joints, joint_dofadr: np.ndarray, nq: int) -> dict:
         dof_C[d] = j.damping
         if j.armature is not None:
             dof_armature[d] = j.armature
+        # a PID law behind a gear: the joint receives gear times the motor's torque (gains and
+        # limit on the joint side), and the reflected rotor inertia gear^2 J_rotor
         if j.control is not None:
             dof_kp[d] = j.control.kp
             dof_kd[d] = j.control.kd
             if hasattr(j.control, "ki"):  # PID
-                dof_ki[d] = j.control.ki
-                dof_limit[d] = j.control.limit
+                N = j.control.gear
+                dof_kp[d] = N * j.control.kp
+                dof_kd[d] = N * j.control.kd
+                dof_ki[d] = N * j.control.ki
+                dof_limit[d] = abs(N) * j.control.limit
+                dof_armature[d] += N * N * j.control.rotor_inertia
                 dof_ts[d] = j.control.sample_time or 0.0
     return dict(dof_stiffness=dof_K, dof_reference=dof_ref, dof_damping=dof_C, dof_kp=dof_kp,
                 dof_kd=dof_kd, dof_ki=dof_ki, dof_limit=dof_limit, dof_ts=dof_ts,

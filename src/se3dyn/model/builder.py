@@ -440,7 +440,7 @@ class ModelBuilder:
                     sub_pd = PID(part(control.kp, i, "control.kp"),
                                  part(control.ki, i, "control.ki"),
                                  part(control.kd, i, "control.kd"), tgt, rate, lim,
-                                 control.sample_time)
+                                 control.sample_time, control.gear, control.rotor_inertia)
                 else:
                     sub_pd = PD(part(control.kp, i, "control.kp"),
                                 part(control.kd, i, "control.kd"), tgt, rate)
@@ -1034,7 +1034,8 @@ def _control_law(control: PD | PID, k: int, item: str) -> PD | PID:
     lim = (np.full(k, np.inf) if control.limit is None
            else _limits(control.limit, k, item, "control.limit"))
     ts = None if control.sample_time is None else float(control.sample_time)
-    return PID(kp, ki, kd, tgt, rate, lim, ts)
+    return PID(kp, ki, kd, tgt, rate, lim, ts, float(control.gear),
+               float(control.rotor_inertia))
 
 
 def marker_offset(node: NodeSpec, at: np.ndarray | None, offset: np.ndarray | None,

@@ -98,6 +98,13 @@ class PID:
         only, from the state there, and its output held until the next (zero-order hold),
         with the integral summed as ``I_k = I_(k-1) + sample_time e_k``. The step of a run
         must divide it (fixed steps). None: the continuous law.
+    gear : float, optional
+        The law drives a motor behind a gear of ratio ``gear`` (motor turns per joint turn):
+        the law's output and ``limit`` are the motor's torque, the joint receives ``gear``
+        times it (so the gains act as ``gear`` times larger on the joint).
+    rotor_inertia : float, optional
+        The motor's rotor inertia; the joint's coordinates carry ``gear^2 rotor_inertia`` of
+        it (its reflected inertia, added to the joint's ``armature``).
     """
 
     kp: Any
@@ -107,6 +114,8 @@ class PID:
     target_rate: Any = None
     limit: Any = None
     sample_time: Any = None
+    gear: Any = 1.0
+    rotor_inertia: Any = 0.0
 
     def __post_init__(self):
         for fld in ("kp", "ki", "kd"):
@@ -117,6 +126,13 @@ class PID:
             v = self.limit
             _limits(v, int(np.size(v)) if isinstance(v, list | tuple | np.ndarray) else 1,
                     "PID", "limit")
+        for fld, lo in (("gear", None), ("rotor_inertia", 0.0)):
+            v = getattr(self, fld)
+            if (isinstance(v, bool) or not isinstance(v, int | float | np.floating)
+                    or not math.isfinite(v) or (lo is None and v == 0) or (lo is not None
+                                                                          and v < lo)):
+                raise ModelError("PID", fld, "a nonzero finite number" if lo is None else
+                                 "a non-negative finite number", v)
         if self.sample_time is not None:
             ts = self.sample_time
             if (isinstance(ts, bool) or not isinstance(ts, int | float | np.floating)
