@@ -11,23 +11,14 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
+from _results_file import run_and_read
 from se3dyn import lie
 from se3dyn.errors import ModelError, UnknownNameError
-from se3dyn.io.h5 import ResultsWriter, read_results
 from se3dyn.model.specs import PD, PID
 from se3dyn.results.channels import channel_unit, get_channel, list_channels
 
 GZ = 9.81
 M, L = 2.0, 0.8
-
-
-def _run_and_read(model, t_end: float, path, step: float = 1e-2):
-    """A run streamed into a results file: (results in memory, read back)."""
-    s = sd.compile_model(model)
-    with ResultsWriter(path, s, settings={"t_end": t_end, "step": step}) as w:
-        res = sd.simulate(s, t_end, step, on_output=w.append)
-        w.close(res.stats)
-    return res, read_results(path)
 
 
 def _trapezoid(t: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -156,23 +147,27 @@ def test_spring_force_on_a_spherical_joint_acts_on_the_log_coordinates():
                                atol=1e-9 * np.abs(F).max())
 
 
-def test_pid_effort_is_the_law_with_its_integral_state():
+@pytest.mark.parametrize("gear, rotor", [(1.0, 0.0), (3.0, 0.004)])
+def test_pid_effort_is_the_law_with_its_integral_state(gear, rotor):
     # a rod on a hinge under gravity, with armature and a spring, lifted to a ramped target by
-    # a PID law: the integral state is not in the rows, so the effort comes from the joint's
-    # equation of motion; it must be the law itself, -kp e - ki z - kd (v - rate), with
-    # z = int e dt by the trapezoidal rule over the stored steps (every step is stored), and
-    # its power must integrate to the run's actuator work
-    kp, ki, kd, Ja = 60.0, 40.0, 5.0, 0.05
-    r = sd.simulate(_rod(0.0, armature=Ja, stiffness=2.0,
-                         control=PID(kp=kp, ki=ki, kd=kd, target=sd.Ramp(0.5, 0.0, 0.5))),
-                    t_end=2.0, step=1e-3, tol_residual=1e-12)
+    # a PID law (behind a gear: the joint gets gear times the motor's torque, and the rotor's
+    # inertia reflected, gear^2 J_rotor): the integral state is not in the rows, so the effort
+    # comes from the joint's equation of motion; it must be the law itself, gear (-kp e - ki z
+    # - kd (v - rate)), with z = int e dt by the trapezoidal rule over the stored steps (every
+    # step is stored), and its power must integrate to the run's actuator work
+    kp, ki, kd = 60.0 / gear, 40.0 / gear, 5.0 / gear
+    Ja = 0.05 + gear**2 * rotor
+    law = PID(kp=kp, ki=ki, kd=kd, target=sd.Ramp(0.5, 0.0, 0.5),
+              **({"gear": gear, "rotor_inertia": rotor} if rotor else {}))
+    r = sd.simulate(_rod(0.0, armature=0.05, stiffness=2.0, control=law), t_end=2.0, step=1e-3,
+                    tol_residual=1e-12)
     act = r.actuator_effort("hinge")[:, 0]
     al, v = r.joint_coordinates("hinge")[:, 0], r.joint_velocities("hinge")[:, 0]
     e = al - 0.5 * np.clip(r.t / 0.5, 0.0, 1.0)
     rate = np.where(r.t < 0.5, 1.0, 0.0)  # (the ramp's rate; at t = 0.5 s its left value)
-    law = -kp * e - ki * _trapezoid(r.t, e) - kd * (v - rate)
-    np.testing.assert_allclose(act, law, rtol=0, atol=1e-9 * np.abs(act).max())
-    assert abs(e[-1]) < 0.05 and abs(ki * _trapezoid(r.t, e)[-1]) > 1.0  # the integral acts
+    tau = gear * (-kp * e - ki * _trapezoid(r.t, e) - kd * (v - rate))
+    np.testing.assert_allclose(act, tau, rtol=0, atol=1e-9 * np.abs(act).max())
+    assert abs(e[-1]) < 0.05 and abs(gear * ki * _trapezoid(r.t, e)[-1]) > 1.0  # it integrates
     W = r.work_actuators
     np.testing.assert_allclose(_trapezoid(r.t, act * v), W, rtol=0, atol=1e-9 * np.abs(W).max())
     # at the end, nearly at rest: it holds the gravity moment and the spring
@@ -268,7 +263,7 @@ def test_force_sensor_channels_equal_in_memory_and_from_a_results_file(tmp_path)
     mb.node("tip", (0.0, 0.5, -0.8), mass=0.5, inertia=(0.01, 0.01, 0.01))
     mb.joint("plain", "hinge", "cart", "tip", axis=(1, 0, 0), at=(0.0, 0.5, -0.5))
     model = mb.build()
-    res, back = _run_and_read(model, 0.1, tmp_path / "res.h5")
+    res, back = run_and_read(model, 0.1, tmp_path / "res.h5")
     want = ["joint/hinge/actuator/0", "joint/hinge/spring/0", "joint/rail/actuator/0",
             "spring/cord/force", "spring/cord/length", "spring/cord/rate"]
     pick = lambda names: [c for c in names  # noqa: E731

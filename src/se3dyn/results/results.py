@@ -411,7 +411,8 @@ class Results:
         coordinates, shape (n, k): ``tau(t) - kp
         (alpha - target(t)) - kd (v - target_rate(t))`` (a PID law: ``- ki z`` more, saturated),
         N m for an angle and N for a translation, positive in the sense of increasing
-        coordinates (as :meth:`drive_effort`).
+        coordinates (as :meth:`drive_effort`); a PID law behind a gear: what the joint
+        receives, gear times the motor's torque.
 
         Exact: evaluated by the compiled element kernel at the stored rows (the time
         functions at the rows' times), see :mod:`se3dyn.results.forces`; under a PID law, whose
