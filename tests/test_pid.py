@@ -329,3 +329,17 @@ def test_a_geared_motor_is_the_law_scaled_by_the_ratio_with_the_reflected_inerti
     assert np.array_equal(_run(back, 1.0, 1e-2).H, a.H)
     with pytest.raises(ModelError, match="PID.*gear"):
         sd.PID(1.0, gear=0.0)
+
+
+def test_a_pid_coordinate_is_not_driven_or_coupled_as_a_follower():
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("a", mass=1.0, inertia=(J, J, J))
+    mb.node("b", (1, 0, 0), mass=1.0, inertia=(J, J, J))
+    mb.joint("ja", "hinge", "g", "a", axis=(0, 0, 1), control=sd.PID(KP, KI, KD))
+    mb.joint("jb", "hinge", "g", "b", axis=(0, 0, 1), at=(1, 0, 0))
+    with pytest.raises(ModelError, match=r"drive 'd'.*without a PID law"):
+        mb.drive("d", "ja", velocity=1.0)
+    with pytest.raises(ModelError, match=r"coupling 'c'.*without a PID law"):
+        mb.coupling("c", leader="jb", follower="ja")
+    mb.coupling("c", leader="ja", follower="jb")  # a PID leader drives both

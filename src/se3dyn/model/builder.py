@@ -864,6 +864,7 @@ class ModelBuilder:
         for i in sorted(set(given["position"]) | set(given["velocity"])):
             kind = "position" if i in given["position"] else "velocity"
             tgt = (parts[i][0], parts[i][1], kind)
+            self._no_pid(item, kind, parts[i][0])
             if tgt[:2] in taken:
                 raise ModelError(item, kind, "a coordinate no other drive prescribes",
                                  f"coordinate {i} of joint {joint!r}",
@@ -915,6 +916,7 @@ class ModelBuilder:
         if ends[0][2:] == ends[1][2:]:
             raise ModelError(item, "follower", "a coordinate other than the leader's",
                              follower)
+        self._no_pid(item, "follower", ends[1][2])
         for fld, v in (("ratio", ratio), ("offset", offset)):
             if isinstance(v, bool) or not isinstance(v, int | float | np.floating) or not \
                     math.isfinite(v) or abs(v) > MAX_ABS:
@@ -953,6 +955,15 @@ class ModelBuilder:
                              "a rigid joint has no coordinate" if js.k == 0 else
                              "its coordinates are log coordinates, which do not add up")
         return [(joint, i) for i in range(js.k)]
+
+    def _no_pid(self, item: str, fld: str, joint: str) -> None:
+        """A driven coordinate or a coupling's follower takes no PID law: its motion is given,
+        the law would only add to the drive's effort or the coupling's force, which the
+        results then could not tell (the law's integral is not in the stored rows)."""
+        if hasattr(self._joints[joint].control, "ki"):
+            raise ModelError(item, fld, "a coordinate without a PID law", f"joint {joint!r}",
+                             "its motion is given here; control another coordinate, or drive "
+                             "it without the law")
 
     @staticmethod
     def _drive_functions(item: str, fld: str, val: Any, k: int) -> dict:
