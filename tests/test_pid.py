@@ -343,3 +343,39 @@ def test_a_pid_coordinate_is_not_driven_or_coupled_as_a_follower():
     with pytest.raises(ModelError, match=r"coupling 'c'.*without a PID law"):
         mb.coupling("c", leader="jb", follower="ja")
     mb.coupling("c", leader="ja", follower="jb")  # a PID leader drives both
+
+
+def test_a_long_controlled_chain_gives_the_same_bits_on_one_and_two_threads():
+    # 120 hinges (the joint-force kernel's elements in several chunks, evaluated in parts):
+    # continuous and sampled PID laws, a law of the user's, a drive and a coupling
+    def chain(n=120):
+        mb = sd.ModelBuilder(gravity=(0, -9.81, 0))
+        mb.node("g", fixed=True)
+        prev = "g"
+        for i in range(n):
+            mb.node(f"b{i}", (0.1 * i + 0.05, 0, 0), mass=1.0, inertia=(1e-3, 1e-2, 1e-2))
+            kw = {}
+            if i % 3 == 0:
+                kw["control"] = sd.PID(1.0, 0.5, 0.02, target=0.01, limit=3.0)
+            elif i % 3 == 1:
+                kw["control"] = sd.PID(1.0, 0.5, 0.02, target=0.0, sample_time=0.002)
+            elif i == 2:
+                kw["torque"] = lambda t, q, v: -2.0 * q - 0.1 * v
+            mb.joint(f"j{i}", "hinge", prev, f"b{i}", axis=(0, 0, 1), at=(0.1 * i, 0, 0),
+                     armature=1e-4, **kw)
+            prev = f"b{i}"
+        mb.drive("d", "j5", velocity=0.3)
+        mb.coupling("c", leader="j7", follower="j8", ratio=-0.5)
+        return mb.build()
+
+    runs = []
+    try:
+        for n in (1, 2, 2):
+            sd.set_threads(n)
+            r = _run(chain(), 0.05, 1e-3)
+            runs.append((r.H, r.v, r.lam, r.stats["final_state"].ctrl))
+    finally:
+        sd.set_threads()
+    for other in runs[1:]:
+        for x, y in zip(runs[0], other, strict=True):
+            assert np.array_equal(x, y)

@@ -467,7 +467,7 @@ class GeneralizedAlpha:
                    4: "the iteration matrix is singular (a mechanism in a singular "
                       "configuration, a massless node no joint determines, or a diverged "
                       "iterate)"}[status]
-            self._fail(s, t1, h, it, ev, why)
+            self._fail(s, t1, h, it, ev, why, w.law_error())
         H, HJ = Hout[:s.M], Hout[s.M:]
         # local truncation error of the increment: a_n approximates vd(t_n + (alpha_m -
         # alpha_f) h), so the position update n = h v + h^2 ((1/2 - beta) a_n + beta a_{n+1})
@@ -492,7 +492,8 @@ class GeneralizedAlpha:
                                   dissipated=st.dissipated + 0.5 * h * (st.power[2] + p[2]))
         return new, StepInfo(int(it), float(er), float(ep), e, n, err)
 
-    def _fail(self, s: System, t: float, h: float, it: int, ev, why: str):
+    def _fail(self, s: System, t: float, h: float, it: int, ev, why: str,
+              law: str | None = None):
         # non-finite entries (an overflow) count as the largest: never a crash here
         with np.errstate(all="ignore"):
             big = dict(nan=np.inf, posinf=np.inf)
@@ -514,7 +515,6 @@ class GeneralizedAlpha:
                 item = s.items[i]
             else:  # pragma: no cover
                 where = item = "?"
-        law = s.pattern.pop("law_error", None)
         if law is not None:  # (the non-finite values are the failed law's)
             why = f"the law of {law}"
         if not (np.isfinite(rmax) and np.isfinite(pmax)) and law is None:

@@ -39,7 +39,8 @@ def _jacobian(fn, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, n
 def law_callback(s: System):
     """The engine's callback ``cb(t, alpha (nq,), v (nq,), out)`` for the laws of ``s``, or None
     without laws. A law that raises or gives a wrong or non-finite value writes NaN (the step
-    then fails) and leaves its message in ``s.pattern["law_error"]``, which the failure names."""
+    then fails) and leaves its message in the callback's ``error``, which the failure names
+    (:meth:`se3dyn.engine.workspace.Workspace.law_error`)."""
     laws, _ = law_table(s)
     if not laws:
         return None
@@ -59,9 +60,10 @@ def law_callback(s: System):
                 if not np.all(np.isfinite(vals)):
                     raise ValueError(f"non-finite values {f}")
             except Exception as exc:  # user code: anything; the failing step names it
-                s.pattern["law_error"] = (f"joint '{name}': its law f(t, q, v) at t={t:.9g}, "
+                cb.error = (f"joint '{name}': its law f(t, q, v) at t={t:.9g}, "
                                           f"q={q}, v={w}: {type(exc).__name__}: {exc}")
                 out[off:off + k + 2 * k * k] = np.nan
                 continue
             out[off:off + k + 2 * k * k] = vals
+    cb.error = None
     return cb

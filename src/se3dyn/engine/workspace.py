@@ -57,7 +57,7 @@ class Workspace:
         self.engine = compiled().Engine(self.layout.tables)
         from se3dyn.engine.laws import law_callback
 
-        cb = law_callback(s)
+        cb = self._law_cb = law_callback(s)
         if cb is not None:  # (the user's laws f(t, q, v): engine.hpp, Engine::law_cb)
             self.engine.set_laws(cb)
         self._steppers: dict = {}
@@ -107,6 +107,15 @@ class Workspace:
                                       f"(LU status {code}): the state does not belong to this "
                                       "model or was altered")
         self._memo[id(stp)] = (stp, stp.serials(), mem)
+
+    def law_error(self) -> str | None:
+        """The message of the last failure of a law of the user's evaluated in this workspace
+        (taken: None afterwards), or None."""
+        cb = self._law_cb
+        if cb is None:
+            return None
+        err, cb.error = cb.error, None
+        return err
 
     def stepper(self, index2: bool, dropped: np.ndarray, keep: bool = True,
                 split: bool = True):
