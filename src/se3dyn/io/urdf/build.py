@@ -178,7 +178,7 @@ def _mimics(robot: Robot, order: list[Joint], mode: str, info: UrdfInfo) -> dict
             info.notes.append(f"<mimic> of {len(raw)} joints dropped (mimic='ignore'): "
                               + ", ".join(raw) + "; they move freely")
         return {}
-    for f, (lead, r, o) in raw.items():
+    for f, (lead, _r, _o) in raw.items():
         item = f"{robot.file}: joint {f!r}"
         if lead not in robot.joints or lead == f:
             raise UrdfError(item, "<mimic> joint", "the name of another joint of the file",
@@ -306,7 +306,7 @@ def _lumped(robot: Robot, links: list[str], Tw: dict):
     parts = [(i, T) for i, T in parts if i is not None and i.mass > 0]
     if not parts:
         return 0.0, None, None
-    cs, Js = zip(*(world_inertia(T, i.T, i.inertia) for i, T in parts))
+    cs, Js = zip(*(world_inertia(T, i.T, i.inertia) for i, T in parts), strict=True)
     return combine_inertia(np.array([i.mass for i, _ in parts]), np.array(cs), np.array(Js))
 
 
