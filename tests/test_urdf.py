@@ -411,3 +411,22 @@ def test_real_robot_imports_builds_and_simulates(name):
         assert z[-1] - z[0] == pytest.approx(-0.5 * G * 0.1 ** 2, rel=1e-10)
     if name == "panda":  # the fingers' <mimic> enforced
         assert [c.name for c in mb.build().couplings] == ["panda_finger_joint2:mimic"]
+
+
+# ---------------------------------------------------------------------------------------------
+def test_cli_checks_runs_and_imports_a_urdf(tmp_path, capsys):
+    from se3dyn.cli import main
+    from se3dyn.io.modelfile import load_model
+
+    assert main(["check", str(DATA / "fourbar.urdf")]) == 0
+    out = capsys.readouterr().out
+    assert "loop closure 'closure'" in out and "redundant constraint equations (3)" in out
+    assert main(["run", str(DATA / "mimic.urdf"), "--t-end", "0.05", "--step", "1e-2",
+                 "--out", str(tmp_path), "--quiet"]) == 0
+    assert "<limit> of 1 joints kept" in capsys.readouterr().err
+    out = tmp_path / "m.yaml"
+    assert main(["import-urdf", str(DATA / "fixed_child_offset_com.urdf"), "-o", str(out),
+                 "--fixed", "merge"]) == 0
+    model, _ = load_model(out)
+    assert [n.name for n in model.nodes] == ["base", "arm"] and model.marker("tip")
+    assert main(["check", str(tmp_path / "none.urdf")]) == 2
