@@ -217,9 +217,7 @@ def test_four_bar_loop_exact_over_a_passive_run_and_redundancy_reported():
     assert gap.max() <= 1e-12
     q1 = res.joint_coordinates("crank")[:, 0]
     q3 = res.joint_coordinates("rocker")[:, 0]
-    bx, bz = 0.3 * np.cos(q1) + 0.4 * np.sin(q1), -0.3 * np.sin(q1) + 0.4 * np.cos(q1)
-    cx, cz = 1.0 + 0.1 * np.cos(q3) + 0.6 * np.sin(q3), -0.1 * np.sin(q3) + 0.6 * np.cos(q3)
-    assert np.abs(np.hypot(cx - bx, cz - bz) - math.hypot(0.8, 0.2)).max() < 1e-12
+    assert np.abs(_loop_gap(q1, q3)).max() < 1e-12
     assert np.ptp(q1) > 0.5
 
 
@@ -239,9 +237,27 @@ def test_loop_closures_of_isaac_drake_and_a_side_file(tmp_path, kind):
     assert any(j.type == "spherical" for j in m.joints)
 
 
-def test_loop_not_closed_by_q0_is_refused_with_the_gap():
-    with pytest.raises(ModelError, match=r"loop 'closure'.*0\.1\d* m apart.*q0"):
-        load("fourbar.urdf", q0={"crank": 0.1})
+def _loop_gap(q1: float, q3: float) -> float:
+    """|C(q3) - B(q1)| - |BC| of the four-bar (hinges about y)."""
+    bx, bz = 0.3 * np.cos(q1) + 0.4 * np.sin(q1), -0.3 * np.sin(q1) + 0.4 * np.cos(q1)
+    cx, cz = 1.0 + 0.1 * np.cos(q3) + 0.6 * np.sin(q3), -0.1 * np.sin(q3) + 0.6 * np.cos(q3)
+    return np.hypot(cx - bx, cz - bz) - math.hypot(0.8, 0.2)
+
+
+def test_loop_closed_by_the_joints_not_given_in_q0():
+    """Only the crank angle given: the knee and rocker angles are solved so that the loop
+    closes (the loop equation holds to round-off), and the report says so."""
+    mb = load("fourbar.urdf", q0={"crank": 0.3})
+    m = mb.build()
+    q3 = float(m.joint("rocker").initial[0])
+    assert m.joint("crank").initial[0] == 0.3
+    assert abs(_loop_gap(0.3, q3)) < 1e-13
+    assert "q0 of rocker, knee solved" in mb.urdf.report()
+
+
+def test_loop_that_q0_cannot_close_is_refused_with_the_gap():
+    with pytest.raises(ModelError, match=r"loop 'closure'.*m apart.*could not close"):
+        load("fourbar.urdf", q0={"crank": 0.3, "rocker": 0.0, "knee": 0.0})
 
 
 # ---------------------------------------------------------------------------------------------

@@ -13,11 +13,11 @@ import numpy as np
 from se3dyn.engine.system import combine_inertia
 from se3dyn.errors import ModelError, Se3dynWarning
 from se3dyn.io.urdf import meshes
+from se3dyn.io.urdf.closure import close_loops, loop_residual
 from se3dyn.io.urdf.geometry import plane_axes, pose_of, world_inertia
 from se3dyn.io.urdf.loops import loops_argument
 from se3dyn.io.urdf.parse import Joint, Robot, UrdfError, _Ctx, read_robot
 from se3dyn.io.urdf.tree import poses, tree_order, twists
-from se3dyn.lie import log_so3
 from se3dyn.model.builder import ModelBuilder
 from se3dyn.model.visuals import MESH_SUFFIXES
 
@@ -134,7 +134,13 @@ def load_urdf(path, *, floating_base: bool = False, package_dirs=(), mimic: str 
     follow = _mimics(robot, order, mimic, info)
     q = _values(robot, order, root, q0, "q0", follow, floating_base)
     v = _values(robot, order, root, v0, "v0", follow, floating_base)
-    Tw = poses(order, root, q.pop(root, np.eye(4)), q)
+    T_root = q.pop(root, np.eye(4))
+    all_loops = robot.loops + loops_argument(loops, ctx)
+    moved = close_loops(order, root, T_root, q, all_loops, set(q0 or ()), follow)
+    if moved:
+        info.notes.append("q0 of " + ", ".join(moved) + " solved to close the loops (the "
+                          "joints not given in q0)")
+    Tw = poses(order, root, T_root, q)
     tw = twists(order, root, Tw, v, v.pop(root, np.zeros(6)))
     group = _groups(order, root, fixed == "merge")
     mb = UrdfBuilder(gravity, name=robot.name)
@@ -144,7 +150,7 @@ def load_urdf(path, *, floating_base: bool = False, package_dirs=(), mimic: str 
     for f, (lead, r, o) in follow.items():
         _wrap(robot.file, mb.coupling, f"{f}:mimic", leader=lead, follower=f, ratio=r,
               offset=o)
-    _add_loops(mb, robot, robot.loops + loops_argument(loops, ctx), group, Tw)
+    _add_loops(mb, robot, all_loops, group, Tw)
     _add_visuals(mb, robot, group, Tw, meshes.package_roots(package_dirs, str(path)),
                  str(path))
     _add_markers(mb, group, Tw)
@@ -340,8 +346,8 @@ def _add_loops(mb, robot: Robot, loops: list, group: dict, Tw: dict) -> None:
         for fld, link in (("link1", lp.link1), ("link2", lp.link2)):
             if link not in robot.links:
                 raise UrdfError(item, fld, "the name of a link of the file", link)
-        F1, F2 = Tw[lp.link1] @ lp.T1, Tw[lp.link2] @ lp.T2
-        _loop_gap(item, lp, F1, F2)
+        _loop_gap(item, lp, Tw)
+        F1 = Tw[lp.link1] @ lp.T1
         na, nb = group[lp.link1], group[lp.link2]
         if na == nb:
             raise UrdfError(item, "link2", "a link on another body than link1", lp.link2,
@@ -355,18 +361,15 @@ def _add_loops(mb, robot: Robot, loops: list, group: dict, Tw: dict) -> None:
                              f"{lp.link1!r} and {lp.link2!r}: an exact {typ} joint")
 
 
-def _loop_gap(item: str, lp, F1: np.ndarray, F2: np.ndarray) -> None:
+def _loop_gap(item: str, lp, Tw: dict) -> None:
     """Refuse a loop whose frames do not meet at the initial configuration (q0)."""
-    gap = float(np.linalg.norm(F1[:3, 3] - F2[:3, 3]))
-    turn = 0.0
-    if lp.type in ONE_DOF:
-        turn = float(np.linalg.norm(np.cross(F1[:3, :3] @ lp.axis, F2[:3, :3] @ lp.axis)))
-    elif lp.type == "fixed":
-        turn = float(np.linalg.norm(log_so3(F1[:3, :3].T @ F2[:3, :3])))
+    r = loop_residual(lp, Tw)
+    gap, turn = float(np.linalg.norm(r[:3])), float(np.linalg.norm(r[3:]))
     if gap > LOOP_GAP or turn > LOOP_GAP:
         raise UrdfError(item, "link2", f"frames that meet in the initial configuration "
                         f"(within {LOOP_GAP:g} m and rad)", f"{gap:.3g} m apart, axes "
-                        f"{turn:.3g} rad apart", "give q0 values that close the loop")
+                        f"{turn:.3g} rad apart", "the joints not given in q0 could not close "
+                        "it: give q0 values that do")
 
 
 # ---------------------------------------------------------------------------------------------
