@@ -446,3 +446,23 @@ def test_cli_checks_runs_and_imports_a_urdf(tmp_path, capsys):
     model, _ = load_model(out)
     assert [n.name for n in model.nodes] == ["base", "arm"] and model.marker("tip")
     assert main(["check", str(tmp_path / "none.urdf")]) == 2
+
+
+def test_point_mass_on_a_fixed_joint_lumped_into_its_parent(tmp_path):
+    """A sensor frame with mass and no inertia (as real files have): lumped into its parent
+    by the parallel-axis theorem (holding torque with the point mass at 0.5 m), its frame
+    kept as a marker; on a moving joint it is refused."""
+    point = ('<link name="cam"><inertial><origin xyz="0.1 0 0"/><mass value="0.5"/>'
+             '<inertia ixx="0" iyy="0" izz="0"/></inertial></link>')
+    weld = '<joint name="w" type="fixed"><parent link="b"/><child link="cam"/>' \
+           '<origin xyz="0.4 0 0"/></joint>'
+    p = tmp_path / "point.urdf"
+    p.write_text(_robot(LINK.format(n="a") + LINK.format(n="b") + point
+                        + _joint("j", "a", "b").replace('xyz="0 0 1"', 'xyz="0 1 0"') + weld))
+    mb = load(str(p), q0={"j": 0.0})
+    m = mb.build()
+    assert "cam" not in m.node_names and m.marker("cam").node == "b"
+    assert holding_torque(mb, "j", 0.0) == pytest.approx(-0.5 * G * 0.5, rel=1e-12)
+    p.write_text(p.read_text().replace('type="fixed"', 'type="continuous"'))
+    with pytest.raises(ModelError, match=r"link 'cam'.*point mass"):
+        sd.load_urdf(p)

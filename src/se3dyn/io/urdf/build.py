@@ -16,7 +16,7 @@ from se3dyn.io.urdf import meshes
 from se3dyn.io.urdf.closure import close_loops, loop_residual
 from se3dyn.io.urdf.geometry import plane_axes, pose_of, world_inertia
 from se3dyn.io.urdf.loops import loops_argument
-from se3dyn.io.urdf.parse import Joint, Robot, UrdfError, _Ctx, read_robot
+from se3dyn.io.urdf.parse import Joint, Robot, UrdfError, _Ctx, is_point_mass, read_robot
 from se3dyn.io.urdf.tree import poses, tree_order, twists
 from se3dyn.model.builder import ModelBuilder
 from se3dyn.model.visuals import MESH_SUFFIXES
@@ -142,7 +142,7 @@ def load_urdf(path, *, floating_base: bool = False, package_dirs=(), mimic: str 
                           "joints not given in q0)")
     Tw = poses(order, root, T_root, q)
     tw = twists(order, root, Tw, v, v.pop(root, np.zeros(6)))
-    group = _groups(order, root, fixed == "merge")
+    group = _groups(robot, order, root, fixed == "merge", info)
     mb = UrdfBuilder(gravity, name=robot.name)
     mb.urdf = info
     _add_nodes(mb, robot, order, root, group, Tw, tw, floating_base)
@@ -154,7 +154,7 @@ def load_urdf(path, *, floating_base: bool = False, package_dirs=(), mimic: str 
     _add_visuals(mb, robot, group, Tw, meshes.package_roots(package_dirs, str(path)),
                  str(path))
     _add_markers(mb, group, Tw)
-    _keep(info, robot, order, group, mimic)
+    _keep(info, robot, order, group, fixed == "merge")
     _warn(info)
     return mb
 
@@ -179,6 +179,12 @@ def _mimics(robot: Robot, order: list[Joint], mode: str, info: UrdfInfo) -> dict
     """follower -> (leader, multiplier, offset), chains of mimics composed to their first
     leader; empty with ``mimic="ignore"`` (the dropped tags noted)."""
     raw = {j.name: j.mimic for j in order if j.mimic is not None}
+    locked = [f for f, m in raw.items() if "fixed" in (
+        robot.joints[f].type, getattr(robot.joints.get(m[0]), "type", None))]
+    if locked:  # (reduced models lock joints and leave their tags)
+        info.notes.append(f"<mimic> of {len(locked)} joints with a fixed joint on either side "
+                          "dropped (nothing to couple): " + ", ".join(locked[:8]))
+        raw = {f: m for f, m in raw.items() if f not in locked}
     if mode == "ignore":
         if raw:
             info.notes.append(f"<mimic> of {len(raw)} joints dropped (mimic='ignore'): "
@@ -277,11 +283,20 @@ def _numbers(val, n: int, fail, expected: str) -> np.ndarray:
     return a
 
 
-def _groups(order: list[Joint], root: str, merge: bool) -> dict[str, str]:
-    """link -> the link whose node carries it (merged through fixed joints, or itself)."""
-    g = {root: root}
+def _groups(robot: Robot, order: list[Joint], root: str, merge: bool, info: UrdfInfo
+            ) -> dict[str, str]:
+    """link -> the link whose node carries it: merged through fixed joints (all with
+    ``merge``, point masses always), or itself."""
+    g, points = {root: root}, []
     for j in order:
-        g[j.child] = g[j.parent] if merge and j.type == "fixed" else j.child
+        point = j.type == "fixed" and is_point_mass(robot.links[j.child].inertial)
+        g[j.child] = g[j.parent] if (merge or point) and j.type == "fixed" else j.child
+        if point and not merge:
+            points.append(j.child)
+    if points:
+        info.notes.append(f"{len(points)} point masses (no inertia) on fixed joints lumped into "
+                          "their parents, their frames kept as markers: " + ", ".join(points[:8])
+                          + (" ..." if len(points) > 8 else ""))
     return g
 
 
@@ -295,6 +310,10 @@ def _add_nodes(mb, robot: Robot, order, root: str, group: dict, Tw: dict, tw: di
             continue
         M, J, c = _lumped(robot, [k for k in group if group[k] == link], Tw)
         fixed = link == root and not floating_base
+        if M > 0 and not fixed and np.linalg.eigvalsh(J)[0] <= 0:
+            raise UrdfError(f"{robot.file}: link {link!r}", "<inertia>", "a positive-definite "
+                            "inertia (a point mass alone has none: on a moving joint, or as "
+                            "a floating base, give it the inertia of its shape)", J.tolist())
         if fixed and M > 0:
             mb.urdf.notes.append(f"root link {link!r}: its mass ({M:g} kg) is carried by the "
                                  "ground (a fixed base; floating_base=True moves it)")
@@ -412,7 +431,7 @@ def _add_markers(mb, group: dict, Tw: dict) -> None:
             mb.marker(link, node, at=T[:3, 3], orientation=T[:3, :3])
 
 
-def _keep(info: UrdfInfo, robot: Robot, order: list[Joint], group: dict, mimic: str) -> None:
+def _keep(info: UrdfInfo, robot: Robot, order: list[Joint], group: dict, merge: bool) -> None:
     """Limits and friction kept on ``info``; what was read and not applied noted."""
     for j in order:
         lim = j.limit
@@ -442,7 +461,7 @@ def _keep(info: UrdfInfo, robot: Robot, order: list[Joint], group: dict, mimic: 
         info.notes.append(f"{len(bare)} links without <inertial> have no mass (URDF's "
                           "default): " + ", ".join(bare[:8]) + (" ..." if len(bare) > 8 else ""))
     merged = [k for k, n in group.items() if n != k]
-    if merged:
+    if merged and merge:
         info.notes.append(f"{len(merged)} links merged through fixed joints (fixed='merge'), "
                           "their frames kept as markers: " + ", ".join(merged[:8])
                           + (" ..." if len(merged) > 8 else ""))

@@ -157,7 +157,8 @@ class _Ctx:
             return f"{prefix}:{local}"
         return t
 
-    def floats(self, text, n: int, item: str, fld: str, default=None) -> np.ndarray:
+    def floats(self, text, n: int, item: str, fld: str, default=None, bound=1e15
+               ) -> np.ndarray:
         if text is None:
             if default is None:
                 self.fail(item, fld, f"{n} numbers", None, "missing")
@@ -166,8 +167,10 @@ class _Ctx:
             a = np.array([float(x) for x in str(text).split()], dtype=float)
         except ValueError:
             self.fail(item, fld, f"{n} numbers", text)
-        if a.shape != (n,) or not np.all(np.isfinite(a)) or np.any(np.abs(a) > 1e15):
-            self.fail(item, fld, f"{n} finite numbers", text)
+        if a.shape != (n,) or not np.all(np.isfinite(a)) or (
+                bound is not None and np.any(np.abs(a) > bound)):
+            self.fail(item, fld, f"{n} finite numbers" + (f" of magnitude at most {bound:g}"
+                                                         if bound else ""), text)
         return a
 
     def number(self, el, attr: str, item: str, fld: str, default=None) -> float:
@@ -332,7 +335,21 @@ def _inertial(ctx: _Ctx, el, item: str) -> Inertial:
     return Inertial(m, T, J)
 
 
+#: An inertia tensor whose entries are all below this (kg m^2) with a mass is a point mass
+#: (1 g in a ball of 1 mm radius has 4e-10 kg m^2; real files write zeros or round-off).
+POINT_MASS = 1e-12
+
+
+def is_point_mass(inertial: Inertial | None) -> bool:
+    """A mass with no rotational inertia (sensor frames of real URDFs): valid on a link
+    fixed to another, which the importer then lumps into it."""
+    return inertial is not None and inertial.mass > 0 and bool(np.all(inertial.inertia == 0))
+
+
 def _check_inertia(ctx: _Ctx, item: str, m: float, J: np.ndarray) -> None:
+    if m > 0 and np.abs(J).max() < POINT_MASS:
+        J[:] = 0.0  # a point mass
+        return
     if m == 0:
         if np.any(J != 0):
             ctx.fail(item, "<inertia>", "no inertia on a link without mass (URDF mass 0)",
@@ -431,8 +448,8 @@ def _limit(ctx: _Ctx, el, item: str) -> dict:
     if lim is None:
         return out
     for k in ("lower", "upper", "effort", "velocity"):
-        if lim.get(k) is not None:
-            out[k] = ctx.number(lim, k, item, f"<limit> {k}")
+        if lim.get(k) is not None:  # any finite number (+-1e16: "no limit" in some files)
+            out[k] = float(ctx.floats(lim.get(k), 1, item, f"<limit> {k}", bound=None)[0])
     for k in ("effort", "velocity"):
         if out.get(k, 0.0) < 0:
             ctx.fail(item, f"<limit> {k}", "a non-negative number", out[k])
