@@ -72,6 +72,7 @@ def main() -> None:
     import pinocchio as pin
 
     from se3dyn.io.urdf import load_urdf
+    from se3dyn.io.urdf.loops import read_loop_tags
     from se3dyn.io.urdf.parse import read_robot
 
     warnings.simplefilter("ignore")
@@ -100,7 +101,7 @@ def main() -> None:
         print(line)
     with tempfile.TemporaryDirectory() as tmp:
         p = with_loop(d / ROBOTS[1], Path(tmp))
-        kept = len(read_robot(p).loops)
+        kept = len(read_robot(p, read_loop_tags).loops)
         print(f"<loop_joint> kept: se3dyn {kept}; pin: not read (urdfdom parses the tree only)"
               + ("" if not args.yourdfpy else "; yourdfpy " + subprocess.run(
                   [args.yourdfpy, "-c", f"import yourdfpy; u=yourdfpy.URDF.load({str(p)!r}, "

@@ -15,7 +15,7 @@ from se3dyn.errors import ModelError, Se3dynWarning
 from se3dyn.io.urdf import meshes
 from se3dyn.io.urdf.closure import close_loops, loop_residual
 from se3dyn.io.urdf.geometry import plane_axes, pose_of, world_inertia
-from se3dyn.io.urdf.loops import loops_argument
+from se3dyn.io.urdf.loops import loops_argument, read_loop_tags
 from se3dyn.io.urdf.parse import Joint, Robot, UrdfError, _Ctx, is_point_mass, read_robot
 from se3dyn.io.urdf.tree import poses, tree_order, twists
 from se3dyn.model.builder import ModelBuilder
@@ -125,7 +125,7 @@ def load_urdf(path, *, floating_base: bool = False, package_dirs=(), mimic: str 
         Nodes named by links, joints by URDF joints (coordinates absolute, zero at
         ``<origin>``), couplings ``<follower>:mimic``; ``.urdf`` holds the report.
     """
-    robot = read_robot(path)
+    robot = read_robot(path, read_loop_tags)
     ctx = _Ctx(robot.file, {})
     _check_option(robot.file, "mimic", mimic, ("enforce", "ignore"))
     _check_option(robot.file, "fixed", fixed, ("keep", "merge"))

@@ -242,10 +242,10 @@ def read_xml(path: str):
     return root, prefixes
 
 
-def read_robot(path: str) -> Robot:
-    """Read ``path`` into a :class:`Robot` (links, joints, loop closures declared in it)."""
-    from se3dyn.io.urdf.loops import read_loop_tags
-
+def read_robot(path: str, extra=None) -> Robot:
+    """Read ``path`` into a :class:`Robot` (links, joints, and the loop closures declared in
+    it: ``extra(ctx, element, tag, loops) -> bool`` reads a top-level tag into ``loops``,
+    :func:`se3dyn.io.urdf.loops.read_loop_tags`)."""
     root, prefixes = read_xml(path)
     ctx = _Ctx(os.path.basename(str(path)), prefixes)
     if ctx.tag(root) != "robot":
@@ -270,7 +270,7 @@ def read_robot(path: str) -> Robot:
             joints[jt.name] = jt
         elif t == "material" or t == "#comment":
             continue
-        elif not read_loop_tags(ctx, el, t, loops):
+        elif extra is None or not extra(ctx, el, t, loops):
             ctx.ignored.add(f"<robot>/<{t}>", root.get("name") or "robot")
     return Robot(root.get("name") or "robot", links, joints, loops, ctx.ignored, ctx.file)
 
