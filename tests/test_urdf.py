@@ -466,3 +466,26 @@ def test_point_mass_on_a_fixed_joint_lumped_into_its_parent(tmp_path):
     p.write_text(p.read_text().replace('type="fixed"', 'type="continuous"'))
     with pytest.raises(ModelError, match=r"link 'cam'.*point mass"):
         sd.load_urdf(p)
+
+
+def test_planar_and_floating_joints_placed_by_q0_and_the_floating_child_falls_freely(tmp_path):
+    body = (LINK.format(n="a") + LINK.format(n="p") + LINK.format(n="f")
+            + '<joint name="pl" type="planar"><parent link="a"/><child link="p"/>'
+              '<origin xyz="1 0 0"/><axis xyz="0 0 1"/></joint>'
+            + '<joint name="fl" type="floating"><parent link="a"/><child link="f"/>'
+              '<origin xyz="0 2 0"/></joint>')
+    p = tmp_path / "pf.urdf"
+    p.write_text(_robot(body))
+    mb = load(str(p), q0={"pl": (0.3, -0.2, 0.5), "fl": (0, 0, 1.0, 0.1, 0.2, 0.3)},
+              v0={"fl": (0.5, 0, 0, 0, 0, 0)})
+    m = mb.build()
+    pn, fn = m.node("p"), m.node("f")
+    assert np.allclose(pn.position, (1.3, -0.2, 0.0), atol=1e-15)
+    assert np.allclose(pn.orientation, rot([0, 0, 0.5]), atol=1e-15)
+    assert np.allclose(fn.position, (0, 2, 1.0)) and np.allclose(fn.orientation, rot([.1, .2, .3]))
+    assert [j.name for j in m.joints] == ["pl"]  # the floating child is a free node
+    res = sd.simulate(m, t_end=0.5, step=1e-2)
+    x = res.node_position("f")
+    assert np.allclose(x[:, 2], 1.0 - 0.5 * G * res.t ** 2, atol=1e-12)
+    assert np.allclose(x[:, 0], 0.5 * res.t, atol=1e-12)
+    assert np.allclose(res.node_position("p"), (1.3, -0.2, 0.0), atol=1e-12)  # held in plane

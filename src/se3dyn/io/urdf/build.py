@@ -132,16 +132,9 @@ def load_urdf(path, *, floating_base: bool = False, package_dirs=(), mimic: str 
     root, order = tree_order(robot)
     info = UrdfInfo(robot.file, root, ignored=robot.ignored.lines())
     follow = _mimics(robot, order, mimic, info)
-    q = _values(robot, order, root, q0, "q0", follow, floating_base)
-    v = _values(robot, order, root, v0, "v0", follow, floating_base)
-    T_root = q.pop(root, np.eye(4))
     all_loops = robot.loops + loops_argument(loops, ctx)
-    moved = close_loops(order, root, T_root, q, all_loops, set(q0 or ()), follow)
-    if moved:
-        info.notes.append("q0 of " + ", ".join(moved) + " solved to close the loops (the "
-                          "joints not given in q0)")
-    Tw = poses(order, root, T_root, q)
-    tw = twists(order, root, Tw, v, v.pop(root, np.zeros(6)))
+    q, Tw, tw = _initial_state(robot, order, root, q0, v0, follow, floating_base, all_loops,
+                               info)
     group = _groups(robot, order, root, fixed == "merge", info)
     mb = UrdfBuilder(gravity, name=robot.name)
     mb.urdf = info
@@ -159,6 +152,20 @@ def load_urdf(path, *, floating_base: bool = False, package_dirs=(), mimic: str 
     return mb
 
 
+def _initial_state(robot: Robot, order: list[Joint], root: str, q0, v0, follow: dict,
+                   floating_base: bool, loops: list, info: UrdfInfo):
+    """Joint values (name -> value, the loops closed), link poses and twists at t = 0."""
+    q = _values(robot, order, root, q0, "q0", follow, floating_base)
+    v = _values(robot, order, root, v0, "v0", follow, floating_base)
+    T_root = q.pop(root, np.eye(4))
+    moved = close_loops(order, root, T_root, q, loops, set(q0 or ()), follow)
+    if moved:
+        info.notes.append("q0 of " + ", ".join(moved) + " solved to close the loops (the "
+                          "joints not given in q0)")
+    Tw = poses(order, root, T_root, q)
+    return q, Tw, twists(order, root, Tw, v, v.pop(root, np.zeros(6)))
+
+
 def _check_option(file: str, fld: str, v, allowed: tuple) -> None:
     if v not in allowed:
         raise UrdfError(f"load_urdf({file})", fld, " or ".join(repr(a) for a in allowed), v)
@@ -170,8 +177,9 @@ def _wrap(src: str, fn, /, *args, **kwargs):
         return fn(*args, **kwargs)
     except UrdfError:
         raise
-    except ModelError as exc:
-        raise UrdfError(f"{src}: {exc.item}", exc.field, exc.expected, exc.got) from None
+    except ModelError as exc:  # (arrays as lists: the message stays on one line)
+        got = exc.got.tolist() if isinstance(exc.got, np.ndarray) else exc.got
+        raise UrdfError(f"{src}: {exc.item}", exc.field, exc.expected, got) from None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -351,7 +359,7 @@ def _add_joints(mb, robot: Robot, order: list[Joint], group: dict, Tw: dict, q: 
             kw.update(axis=a, initial=q[j.name], damping=j.damping or None)
             mb.urdf.joints.append(j.name)
         elif j.type == "planar":
-            kw.update(normal=a, axes=Tj[:3, :3] @ plane_axes(j.axis).T)
+            kw.update(normal=a, axes=(Tj[:3, :3] @ plane_axes(j.axis).T).T)
             mb.urdf.joints.append(j.name)
         _wrap(robot.file, mb.joint, j.name, SE3DYN_TYPE[j.type], group[j.parent], j.child,
               **kw)
