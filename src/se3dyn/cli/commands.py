@@ -695,7 +695,9 @@ def cmd_types(args) -> int:
     for key, kind in (("markers", "marker"), ("drives", "drive"), ("couplings", "coupling")):
         _section_fields(key, top[key].doc, FIELDS[kind])
     print("control laws (joints: control): PD (kp, kd, target, target_rate), PID (kp, ki, kd, "
-          "target, target_rate, limit, sample_time); laws of your own in Python: "
+          "target, target_rate, limit, sample_time, gear, rotor_inertia, sensor: a sampled "
+          "law reading marker/<m>/position/x|y|z, marker/<a>/distance/<b> or "
+          "joint/<j>/alpha/<i>); laws of your own in Python: "
           "torque=lambda t, q, v: ...")
     return 0
 
