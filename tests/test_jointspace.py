@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from _pinocchio_models import pinocchio_model, random_chain, random_states, se3dyn_model
 
 import se3dyn as sd
+from _pinocchio_models import pinocchio_model, random_chain, random_states, se3dyn_model
 from se3dyn.errors import ModelError
 
 CHAINS = {

@@ -31,7 +31,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from se3dyn._lazy import LazyModule
 from se3dyn.analysis.common import _Blocks, _joint_ids
 from se3dyn.engine.evaluate import evaluate
 from se3dyn.engine.scaling import _RCOND, _char_length, _row_scale, _unknown_scale
@@ -40,7 +39,6 @@ from se3dyn.errors import ModelError, SimulationError
 if TYPE_CHECKING:
     from se3dyn.engine.system import System
 
-sla = LazyModule("scipy.linalg")
 
 __all__ = ["Partition", "ReducedMap", "partition", "reduced_map"]
 
@@ -149,7 +147,7 @@ class ReducedMap:
         exact for a consistent right-hand side)."""
         Q, R = self._qr
         x = np.zeros(self.B.shape[1])
-        x[self.part.dependent] = sla.solve_triangular(R, Q.T @ rhs, check_finite=False)
+        x[self.part.dependent] = np.linalg.solve(R, Q.T @ rhs)
         return x
 
     def velocities(self, zd: np.ndarray) -> np.ndarray:
@@ -172,7 +170,7 @@ def reduced_map(s: System, B: np.ndarray, part: Partition) -> ReducedMap:
         return ReducedMap(part=part, B=B, T=T, _qr=(np.zeros((s.nm, 0)), np.zeros((0, 0))))
     L = _char_length(s)
     cs = _unknown_scale(s, L)
-    Q, R = sla.qr(B[:, D] * cs[D], mode="economic", check_finite=False)
+    Q, R = np.linalg.qr(B[:, D] * cs[D])
     d = np.abs(np.diag(R))
     if d.min() <= 1e-10 * d.max():
         raise SimulationError(
@@ -180,7 +178,7 @@ def reduced_map(s: System, B: np.ndarray, part: Partition) -> ReducedMap:
             + " no longer determine the others at this configuration (a singular "
             "configuration of the partition); choose other independent joints")
     R = R / cs[D][None, :]  # B_D = Q (R / cs): solves in physical units
-    T[D] = -sla.solve_triangular(R, Q.T @ B[:, ind], check_finite=False)
+    T[D] = -np.linalg.solve(R, Q.T @ B[:, ind])
     return ReducedMap(part=part, B=B, T=T, _qr=(Q, R))
 
 
