@@ -172,3 +172,60 @@ def test_bad_arguments():
         sd.linearize(model, outputs=["nope"])
     with pytest.raises(ModelError, match="at"):
         sd.linearize(model, at=3)
+
+
+@pytest.mark.parametrize("formulation", ["index2", "index3"])
+def test_discrete_step_against_finite_differences(formulation):
+    """lin.discrete(h) against central differences of one step of the nonlinear scheme from
+    perturbed states (configuration by the joint coordinates, velocities, accelerations, the
+    scheme's variable a, the actuator input) about the equilibrium of a compound double
+    pendulum with a damper and an actuator."""
+    mb2 = sd.ModelBuilder(gravity=(0, 0, -G))
+    mb2.node("ground", fixed=True)
+    mb2.node("bar1", position=(0, 0, -0.35), mass=2.0, inertia=(0.12, 0.11, 0.07))
+    mb2.node("bar2", position=(0, 0, -1.25), mass=1.5, inertia=(0.06, 0.07, 0.035))
+    mb2.joint("h1", "hinge", "ground", "bar1", axis=(0, 1, 0), at=(0, 0, 0), torque=0.0,
+              damping=0.3)
+    mb2.joint("h2", "hinge", "bar1", "bar2", axis=(0, 1, 0), at=(0, 0, -0.8))
+    model = mb2.build()
+    eq = sd.static_equilibrium(model)
+    h, rho = 0.01, 0.8
+    dis = sd.linearize(model, at=eq, inputs=["h1"]).discrete(h, rho_inf=rho)
+    s = eq.system
+    js = sd.JointSpace(s)
+    ga = sd.GeneralizedAlpha(rho_inf=rho, formulation=formulation, tol_residual=1e-15,
+                             tol_constraint=1e-15, newton="full")
+    slot = [nm[3] for nm in s.inputs.names if nm[1] == "h1"][0]
+    T = js._mass_and_map(eq.H, eq.HJ, eq.alpha)[1].T
+    ind = js.partition.independent
+
+    def step(x, u):
+        z, zd, zdd, a = x[:2], x[2:4], x[4:6], x[6:]
+        q = eq.alpha[ind] + z
+        H = np.array([js.frame_pose(q, n) for n in s.node_names])
+        alpha = eq.alpha.copy()
+        alpha[ind] = q
+        st = sd.State(t=0.0, H=H, HJ=_joint_frames(s, H), v=T @ zd,
+                      vd=T @ zdd, a=T @ a, lam=eq.lam, alpha=alpha)
+        inputs = dict(u=np.zeros(s.inputs.nu))
+        inputs["u"][:3] = s.gravity
+        inputs["u"][slot] = u
+        new = ga.step(s, st, h, inputs=inputs)[0]
+        return np.concatenate([new.alpha[ind] - eq.alpha[ind], new.v[ind], new.vd[ind],
+                               new.a[ind]])
+
+    eps = 1e-5
+    x0 = np.zeros(8)
+    for k in range(8):
+        e = np.zeros(8)
+        e[k] = eps
+        fd = (step(x0 + e, 0.0) - step(x0 - e, 0.0)) / (2 * eps)
+        assert np.abs(fd - dis.Phi[:, k]).max() <= 1e-7 * np.abs(dis.Phi).max()
+    fd = (step(x0, eps) - step(x0, -eps)) / (2 * eps)
+    assert np.abs(fd - dis.Gamma[:, 0]).max() <= 1e-7 * np.abs(dis.Gamma).max()
+
+
+def _joint_frames(s, H):
+    from se3dyn.engine.system import joint_frames
+
+    return joint_frames(s, H[None])[0]

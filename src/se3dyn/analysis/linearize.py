@@ -37,7 +37,7 @@ import numpy as np
 from se3dyn import lie
 from se3dyn._lazy import LazyModule
 from se3dyn.analysis.common import _as_system, _joint_ids, _unknown_name
-from se3dyn.analysis.reduced import Constraints, Partition, ReducedMap, partition, reduced_map
+from se3dyn.analysis.reduced import Constraints, Partition, ReducedMap, reduced_map
 from se3dyn.analysis.statics import StaticResult
 from se3dyn.dynamics.state import State
 from se3dyn.engine.evaluate import evaluate
@@ -51,7 +51,7 @@ if TYPE_CHECKING:
 
 sla = LazyModule("scipy.linalg")
 
-__all__ = ["Linearization", "Modes", "linearize"]
+__all__ = ["DiscreteStep", "Linearization", "Modes", "linearize", "step_jacobian"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -212,9 +212,9 @@ class Linearization:
         return control.ss(self.A, self.B_x, self.C_y, D, states=list(self.state_names),
                           inputs=list(self.input_names), outputs=list(self.output_names))
 
-    def discrete(self, h: float, *, rho_inf: float = 0.9):
+    def discrete(self, h: float, *, rho_inf: float = 0.9) -> DiscreteStep:
         """The exact Jacobian of one step of se3dyn's generalized-alpha scheme about the
-        linearisation point: see :func:`se3dyn.analysis.linearize.step_jacobian`."""
+        equilibrium: see :func:`se3dyn.analysis.linearize.step_jacobian`."""
         return step_jacobian(self, h, rho_inf=rho_inf)
 
 
@@ -463,6 +463,88 @@ def _pairs(lam: np.ndarray, scale: float) -> list[tuple[int, int]]:
     return pairs
 
 
-def step_jacobian(lin: Linearization, h: float, *, rho_inf: float = 0.9):
-    """Placeholder (see :meth:`Linearization.discrete`)."""
-    raise NotImplementedError
+@dataclass(eq=False)
+class DiscreteStep:
+    """The Jacobian of one generalized-alpha step of size ``h`` about an equilibrium:
+    ``x_{n+1} = Phi x_n + Gamma u_{n+1}`` with ``x = [dz; dz_dot; dz_ddot; a]`` (4 nz: the
+    scheme's own memory, ``a`` its acceleration-like variable of Eq. (43)) and the inputs held
+    at the end of the step (where the step imposes the equations of motion).
+
+    Attributes
+    ----------
+    Phi : ndarray (4 nz, 4 nz); Gamma : ndarray (4 nz, nu); C_y : ndarray (ny, 4 nz)
+    h : float; params : (alpha_m, alpha_f, gamma, beta) of Eq. (44)
+    state_names, input_names, output_names : tuple of str
+    """
+
+    Phi: np.ndarray
+    Gamma: np.ndarray
+    C_y: np.ndarray
+    h: float
+    params: tuple
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    output_names: tuple[str, ...]
+
+    def state_space(self):
+        """A discrete python-control ``StateSpace`` (``dt = h``) with named signals."""
+        import control
+
+        D = np.zeros((self.C_y.shape[0], self.Gamma.shape[1]))
+        return control.ss(self.Phi, self.Gamma, self.C_y, D, self.h,
+                          states=list(self.state_names), inputs=list(self.input_names),
+                          outputs=list(self.output_names))
+
+
+def step_jacobian(lin: Linearization, h: float, *, rho_inf: float = 0.9) -> DiscreteStep:
+    """The exact Jacobian of one step of se3dyn's Lie-group generalized-alpha scheme (Eqs.
+    (38)-(46); either formulation, index 3 or stabilised index 2) about an equilibrium.
+
+    About an equilibrium the step's increments, velocities and accelerations are first order
+    in the perturbation, ``H exp(n)`` composes to first order as ``z + n``, and the residual and
+    the constraints linearise to ``M vd + C v + K dq + B^T dlambda = B_u u``, ``B dq = 0`` with
+    the matrices of the linearisation (the constraint force's geometric stiffness inside K);
+    the solution stays in the range of ``T`` (``xi = 0`` in the index-2 form). The Jacobian is
+    therefore the scheme applied to ``M_z z_ddot + C_z z_dot + K_z z = B_z u``: with
+    ``S = (1 - alpha_m)/(1 - alpha_f) M + gamma h C + beta h^2 K``,
+
+        a_{n+1} = S^-1 (B u_{n+1} - M vd* - C v* - K z*)
+        z* = z_n + h z_dot_n + h^2 (1/2 - beta) a_n,   v* = z_dot_n + h (1 - gamma) a_n
+        vd* = (alpha_m a_n - alpha_f z_ddot_n) / (1 - alpha_f)
+
+    and ``z_{n+1} = z* + beta h^2 a_{n+1}``, ``z_dot_{n+1} = v* + gamma h a_{n+1}``,
+    ``z_ddot_{n+1} = vd* + (1 - alpha_m)/(1 - alpha_f) a_{n+1}``.
+
+    Parameters
+    ----------
+    lin : Linearization        about an equilibrium (at rest, no acceleration)
+    h : float                  step size
+    rho_inf : float            the scheme's spectral radius at infinity (``simulate``'s)
+    """
+    from se3dyn.dynamics.integrator import GeneralizedAlpha
+
+    p = lin._point
+    if np.any(p.v) or np.abs(p.vd).max(initial=0.0) > 1e-9 * max(1.0, np.abs(p.v).max(
+            initial=0.0)):
+        raise ModelError("discrete", "at", "a linearisation about an equilibrium (no velocity "
+                         "or acceleration)", "a state with motion")
+    if not (isinstance(h, int | float) and 0 < h < np.inf):
+        raise ModelError("discrete", "h", "a positive step size", h)
+    am, af, g, b = GeneralizedAlpha(rho_inf=rho_inf).params
+    n = len(lin.M)
+    I, Z = np.eye(n), np.zeros((n, n))
+    Pq = np.hstack([I, h * I, Z, h * h * (0.5 - b) * I])
+    Pv = np.hstack([Z, I, Z, h * (1 - g) * I])
+    Pd = np.hstack([Z, Z, -af / (1 - af) * I, am / (1 - af) * I])
+    c = (1 - am) / (1 - af)
+    S = c * lin.M + g * h * lin.C + b * h * h * lin.K
+    A1 = -np.linalg.solve(S, lin.M @ Pd + lin.C @ Pv + lin.K @ Pq)
+    G1 = np.linalg.solve(S, lin.B)
+    Phi = np.vstack([Pq + b * h * h * A1, Pv + g * h * A1, Pd + c * A1, A1])
+    Gamma = np.vstack([b * h * h * G1, g * h * G1, c * G1, G1])
+    Cy = np.hstack([lin.C_y, np.zeros((lin.C_y.shape[0], 2 * n))])
+    names = (tuple(lin.state_names) + tuple(f"d2/dt2 {x}" for x in lin.names)
+             + tuple(f"a {x}" for x in lin.names))
+    return DiscreteStep(Phi=Phi, Gamma=Gamma, C_y=Cy, h=float(h), params=(am, af, g, b),
+                        state_names=names, input_names=lin.input_names,
+                        output_names=lin.output_names)
