@@ -25,7 +25,7 @@ def point_double_pendulum(l: float, m: float) -> sd.Model:
     mb.node("ground", fixed=True)
     mb.node("rod1")
     mb.node("rod2", position=(0, 0, -l))
-    for i, rod in ((1, "rod1"), (2, "rod2")):
+    for i in (1, 2):
         mb.node(f"bob{i}", position=(0, 0, -i * l), mass=m, inertia=(0.01, 0.02, 0.025))
     mb.joint("h1", "hinge", "ground", "rod1", axis=(0, 1, 0))
     mb.joint("s1", "spherical", "rod1", "bob1", at=(0, 0, -l))
