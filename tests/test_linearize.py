@@ -229,3 +229,62 @@ def _joint_frames(s, H):
     from se3dyn.engine.system import joint_frames
 
     return joint_frames(s, H[None])[0]
+
+
+def spinning_top(spin: float, m=1.0, l=0.1, A=0.002, C=0.004) -> sd.Model:
+    mb = sd.ModelBuilder(gravity=(0, 0, -G))
+    mb.node("ground", fixed=True)
+    mb.node("top", com=(0, 0, l), mass=m, inertia=(A, A, C), angular_velocity=(0, 0, spin))
+    mb.joint("pivot", "spherical", "ground", "top")
+    return mb.build()
+
+
+def test_heavy_top_sleeping_threshold():
+    """A heavy top spinning upright is a relative equilibrium: in material velocities its state
+    is time-invariant, and the linearisation about it (the initial state of a run) holds for
+    all times. Closed form (inertial frame, xi = theta_x + i theta_y): I0 xi'' - i C W xi' -
+    m g l xi = 0, stable iff C^2 W^2 >= 4 I0 m g l (I0 = A + m l^2); the material coordinates
+    turn with the top, so their eigenvalues are the inertial ones shifted by -i W."""
+    m, l, A, C = 1.0, 0.1, 0.002, 0.004
+    I0 = A + m * l * l
+    Wc = 2 * math.sqrt(I0 * m * G * l) / C
+
+    def eig(W):
+        return np.linalg.eigvals(sd.linearize(spinning_top(W, m, l, A, C)).A)
+
+    lam = eig((1 - 1e-8) * Wc)
+    assert np.abs(lam.real).max() > 1e-9 * np.abs(lam).max()  # just below: unstable
+    for f in (1 + 1e-8, 1.5, 3.0):
+        W = f * Wc
+        lam = eig(W)
+        assert np.abs(lam.real).max() <= 1e-9 * np.abs(lam).max()  # purely imaginary
+        ref = (1j * C * W + np.array([1, -1]) * np.sqrt(complex(4 * I0 * m * G * l
+                                                                - (C * W) ** 2))) / (2 * I0)
+        ref = np.abs((ref - 1j * W).imag)
+        got = np.sort(np.abs(lam.imag))[-4::2]  # the two conjugate pairs (and a double 0)
+        assert np.abs(np.sort(ref) / got - 1).max() <= 1e-8
+    md = sd.linearize(spinning_top(2 * Wc, m, l, A, C)).modes()
+    assert len(md) == 3 and np.sum(md.rigid) == 1  # the spin angle: no stiffness
+
+
+def test_cli_linearize_exports_the_linear_model(tmp_path, capsys):
+    """``se3dyn linearize MODEL --export x.npz``: the compound double pendulum's frequencies
+    (closed form as above) in the printed table and the file."""
+    from se3dyn.cli.commands import main
+    from se3dyn.io.modelfile import save_model
+
+    m1, m2, l1, c1, c2, J1, J2 = 2.0, 1.5, 0.8, 0.35, 0.45, 0.11, 0.07
+    path = tmp_path / "pendulum.yaml"
+    save_model(compound_double(m1, m2, l1, c1, c2, J1, J2), path)
+    out = tmp_path / "lin.npz"
+    assert main(["linearize", str(path), "--input", "h1", "--output", "h2", "--export",
+                 str(out)]) == 0
+    assert "2 minimal coordinates about the static equilibrium" in capsys.readouterr().out
+    data = np.load(out)
+    M = np.array([[J1 + m1 * c1**2 + m2 * l1**2, m2 * l1 * c2], [m2 * l1 * c2, J2 + m2 * c2**2]])
+    K = G * np.diag([m1 * c1 + m2 * l1, m2 * c2])
+    ref = np.sqrt(np.sort(np.linalg.eigvals(np.linalg.solve(M, K)).real))
+    assert np.abs(data["omega"] / ref - 1).max() <= 1e-10
+    assert list(data["input_names"]) == ["h1"] and list(data["output_names"]) == ["h2"]
+    assert data["A"].shape == (4, 4) and data["T"].shape[1] == 2
+    assert main(["linearize", str(path), "--input", "nope"]) == 2

@@ -24,7 +24,13 @@ where ``d(T^T)/dz (r - f) = -d(T^T)/dz B^T lambda = T^T d(B^T lambda)/dq T`` (fr
 = 0``, ``w = 0``) only ``T^T M T``, ``T^T C_T T``, ``T^T K_T T`` remain: exact. At a state with
 motion, ``dw/dz_dot`` is a central difference of the quadratic ``w`` (exact up to round-off)
 and the derivatives of the velocity map along the configuration are Richardson-extrapolated
-central differences of the exact Jacobian (relative error ~1e-10).
+central differences of the exact Jacobian (relative error ~1e-10). With motion the coordinate
+rates also differ from the velocity perturbations on non-abelian coordinates: a frame
+``H exp(eta)`` moving with the material velocity ``v`` has the velocity ``v + eta_dot +
+ad(v) eta``, so ``z_dot = dv_I - G z`` with ``G`` the independent rows of ``ad(v) T`` (zero on
+abelian joint coordinates), and the reported matrices are those of ``z`` and its rate:
+``C <- C_z + M_z G``, ``K <- K_z + C_z G``. About a relative equilibrium (a steady spin: in
+material velocities the state is time-invariant) the linear model holds for all times.
 """
 
 from __future__ import annotations
@@ -261,6 +267,9 @@ def linearize(model_or_system: Model | System, at: Any = None, *, inputs=(), out
     if np.any(p.v) or np.any(p.vd):
         dC, dK = _motion_terms(s, con, rm, p, M, C)
         Cz, Kz = Cz + dC, Kz + dK
+        # from velocity perturbations to coordinate rates: dz_dot = dv_I - G dz
+        G = _bracket(s, rm, p.v)
+        Cz, Kz = Cz + Mz @ G, Kz + Cz @ G
     Bf, in_names = _input_matrix(s, p, u, inputs)
     Cy, out_names = _output_matrix(s, p, T, outputs)
     return Linearization(system=s, M=Mz, C=Cz, K=Kz, B=T.T @ Bf, C_y=Cy, T=T,
@@ -311,6 +320,24 @@ def _motion_terms(s: System, con: Constraints, rm: ReducedMap, p: _Point, M, C):
         dV[:, k] = (4 * D2 - D1) / 3
     nq = s.nq
     return T.T @ M @ dw, T.T @ (C @ dV[:nq] + M @ dV[nq:])
+
+
+def _bracket(s: System, rm: ReducedMap, v: np.ndarray) -> np.ndarray:
+    """``G`` (nz, nz): the independent rows of ``ad(v) T`` frame by frame. A perturbation
+    ``H exp(eta)`` of a frame moving with the material velocity ``v`` has the velocity ``v +
+    eta_dot + ad(v) eta`` (``Ad_{exp(-eta)} v + T(eta) eta_dot``, Eqs. (6), (27)), so the
+    coordinate rates are ``eta_dot = dv - ad(v) eta``; zero on abelian joint coordinates."""
+    Gf = np.zeros((s.nq, s.nq))
+    for i in s.node_free:
+        d = int(s.node_dofadr[i])
+        Gf[d:d + 6, d:d + 6] = lie.ad6(v[d:d + 6])
+    for grp in s.groups:
+        for e in range(len(grp.ids)):
+            if grp.k == 0 or grp.abelian[e]:
+                continue
+            A, dofs = grp.A[e], grp.jdof[e]
+            Gf[np.ix_(dofs, dofs)] = np.linalg.pinv(A) @ lie.ad6(A @ v[dofs]) @ A
+    return (Gf @ rm.T)[rm.part.independent]
 
 
 def _input_matrix(s: System, p: _Point, u: dict, names) -> tuple[np.ndarray, tuple]:
