@@ -81,3 +81,36 @@ def test_bad_input():
         js.jacobian(np.zeros(2), "L0", frame="world")
     with pytest.raises(KeyError, match="L1"):
         js.frame_pose(np.zeros(2), "L7")
+
+
+def test_closed_loop_parallelogram():
+    """A parallelogram four-bar in joint space: its one independent coordinate is the crank
+    angle (the loop closed by Newton), and with the crank and rocker (centres of mass at c,
+    moments J about them) and the translating coupler (mass mc) the closed forms are
+    M = J1 + m1 c^2 + J3 + m3 c^2 + mc a^2, g(theta) = g (m1 c + m3 c + mc a) sin theta, the
+    coupler's pose a translation by a (sin theta, 0, 1 - cos theta)."""
+    a, d, c, m1, m3, mc, J1, J3, g = 0.5, 0.9, 0.2, 1.2, 0.8, 2.5, 0.03, 0.02, 9.81
+    mb = sd.ModelBuilder(gravity=(0, 0, -g))
+    mb.node("ground", fixed=True)
+    mb.node("crank", position=(0, 0, -c), mass=m1, inertia=(J1, J1, J1 * 0.4))
+    mb.node("rocker", position=(d, 0, -c), mass=m3, inertia=(J3, J3, J3 * 0.4))
+    mb.node("coupler", position=(d / 2, 0, -a), mass=mc, inertia=(0.01, 0.2, 0.2))
+    mb.joint("A", "hinge", "ground", "crank", axis=(0, 1, 0), at=(0, 0, 0))
+    mb.joint("B", "hinge", "crank", "coupler", axis=(0, 1, 0), at=(0, 0, -a))
+    mb.joint("C", "hinge", "coupler", "rocker", axis=(0, 1, 0), at=(d, 0, -a))
+    mb.joint("D", "hinge", "ground", "rocker", axis=(0, 1, 0), at=(d, 0, 0))
+    js = sd.JointSpace(mb.build())
+    assert js.joint_names == ("joint 'A' alpha_0",)
+    th = np.linspace(-1.2, 1.2, 7)[:, None]
+    Mref = J1 + m1 * c**2 + J3 + m3 * c**2 + mc * a**2
+    assert np.abs(js.mass_matrix(th)[:, 0, 0] / Mref - 1).max() <= 1e-10
+    gref = g * (m1 * c + m3 * c + mc * a) * np.sin(th[:, 0])
+    assert np.abs(js.gravity(th)[:, 0] - gref).max() <= 1e-10 * np.abs(gref).max()
+    # a rotation about +y by theta moves the crank tip (0, 0, -a) to -a (sin theta, 0, cos theta)
+    P = js.frame_pose(th, "coupler")
+    assert np.abs(P[:, :3, :3] - np.eye(3)).max() <= 1e-10
+    shift = -a * np.column_stack([np.sin(th[:, 0]), 0 * th[:, 0], np.cos(th[:, 0]) - 1])
+    assert np.abs(P[:, :3, 3] - (np.array([d / 2, 0, -a]) + shift)).max() <= 1e-10
+    # the coupler translates: with theta_dot the centripetal terms cancel in the bias (the
+    # mass matrix does not depend on theta): b = g(theta)
+    assert np.abs(js.bias(th, 2.0 * np.ones_like(th))[:, 0] - gref).max() <= 1e-9

@@ -26,7 +26,7 @@ from se3dyn.analysis.common import _as_system, _unknown_name
 from se3dyn.analysis.reduced import Constraints, partition, reduced_map
 from se3dyn.engine.evaluate import evaluate
 from se3dyn.engine.inputs import step_inputs
-from se3dyn.engine.scaling import _char_length, _row_scale
+from se3dyn.engine.scaling import _char_length, _row_scale, _unknown_scale
 from se3dyn.errors import ModelError, SimulationError
 
 if TYPE_CHECKING:
@@ -149,15 +149,31 @@ class JointSpace:
         independent coordinates (N, self.nq): the tree by composition, loops by Newton."""
         s = self.system
         N = len(q)
-        alpha = np.tile(s.alpha0, (N, 1))
+        alpha = self._alpha(q, np.tile(s.alpha0, (N, 1)))
+        H, HJ = self._tree(q, alpha, np.tile(s.joint_H0, (N, 1, 1, 1)))
+        if self._plan.closures:
+            for r in range(N):
+                H[r], HJ[r], alpha[r] = self._continue(q[r])
+        return H, HJ, alpha
+
+    def _alpha(self, q: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+        """Coordinates (N, nq): the independent joint coordinates from q, the others kept."""
         for d in self._jointdofs:
             alpha[:, d] = q[:, self._qpos[np.searchsorted(self.partition.independent, d)]]
-        HJ = np.tile(s.joint_H0, (N, 1, 1, 1))
+        return alpha
+
+    def _tree(self, q: np.ndarray, alpha: np.ndarray, HJ: np.ndarray):
+        """Node and joint frames by composition along the tree (Eq. (7)) from the roots' poses
+        in q, the abelian joints' frames from their coordinates (the others' kept in HJ)."""
+        s = self.system
+        N = len(q)
+        HJ = HJ.copy()
         for g in s.groups:
-            if g.k and np.all(g.abelian):
-                da = alpha[:, g.jdof] - s.alpha0[g.jdof]  # (N, nj, k)
-                HJ[:, g.ids] = s.joint_H0[g.ids] @ lie.exp_se3(np.einsum("jck,njk->njc",
-                                                                          g.A, da))
+            ids, jd = g.ids[g.abelian], g.jdof[g.abelian]
+            if g.k and len(ids):
+                da = alpha[:, jd] - s.alpha0[jd]  # (N, nj, k)
+                HJ[:, ids] = s.joint_H0[ids] @ lie.exp_se3(np.einsum("jck,njk->njc",
+                                                                      g.A[g.abelian], da))
         H = np.tile(s.node_H0, (N, 1, 1, 1))
         for i, d in zip(self._roots, self._rootdofs, strict=True):
             p = self._qpos[np.searchsorted(self.partition.independent, d)]
@@ -170,10 +186,25 @@ class JointSpace:
                 H[:, b] = H[:, a] @ XA @ HJ[:, j] @ lie.inverse(XB)
             else:
                 H[:, a] = H[:, b] @ XB @ lie.inverse(HJ[:, j]) @ lie.inverse(XA)
-        if self._plan.closures:
-            for r in range(N):
-                H[r], HJ[r], alpha[r] = self._close(H[r], HJ[r], alpha[r])
-        return H, HJ, alpha
+        return H, HJ
+
+    def _continue(self, qr: np.ndarray):
+        """One configuration with closed loops: from the model's configuration to ``qr`` in
+        steps of at most 0.2 (rad, or the model's length) of the independent coordinates, the
+        loops closed by Newton at each, so that the solution stays on the model's branch."""
+        s = self.system
+        q0 = self.neutral()
+        scale = np.ones(self.nq)
+        scale[self._qpos] = _unknown_scale(s, _char_length(s))[self.partition.independent]
+        steps = max(1, int(np.ceil(np.abs((qr - q0) / scale).max(initial=0.0) / 0.2)))
+        alpha, HJ = s.alpha0[None].copy(), s.joint_H0[None].copy()
+        for k in range(1, steps + 1):
+            qk = (q0 + (k / steps) * (qr - q0))[None]
+            alpha = self._alpha(qk, alpha)
+            H, HJ = self._tree(qk, alpha, HJ)
+            H0, HJ0, a0 = self._close(H[0], HJ[0], alpha[0])
+            H, HJ, alpha = H0[None], HJ0[None], a0[None]
+        return H[0], HJ[0], alpha[0]
 
     def _close(self, H, HJ, alpha, tol: float = 1e-13, max_iter: int = 30):
         """Newton on the closure constraints, the independent unknowns held."""
