@@ -150,6 +150,9 @@ def test_cart_pole_lqr_stabilises_the_nonlinear_run():
     assert sys.input_labels == ["cart"] and sys.output_labels == ["cart", "pole"]
     Kx, _, E = control.lqr(sys, np.diag([10.0, 50.0, 1.0, 1.0]), np.array([[0.1]]))
     assert np.all(E.real < 0)
+    # a Simulator's state at the start is the initial state of a run (at=None)
+    start = sd.Simulator(cart_pole(), step=2e-3).state
+    assert np.array_equal(sd.linearize(cart_pole(), at=start, inputs=["cart"]).A, lin.A)
     sim = sd.Simulator(cart_pole(math.radians(5)), step=2e-3)
     chans = ["joint/cart/alpha/0", "joint/pole/alpha/0", "joint/cart/velocity/0",
              "joint/pole/velocity/0"]

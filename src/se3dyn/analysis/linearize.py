@@ -71,6 +71,7 @@ class _Point:
     vd: np.ndarray
     lam: np.ndarray
     t: float
+    u: np.ndarray | None = None  # the inputs of the step that reached it (a Simulator's)
 
 
 def _point(s: System, at: Any, t: float | None) -> _Point:
@@ -84,6 +85,15 @@ def _point(s: System, at: Any, t: float | None) -> _Point:
             raise ModelError("linearize", "at", "a StaticResult of this model",
                              f"one of model {at.system.model.name!r}")
         return _Point(at.H, at.HJ, at.alpha, z, z, at.lam, 0.0 if t is None else float(t))
+    from se3dyn.dynamics.simulator import SimulatorState
+
+    if isinstance(at, SimulatorState):
+        if at.condensed:
+            raise ModelError("linearize", "at", "a SimulatorState of the model's own unknowns",
+                             "the state of a run with its rigid joints condensed",
+                             "use Simulator(model, step, condense=False)")
+        p = _point(s, at.state, t)
+        return _Point(p.H, p.HJ, p.alpha, p.v, p.vd, p.lam, p.t, np.array(at.u))
     if isinstance(at, State):
         if at.H.shape != s.node_H0.shape or at.v.shape != (s.nq,):
             raise ModelError("linearize", "at", "a State of this model",
@@ -234,10 +244,12 @@ def linearize(model_or_system: Model | System, at: Any = None, *, inputs=(), out
     Parameters
     ----------
     model_or_system : Model or System
-    at : StaticResult, State or None
-        A static equilibrium (:func:`se3dyn.static_equilibrium`), any State of a run (e.g.
-        ``Simulator.state``), or None: the initial state of a run of the model (its initial
-        configuration and velocities, consistent accelerations and multipliers).
+    at : StaticResult, State, SimulatorState or None
+        A static equilibrium (:func:`se3dyn.static_equilibrium`), any State of a run (of
+        :meth:`GeneralizedAlpha.step`), a :class:`Simulator`'s state (its inputs then those of
+        the step that reached it; a simulator with ``condense=False`` if the model has rigid
+        joints), or None: the initial state of a run of the model (its initial configuration
+        and velocities, consistent accelerations and multipliers).
     inputs : sequence of str
         Joint names (a unit generalized force on each of the joint's coordinates, positive
         along it: an actuator's torque or force, Eq. (66)) and load names (each force and
@@ -260,7 +272,7 @@ def linearize(model_or_system: Model | System, at: Any = None, *, inputs=(), out
     p = _point(s, at, t)
     con = Constraints(s)
     rm = con.map_at(p.H, p.HJ, p.alpha, independent=independent)
-    u = step_inputs(s, p.t)
+    u = step_inputs(s, p.t) if p.u is None else dict(u=p.u)
     M, C, K = _tangents(s, con, p, u)
     T = rm.T
     Mz, Cz, Kz = T.T @ M @ T, T.T @ C @ T, T.T @ K @ T
