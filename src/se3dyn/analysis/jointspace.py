@@ -179,13 +179,11 @@ class JointSpace:
             p = self._qpos[np.searchsorted(self.partition.independent, d)]
             H[:, i, :3, 3] = q[:, p:p + 3]
             H[:, i, :3, :3] = quat_to_rot(q[:, p + 3:p + 7])
-        for j, forward in self._plan.order:
-            XA, XB = s.joint_XA[j], s.joint_XB[j]
-            a, b = s.joint_a[j], s.joint_b[j]
-            if forward:
-                H[:, b] = H[:, a] @ XA @ HJ[:, j] @ lie.inverse(XB)
-            else:
-                H[:, a] = H[:, b] @ XB @ lie.inverse(HJ[:, j]) @ lie.inverse(XA)
+        for j, forward, a, b, XA, XBi in self._plan.order:
+            if forward:  # H_B = H_A X_A H_J X_B^-1
+                H[:, b] = H[:, a] @ XA @ HJ[:, j] @ XBi
+            else:  # H_A = H_B X_B H_J^-1 X_A^-1 (XA, XBi hold X_B, X_A^-1 here)
+                H[:, a] = H[:, b] @ XA @ lie.inverse(HJ[:, j]) @ XBi
         return H, HJ
 
     def _continue(self, qr: np.ndarray):
@@ -217,7 +215,7 @@ class JointSpace:
             H, HJ, alpha = ev.H, ev.HJ, ev.alpha
             if float(np.abs(self._rs * ev.phi).max(initial=0.0)) <= tol:
                 return H, HJ, alpha
-            rm = reduced_map(s, con.blocks.split(ev.values)[2], self.partition)
+            rm = reduced_map(s, con.blocks.split(ev.values)[2], self.partition, con.cs)
             n = -rm.solve_dependent(ev.phi)
         raise SimulationError("JointSpace: the closed loops do not close at these "
                               "independent coordinates (Newton did not converge; the "
@@ -231,7 +229,7 @@ class JointSpace:
         ev = evaluate(s, H, HJ, alpha, z, z, z, con.lam0, con.zin, (1.0, 0.0, 0.0),
                       full_alpha=False)
         M, _, B = con.blocks.split(ev.values)
-        return M, reduced_map(s, B, self.partition)
+        return M, reduced_map(s, B, self.partition, con.cs)
 
     def _tau(self, H, HJ, alpha, zd, zdd, inputs) -> tuple[np.ndarray, np.ndarray]:
         """``(tau, M_z)``: generalized forces on the independent coordinates and the mass
@@ -379,7 +377,9 @@ class _Plan:
 
 def _tree_plan(s: System, roots: list[int]) -> _Plan:
     """Joints in an order where each places an unplaced node from a placed one (fixed nodes and
-    roots placed first), ``(joint, forward)``; the others close loops."""
+    roots placed first), ``(joint, forward, a, b, X, Y)`` with the constant factors of the
+    composition (``X_A, X_B^-1`` forward, ``X_B, X_A^-1`` backward); the others close
+    loops."""
     placed = set(int(i) for i in np.flatnonzero(s.node_fixed)) | set(roots)
     left = list(range(s.m))
     order: list[tuple[int, bool]] = []
@@ -388,11 +388,12 @@ def _tree_plan(s: System, roots: list[int]) -> _Plan:
         progress = False
         for j in list(left):
             a, b = int(s.joint_a[j]), int(s.joint_b[j])
+            XA, XB = s.joint_XA[j], s.joint_XB[j]
             if a in placed and b not in placed:
-                order.append((j, True))
+                order.append((j, True, a, b, XA, lie.inverse(XB)))
                 placed.add(b)
             elif b in placed and a not in placed:
-                order.append((j, False))
+                order.append((j, False, a, b, XB, lie.inverse(XA)))
                 placed.add(a)
             else:
                 continue

@@ -160,16 +160,18 @@ class ReducedMap:
         return self.T @ dz
 
 
-def reduced_map(s: System, B: np.ndarray, part: Partition) -> ReducedMap:
+def reduced_map(s: System, B: np.ndarray, part: Partition,
+                cs: np.ndarray | None = None) -> ReducedMap:
     """``T`` of a configuration's ``B`` for a partition (SimulationError when the dependent
-    unknowns are no longer determined there: a singular configuration of the partition)."""
+    unknowns are no longer determined there: a singular configuration of the partition);
+    ``cs``: the unknowns' scales (:func:`se3dyn.engine.scaling._unknown_scale`) if known."""
     D, ind = part.dependent, part.independent
     T = np.zeros((s.nq, len(ind)))
     T[ind, np.arange(len(ind))] = 1.0
     if len(D) == 0:
         return ReducedMap(part=part, B=B, T=T, _qr=(np.zeros((s.nm, 0)), np.zeros((0, 0))))
-    L = _char_length(s)
-    cs = _unknown_scale(s, L)
+    if cs is None:
+        cs = _unknown_scale(s, _char_length(s))
     Q, R = np.linalg.qr(B[:, D] * cs[D])
     d = np.abs(np.diag(R))
     if d.min() <= 1e-10 * d.max():
@@ -191,6 +193,7 @@ class Constraints:
         self.zq = np.zeros(s.nq)
         self.lam0 = np.zeros(s.nm)
         self.zin = dict(u=np.zeros(s.inputs.nu))
+        self.cs = _unknown_scale(s, _char_length(s))
 
     def jacobian(self, H, HJ, alpha) -> np.ndarray:
         """``B`` (nm, nq) at a configuration (frames (M, 4, 4), (m, 4, 4), coordinates (nq,))."""
@@ -211,7 +214,7 @@ class Constraints:
         B = self.jacobian(H, HJ, alpha)
         if part is None:
             part = partition(self.s, B, independent)
-        return reduced_map(self.s, B, part)
+        return reduced_map(self.s, B, part, self.cs)
 
     def accel_term(self, rm: ReducedMap, H, HJ, alpha, v: np.ndarray) -> np.ndarray:
         """``w = Tdot z_dot`` (nq,): the accelerations of all unknowns when the independent ones
