@@ -830,14 +830,14 @@ def cmd_linearize(args) -> int:
     """Linearise a model file about its static equilibrium or its initial state
     (se3dyn.analysis.linearize): print the minimal coordinates and the modes; with
     ``--export``, write the matrices, names and modes to a NumPy ``.npz`` file."""
-    import se3dyn as sd
+    from se3dyn.analysis.linearize import linearize
+    from se3dyn.analysis.statics import static_equilibrium
     from se3dyn.errors import Se3dynError
 
     model, _ = _load(args.model)
     try:
-        at = sd.static_equilibrium(model) if args.at == "static" else None
-        lin = sd.linearize(model, at=at, inputs=args.inputs or (),
-                           outputs=args.outputs or ())
+        at = static_equilibrium(model) if args.at == "static" else None
+        lin = linearize(model, at=at, inputs=args.inputs or (), outputs=args.outputs or ())
         md = lin.modes(args.modes)
     except Se3dynError as exc:
         raise _Usage(str(exc)) from None
