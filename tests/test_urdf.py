@@ -489,3 +489,61 @@ def test_planar_and_floating_joints_placed_by_q0_and_the_floating_child_falls_fr
     assert np.allclose(x[:, 2], 1.0 - 0.5 * G * res.t ** 2, atol=1e-12)
     assert np.allclose(x[:, 0], 0.5 * res.t, atol=1e-12)
     assert np.allclose(res.node_position("p"), (1.3, -0.2, 0.0), atol=1e-12)  # held in plane
+
+
+def _joint_space_pair(name: str, floating: bool):
+    """Pinocchio's model of an example-robot-data URDF and se3dyn's JointSpace of its import,
+    the permutation of se3dyn's velocity coordinates into Pinocchio's and the URDF's joint
+    damping (se3dyn applies it; Pinocchio's RNEA leaves it out)."""
+    path = str(_robots_dir() / REAL[name])
+    pm = (pin.buildModelFromUrdf(path, pin.JointModelFreeFlyer()) if floating
+          else pin.buildModelFromUrdf(path))
+    model = load(path, floating_base=floating, mimic="ignore").build()
+    js = sd.JointSpace(model)
+    perm = []
+    for label in js.joint_names:
+        kind, name_, comp = (part.strip() for part in label.split("'"))
+        perm.append(["U_x", "U_y", "U_z", "Omega_x", "Omega_y", "Omega_z"].index(comp)
+                    if kind == "node" else pm.joints[pm.getJointId(name_)].idx_v)
+    damping = np.zeros(pm.nv)
+    for j in model.joints:
+        if j.k == 1 and j.name in pm.names:
+            damping[pm.joints[pm.getJointId(j.name)].idx_v] = j.damping[0]
+    return pm, js, np.array(perm), damping
+
+
+def _random_state(pm, js, perm, rng, floating: bool):
+    """One random state in both conventions: Pinocchio's q (continuous joints as cos, sin;
+    the free flyer x, y, z, qx, qy, qz, qw) and se3dyn's (angles; the same root pose)."""
+    q, qs = pin.neutral(pm), js.neutral().copy()
+    joints = list(pm.joints)[1:]
+    if floating:
+        quat = rng.normal(size=4)
+        q[:7] = qs[:7] = np.r_[rng.normal(size=3), quat / np.linalg.norm(quat)]
+        joints = joints[1:]
+    angle = {}
+    for jt in joints:
+        angle[jt.idx_v] = th = rng.uniform(-1.5, 1.5)
+        q[jt.idx_q:jt.idx_q + jt.nq] = (th,) if jt.nq == 1 else (math.cos(th), math.sin(th))
+    first = 7 if floating else 0
+    for i, p in enumerate(p for p in perm if not (floating and p < 6)):
+        qs[first + i] = angle[p]
+    return q, qs, rng.normal(size=pm.nv), rng.normal(size=pm.nv)
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda", "double_pendulum_continuous", "solo12"])
+def test_imported_robot_joint_space_matches_pinocchio(name):
+    """The mass matrix and the inverse dynamics of the imported robot (sd.JointSpace) at 20
+    random states against Pinocchio's CRBA and RNEA on its own parse of the same URDF
+    (Panda's fingers uncoupled: mimic ignored; the URDF's joint damping added to RNEA)."""
+    floating = name == "solo12"
+    pm, js, perm, damping = _joint_space_pair(name, floating)
+    data, rng = pm.createData(), np.random.default_rng(5)
+    for _ in range(20):
+        q, qs, v, a = _random_state(pm, js, perm, rng, floating)
+        M = pin.crba(pm, data, q)
+        M = np.triu(M) + np.triu(M, 1).T
+        assert np.abs(js.mass_matrix(qs) - M[np.ix_(perm, perm)]).max() <= 1e-10 * np.abs(M).max()
+        tau = pin.rnea(pm, data, q, v, a) + damping * v
+        ours = js.inverse_dynamics(qs, v[perm], a[perm])
+        assert np.abs(ours - tau[perm]).max() <= 1e-10 * np.abs(tau).max()
