@@ -6,6 +6,8 @@ from se3dyn._version import __version__ as __version__
 from se3dyn.analysis.assemble import Assembly as Assembly
 from se3dyn.analysis.assemble import AssemblyError as AssemblyError
 from se3dyn.analysis.assemble import assemble as assemble
+from se3dyn.analysis.buckling import Buckling as Buckling
+from se3dyn.analysis.buckling import buckling as buckling
 from se3dyn.analysis.jointspace import JointSpace as JointSpace
 from se3dyn.analysis.kinematics import KinematicsResult as KinematicsResult
 from se3dyn.analysis.kinematics import kinematics as kinematics

@@ -44,7 +44,7 @@ from se3dyn import lie
 from se3dyn._lazy import LazyModule
 from se3dyn.analysis.common import _as_system, _joint_ids, _unknown_name
 from se3dyn.analysis.reduced import Constraints, Partition, ReducedMap, reduced_map
-from se3dyn.analysis.statics import StaticResult
+from se3dyn.analysis.statics import StaticResult, _scaled_inputs
 from se3dyn.dynamics.state import State
 from se3dyn.engine.evaluate import evaluate
 from se3dyn.engine.inputs import step_inputs
@@ -84,7 +84,11 @@ def _point(s: System, at: Any, t: float | None) -> _Point:
         if at.system.model is not s.model:
             raise ModelError("linearize", "at", "a StaticResult of this model",
                              f"one of model {at.system.model.name!r}")
-        return _Point(at.H, at.HJ, at.alpha, z, z, at.lam, 0.0 if t is None else float(t))
+        tt = 0.0 if t is None else float(t)
+        u = None
+        if at.load_factor != 1.0:  # (the loads it carries: statics' scaling of the inputs)
+            u = _scaled_inputs(dict(step_inputs(s, tt), kind=s.inputs.kind), at.load_factor)["u"]
+        return _Point(at.H, at.HJ, at.alpha, z, z, at.lam, tt, u)
     from se3dyn.dynamics.simulator import SimulatorState
 
     if isinstance(at, SimulatorState):

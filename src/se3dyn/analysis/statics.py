@@ -104,6 +104,9 @@ class StaticResult(_OneConfiguration):
     #: every PID-controlled one (``System.inputs.pid_ref``), at equilibrium
     efforts: np.ndarray | None = None
     _squeeze: bool = field(default=True, repr=False)
+    #: the multiple of the model's loads this equilibrium carries (``load_factor`` of
+    #: :func:`static_equilibrium`)
+    load_factor: float = 1.0
 
     def drive_effort(self, name: str) -> np.ndarray:
         """Force or torque a driver supplies to hold its coordinates, shape (c,): the residual
@@ -148,6 +151,34 @@ class StaticResult(_OneConfiguration):
                 f"load step(s), {int(np.sum(self.iterations))} Newton iterations, {self.cuts} "
                 f"cut(s); residual {self.residual:.2e}, constraint {self.constraint:.2e}; "
                 f"{st} (smallest reduced stiffness {self.min_stiffness})")
+
+
+#: the reciprocal condition number (1-norm estimate of LAPACK's gecon) below which the scaled
+#: static tangent is taken as singular: a few hundred times the machine epsilon. A stiff
+#: structure (steel beams, EA / EI = 1e7 and more; stiff spring joints) has condition numbers
+#: of 1e10 to 1e13 that LU with partial pivoting solves to the digits Newton needs; a free
+#: motion gives an estimate at round-off level (1e-17 and below)
+_SINGULAR_RCOND = 256 * np.finfo(float).eps
+#: an eigenvalue of the reduced stiffness is zero when below this times the largest one
+_ZERO_EIGENVALUE = 64 * np.finfo(float).eps
+
+
+def _equilibrate(S: np.ndarray, sweeps: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column scalings ``dr``, ``dc`` (n,) that bring every row and column of
+    ``diag(dr) S diag(dc)`` to an infinity norm near 1 (Ruiz's iteration, powers of two so the
+    scaling is exact): a stiff spring's 1e12 beside a constraint's 1 no longer sets the
+    condition number of the static tangent."""
+    n = S.shape[0]
+    dr, dc = np.ones(n), np.ones(n)
+    A = np.abs(S)
+    for _ in range(sweeps):
+        r = (dr[:, None] * A * dc).max(axis=1)
+        c = (dr[:, None] * A * dc).max(axis=0)
+        r[r == 0] = 1.0
+        c[c == 0] = 1.0
+        dr *= np.exp2(-np.round(0.5 * np.log2(r)))
+        dc *= np.exp2(-np.round(0.5 * np.log2(c)))
+    return dr, dc
 
 
 class _StepFailure(Exception):
@@ -256,13 +287,16 @@ class _Newton:
     def _linear_solve(self, S: np.ndarray, rhs: np.ndarray, it: int) -> np.ndarray:
         nq = self.s.nq
         if not self.redundant:
+            dr, dc = _equilibrate(S)
+            Se = dr[:, None] * S * dc
             with warnings.catch_warnings(), np.errstate(all="ignore"):
                 warnings.simplefilter("ignore")
-                lu, piv = sla.lu_factor(S, check_finite=False)
-            p = np.abs(np.diag(lu))
-            if np.all(np.isfinite(p)) and p.min(initial=1.0) > 1e-12 * max(p.max(initial=0.0),
-                                                                              1e-300):
-                return sla.lu_solve((lu, piv), rhs, check_finite=False)
+                lu, piv = sla.lu_factor(Se, check_finite=False)
+            if np.all(np.isfinite(lu)):
+                anorm = float(np.abs(Se).sum(axis=0).max(initial=0.0))
+                rcond = sla.lapack.dgecon(lu, anorm, norm="1")[0] if anorm > 0 else 0.0
+                if rcond > _SINGULAR_RCOND:
+                    return dc * sla.lu_solve((lu, piv), dr * rhs, check_finite=False)
         U, sv, Vt = _svd(S, full=True)
         r = int(np.sum(sv > 1e-11 * sv[0])) if sv.size and sv[0] > 0 else 0
         Nn = Vt[r:, :nq]  # unknown part of the null vectors
@@ -283,7 +317,8 @@ class _Newton:
 
 def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
                        tol: float = 1e-10, max_iter: int = 30, t: float = 0.0,
-                       max_cuts: int = 10) -> StaticResult:
+                       max_cuts: int = 10, load_factor: float = 1.0,
+                       stability: bool = True) -> StaticResult:
     """Static equilibrium under gravity, joint springs, actuators, PD laws and nodal loads.
 
     Newton iterations on the group (see the module docstring for the equations) from the model's
@@ -307,6 +342,14 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         Time at which actuators, loads and PD targets are evaluated.
     max_cuts : int
         Maximum number of successive halvings of a load increment.
+    load_factor : float
+        The equilibrium under this multiple of the loads (gravity, nodal loads, actuator
+        efforts; any sign), reached by the same load steps: a point of the load path, e.g.
+        for :func:`se3dyn.buckling`. Drives and control targets are not scaled.
+    stability : bool
+        Compute the smallest eigenvalue of the reduced stiffness at the equilibrium
+        (``min_stiffness``, ``stable``), refusing a zero one; False: skip it (both None), e.g.
+        at a critical load, where it is zero by definition.
 
     Returns
     -------
@@ -336,6 +379,10 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         raise ModelError("static_equilibrium", "tol", "a positive tolerance below 1", tol)
     if not (isinstance(t, int | float) and math.isfinite(t)):
         raise ModelError("static_equilibrium", "t", "a finite time", t)
+    if (isinstance(load_factor, bool) or not isinstance(load_factor, int | float | np.floating)
+            or not math.isfinite(load_factor)):
+        raise ModelError("static_equilibrium", "load_factor", "a finite number", load_factor)
+    lfac = float(load_factor)
     if len(s.sensor_dof):
         d = int(s.sensor_dof[0])
         raise ModelError("static_equilibrium", "model", "PID laws on their joints' own "
@@ -373,7 +420,7 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         newton.held = (held, goal if target == 1.0 else a0 + target * (goal - a0))
         try:
             ev, lam_new, it, er, ep, effort = newton.solve(H, HJ, alpha, lam,
-                                                   _scaled_inputs(full, target))
+                                                   _scaled_inputs(full, target * lfac))
         except _StepFailure as fail:
             if level >= max_cuts:
                 part = StaticResult(
@@ -409,11 +456,12 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
             run = 0
     if not factors:  # pragma: no cover - the loop runs at least once
         factors, iters = [1.0], [0]
-    kmin, stable = _stability(s, newton, H, HJ, alpha, lam, _scaled_inputs(full, 1.0))
+    kmin, stable = (_stability(s, newton, H, HJ, alpha, lam, _scaled_inputs(full, lfac))
+                    if stability else (None, None))
     return StaticResult(system=s, H=H, HJ=HJ, alpha=alpha, lam=lam,
                         load_factors=np.array(factors), iterations=np.array(iters, dtype=int),
                         cuts=cuts, residual=er, constraint=ep, min_stiffness=kmin, stable=stable,
-                        efforts=efforts)
+                        efforts=efforts, load_factor=lfac)
 
 
 def _eliminate_followers(s: System, S: np.ndarray, cs: np.ndarray) -> None:
@@ -457,10 +505,12 @@ def _stability(s: System, newton: _Newton, H, HJ, alpha, lam, inputs):
         return None, None
     Kr = N.T @ (cs[:, None] * K * cs) @ N
     w, V = np.linalg.eigh(0.5 * (Kr + Kr.T))
-    Ks = cs[:, None] * K * cs
-    scale = max(float(np.abs(Ks).max(initial=0.0)), float(np.abs(lam).max(initial=0.0)))
+    # zero within round-off: the error of a computed eigenvalue is about eps |Kr|_2 (Weyl),
+    # whatever the stiffness contrast of the structure (a column near its buckling load keeps
+    # a bending eigenvalue far below its axial ones, and that is not a singularity)
+    scale = float(np.abs(w).max(initial=0.0))
     i = int(np.argmin(np.abs(w)))
-    if abs(w[i]) <= 1e-10 * scale or scale == 0.0:
+    if abs(w[i]) <= _ZERO_EIGENVALUE * scale or scale == 0.0:
         raise SimulationError(_mechanism_message(
             "at the equilibrium reached (load factor 1)", _describe(N @ V[:, i] * cs, s.labels),
             "(zero stiffness along a free motion)"))
