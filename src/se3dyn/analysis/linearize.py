@@ -104,12 +104,11 @@ def _point(s: System, at: Any, t: float | None) -> _Point:
 
 
 def _check_model(s: System) -> None:
-    for what, bad in (("drives", len(s.drive_dof)), ("couplings", len(s.cpl_lead)),
-                      ("PID laws", int(np.sum(s.dof_ki > 0)))):
-        if bad:
-            raise ModelError("linearize", "model", f"a model without {what} (their states "
-                             "and prescribed coordinates are not in the linear model yet)",
-                             f"{bad} {what}")
+    bad = int(np.sum(s.dof_ki > 0))
+    if bad:
+        raise ModelError("linearize", "model", "a model without PID laws (their integral "
+                         "states are not in the linear model yet)", f"{bad} PID law(s)",
+                         "use a PD law, or linearise without the controller")
 
 
 # =============================================================================================
@@ -270,7 +269,7 @@ def linearize(model_or_system: Model | System, at: Any = None, *, inputs=(), out
     s = _as_system(model_or_system, "linearize")
     _check_model(s)
     p = _point(s, at, t)
-    con = Constraints(s)
+    con = Constraints(s, locked=s.drive_dof)
     rm = con.map_at(p.H, p.HJ, p.alpha, independent=independent)
     u = step_inputs(s, p.t) if p.u is None else dict(u=p.u)
     M, C, K = _tangents(s, con, p, u)
@@ -319,7 +318,7 @@ def _motion_terms(s: System, con: Constraints, rm: ReducedMap, p: _Point, M, C):
     def along(n):  # (T z_dot, T z_ddot + w) at the configuration H exp(n)
         ev = evaluate(s, p.H, p.HJ, p.alpha, n, con.zq, con.zq, con.lam0, con.zin,
                       (0.0, 0.0, 0.0), full_alpha=False)
-        r2 = reduced_map(s, con.blocks.split(ev.values)[2], rm.part)
+        r2 = reduced_map(s, con.rows(con.blocks.split(ev.values)[2]), rm.part, con.cs)
         v = r2.T @ zd
         return np.concatenate([v, r2.T @ zdd + con.accel_term(r2, ev.H, ev.HJ, ev.alpha, v)])
 
