@@ -43,7 +43,7 @@ import numpy as np
 from se3dyn import lie
 from se3dyn._lazy import LazyModule
 from se3dyn.analysis.common import _as_system, _joint_ids, _unknown_name
-from se3dyn.analysis.reduced import Constraints, Partition, ReducedMap, reduced_map
+from se3dyn.analysis.reduced import Constraints, Partition, ReducedMap
 from se3dyn.analysis.statics import StaticResult
 from se3dyn.dynamics.state import State
 from se3dyn.engine.evaluate import evaluate
@@ -315,10 +315,11 @@ def _motion_terms(s: System, con: Constraints, rm: ReducedMap, p: _Point, M, C):
                     - con.accel_term(rm, p.H, p.HJ, p.alpha, T @ (zd - e))) / (2 * scale)
     cs = _unknown_scale(s, _char_length(s))
 
-    def along(n):  # (T z_dot, T z_ddot + w) at the configuration H exp(n)
-        ev = evaluate(s, p.H, p.HJ, p.alpha, n, con.zq, con.zq, con.lam0, con.zin,
-                      (0.0, 0.0, 0.0), full_alpha=False)
-        r2 = reduced_map(s, con.rows(con.blocks.split(ev.values)[2]), rm.part, con.cs)
+    def along(n):  # (T z_dot, T z_ddot + w) at the configuration H exp(n), re-based there
+        # (the matrix of an evaluation at n holds B T(n), Eq. (46): B itself is at n = 0)
+        ev = evaluate(s, p.H, p.HJ, p.alpha, n, con.zq, con.zq, con.lam0, con.zin, None,
+                      full_alpha=False)
+        r2 = con.map_at(ev.H, ev.HJ, ev.alpha, rm.part)
         v = r2.T @ zd
         return np.concatenate([v, r2.T @ zdd + con.accel_term(r2, ev.H, ev.HJ, ev.alpha, v)])
 
