@@ -183,7 +183,11 @@ class Linearization:
     input_names: tuple[str, ...]
     output_names: tuple[str, ...]
     _point: _Point = field(repr=False)
-    _inputs: list = field(repr=False)
+
+    def __repr__(self) -> str:
+        return (f"Linearization({len(self.names)} minimal coordinates: "
+                f"{', '.join(self.names[:6])}{' ...' if len(self.names) > 6 else ''}; "
+                f"{len(self.input_names)} inputs, {len(self.output_names)} outputs)")
 
     @property
     def symmetric(self) -> bool:
@@ -285,7 +289,7 @@ def linearize(model_or_system: Model | System, at: Any = None, *, inputs=(), out
     Cy, out_names = _output_matrix(s, p, T, outputs)
     return Linearization(system=s, M=Mz, C=Cz, K=Kz, B=T.T @ Bf, C_y=Cy, T=T,
                          partition=rm.part, names=rm.part.names, input_names=in_names,
-                         output_names=out_names, _point=p, _inputs=list(inputs))
+                         output_names=out_names, _point=p)
 
 
 def _tangents(s: System, con: Constraints, p: _Point, u: dict):
