@@ -142,3 +142,12 @@ def test_linearization_about_a_moving_state_against_pinocchio_derivatives():
     assert rel(lin.M, M) <= 1e-10
     assert rel(lin.C, dv) <= 1e-8
     assert rel(lin.K, dq) <= 1e-8
+
+
+def test_non_abelian_coordinates_refused():
+    mb = sd.ModelBuilder(gravity=(0, 0, -9.81))
+    mb.node("ground", fixed=True)
+    mb.node("bob", position=(0, 0, -1), mass=1.0, inertia=(0.1, 0.1, 0.1))
+    mb.joint("ball", "spherical", "ground", "bob", at=(0, 0, 0))
+    with pytest.raises(ModelError, match="joint 'ball' \\(spherical\\)"):
+        sd.JointSpace(mb.build())

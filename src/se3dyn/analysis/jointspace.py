@@ -117,7 +117,7 @@ class JointSpace:
                 j = int(jid[i])
                 raise ModelError(f"joint {s.joint_names[j]!r} ({s.joint_type[j]})", "type",
                                  "abelian joints for JointSpace coordinates (hinge, "
-                                 "prismatic, cylindrical, screw, planar, universal)",
+                                 "prismatic, cylindrical, screw, universal)",
                                  s.joint_type[j], "its coordinates are not coordinates of "
                                  "a configuration; linearize handles it")
         self._jointdofs = np.array(jointdofs, np.int64)
