@@ -13,6 +13,9 @@ from se3dyn.analysis.kinematics import KinematicsResult as KinematicsResult
 from se3dyn.analysis.kinematics import kinematics as kinematics
 from se3dyn.analysis.linearize import Linearization as Linearization
 from se3dyn.analysis.linearize import linearize as linearize
+from se3dyn.analysis.spin import Campbell as Campbell
+from se3dyn.analysis.spin import campbell as campbell
+from se3dyn.analysis.spin import relative_equilibrium as relative_equilibrium
 from se3dyn.analysis.statics import StaticResult as StaticResult
 from se3dyn.analysis.statics import static_equilibrium as static_equilibrium
 from se3dyn.dynamics.integrator import GeneralizedAlpha as GeneralizedAlpha

@@ -308,28 +308,30 @@ def _tangents(s: System, con: Constraints, p: _Point, u: dict):
 
 def _motion_terms(s: System, con: Constraints, rm: ReducedMap, p: _Point, M, C):
     """The terms of a state with motion: ``T^T M dw/dz_dot`` and ``T^T (C_T d(T z_dot)/dz +
-    M d(T z_ddot + w)/dz)`` (see the module docstring)."""
-    T = rm.T
-    zd = np.linalg.lstsq(T, p.v, rcond=None)[0]
-    w0 = con.accel_term(rm, p.H, p.HJ, p.alpha, p.v)
-    zdd = np.linalg.lstsq(T, p.vd - w0, rcond=None)[0]
+    M d(T z_ddot + w)/dz)`` (see the module docstring). Driven coordinates move with their
+    drives' rates and accelerations (``v = T z_dot + v_p``, ``v_p`` the unknowns moving with the
+    drives alone, at every configuration): a rotor driven at constant speed."""
+    T, ind, dd = rm.T, rm.part.independent, s.drive_dof
+    zd, zdd = p.v[ind], p.vd[ind]  # (T is the identity there, v_p and w zero)
     nz = T.shape[1]
     scale = max(float(np.abs(zd).max(initial=0.0)), 1.0)
+    vp = _driven(rm, p.v[dd])
     dw = np.zeros((s.nq, nz))
     for k in range(nz):  # w is quadratic in z_dot: the central difference is exact
         e = np.zeros(nz)
         e[k] = scale
-        dw[:, k] = (con.accel_term(rm, p.H, p.HJ, p.alpha, T @ (zd + e))
-                    - con.accel_term(rm, p.H, p.HJ, p.alpha, T @ (zd - e))) / (2 * scale)
+        dw[:, k] = (con.accel_term(rm, p.H, p.HJ, p.alpha, T @ (zd + e) + vp)
+                    - con.accel_term(rm, p.H, p.HJ, p.alpha, T @ (zd - e) + vp)) / (2 * scale)
     cs = _unknown_scale(s, _char_length(s))
 
-    def along(n):  # (T z_dot, T z_ddot + w) at the configuration H exp(n), re-based there
+    def along(n):  # (v, vd) at the configuration H exp(n), re-based there
         # (the matrix of an evaluation at n holds B T(n), Eq. (46): B itself is at n = 0)
         ev = evaluate(s, p.H, p.HJ, p.alpha, n, con.zq, con.zq, con.lam0, con.zin, None,
                       full_alpha=False)
         r2 = con.map_at(ev.H, ev.HJ, ev.alpha, rm.part)
-        v = r2.T @ zd
-        return np.concatenate([v, r2.T @ zdd + con.accel_term(r2, ev.H, ev.HJ, ev.alpha, v)])
+        v = r2.T @ zd + _driven(r2, p.v[dd])
+        return np.concatenate([v, r2.T @ zdd + con.accel_term(r2, ev.H, ev.HJ, ev.alpha, v)
+                               + _driven(r2, p.vd[dd])])
 
     dV = np.zeros((2 * s.nq, nz))
     for k in range(nz):
@@ -340,6 +342,17 @@ def _motion_terms(s: System, con: Constraints, rm: ReducedMap, p: _Point, M, C):
         dV[:, k] = (4 * D2 - D1) / 3
     nq = s.nq
     return T.T @ M @ dw, T.T @ (C @ dV[:nq] + M @ dV[nq:])
+
+
+def _driven(rm: ReducedMap, x: np.ndarray) -> np.ndarray:
+    """The unknowns (nq,) moving with the driven coordinates' rates (or accelerations) ``x``
+    alone, the independent ones at rest: the locked rows of ``[B; E]`` are its last ones."""
+    out = np.zeros(rm.T.shape[0])
+    if not np.any(x):
+        return out
+    rhs = np.zeros(rm.B.shape[0])
+    rhs[len(rhs) - len(x):] = x
+    return rm.solve_dependent(rhs)
 
 
 def _bracket(s: System, rm: ReducedMap, v: np.ndarray) -> np.ndarray:
@@ -444,10 +457,7 @@ def _modes(lin: Linearization, k: int | None) -> Modes:
     n = len(lin.M)
     if k is not None and not (isinstance(k, int) and 1 <= k):
         raise ModelError("modes", "k", "a positive number of modes", k)
-    I, Z = np.eye(n), np.zeros((n, n))
-    A = np.block([[Z, I], [-lin.K, -lin.C]])
-    E = np.block([[I, Z], [Z, lin.M]])
-    lam, Y = sla.eig(A, E)
+    lam, Y = _eigen(lin.M, lin.C, lin.K)
     scale = max(float(np.abs(lam).max(initial=0.0)), 1e-300)
     pairs = _pairs(lam, scale)
     ev, om, zeta, shapes, st = [], [], [], [], []
@@ -478,14 +488,41 @@ def _modes(lin: Linearization, k: int | None) -> Modes:
                  full_shapes=lin.T @ Sh, names=lin.names)
 
 
+def _eigen(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues and vectors ``[x; s x]`` of ``(s^2 M + s C + K) x = 0``: the companion
+    matrix ``[[0, I], [-M^-1 K, -M^-1 C]]`` scaled by ``diag(w, 1)``, ``w_i = sqrt(K_ii /
+    M_ii)``, so that every block is of the size of its frequencies (a stiff structure's
+    companion form spans 1e18 in magnitude unscaled, and the real parts of its eigenvalues come
+    out at 1e-8 of the largest frequency instead of round-off: a slender blade's "growth"
+    of 20 1/s at rest); the generalized form when M is singular."""
+    n = len(M)
+    I, Z = np.eye(n), np.zeros((n, n))
+    dM, dK = np.abs(np.diag(M)), np.abs(np.diag(K))
+    if n == 0 or np.linalg.cond(M) > 1e12:
+        return sla.eig(np.block([[Z, I], [-K, -C]]), np.block([[I, Z], [Z, M]]))
+    w = np.where((dK > 0) & (dM > 0), np.sqrt(dK / np.where(dM > 0, dM, 1.0)), 1.0)
+    A = np.block([[Z, np.diag(1.0 / w)], [-np.linalg.solve(M, K) * w, -np.linalg.solve(M, C)]])
+    lam, Y = sla.eig(A)
+    Y[:n] *= w[:, None]
+    return lam, Y
+
+
 def _peak(S: np.ndarray) -> np.ndarray:
     """The largest component (by modulus) of every column (normalisation to 1 there)."""
     return S[np.argmax(np.abs(S), axis=0), np.arange(S.shape[1])]
 
 
+#: a singular value of K below this times its largest is a rigid-body direction. A null
+#: direction of K comes out at round-off (1e-17 relative, also about a steady spin, where the
+#: motion terms are differences); a stiff structure's softest flexible one is far above it but
+#: may be small: a slender rotating blade (EA / EI = 1e6, 64 elements) keeps its first flap mode
+#: at 1.2e-10 (tests/test_campbell.py)
+_RIGID_SV = 1e-12
+
+
 def _null(K: np.ndarray) -> tuple[int, np.ndarray]:
     _, sv, Vt = np.linalg.svd(K)
-    r = int(np.sum(sv > 1e-9 * max(sv[0], 1e-300))) if sv.size else 0
+    r = int(np.sum(sv > _RIGID_SV * max(sv[0], 1e-300))) if sv.size else 0
     return r, Vt[r:].T
 
 
