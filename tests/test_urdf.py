@@ -576,3 +576,12 @@ def test_imported_arm_falls_as_pinocchio_aba_at_order_2():
     assert np.all(np.abs(np.log2(np.array(err[:-1]) / err[1:]) - 2.0) < 0.1), err
     assert np.all(np.abs(np.log2(np.array(drift[:-1]) / drift[1:]) - 2.0) < 0.1), drift
     assert err[-1] < 1e-4
+
+
+def test_visual_mesh_the_viewer_cannot_read_drawn_with_the_collision_mesh():
+    mb = load("dae_visual.urdf")
+    (v,) = mb.build().visuals
+    assert Path(v.file) == (DATA / "meshes/tet.stl").resolve()
+    assert np.allclose(v.offset, (0, 0, 0.3))
+    text = mb.urdf.report()
+    assert "tet.dae" in text and "drawn with their <collision> mesh instead: base" in text
