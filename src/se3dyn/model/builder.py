@@ -635,6 +635,14 @@ class ModelBuilder:
             nrm = nrm / ln
         if material is None:
             material = ContactMaterial()
+        if isinstance(material, dict):  # (model files, or a dict of ContactMaterial's fields)
+            try:
+                material = ContactMaterial(**material)
+            except ModelError as exc:
+                raise ModelError(item, f"material.{exc.field}", exc.expected, exc.got) from None
+            except TypeError as exc:
+                raise ModelError(item, "material", "the fields of se3dyn.ContactMaterial",
+                                 str(exc)) from None
         if not isinstance(material, ContactMaterial):
             raise ModelError(item, "material", "an se3dyn.ContactMaterial",
                              type(material).__name__)

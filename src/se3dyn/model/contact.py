@@ -28,6 +28,9 @@ from se3dyn.errors import ModelError
 #: gravity used to scale the default bristle damping time (m/s^2)
 G0 = 9.81
 SHAPES = ("sphere", "plane")
+#: smallest restitution coefficient (c(0.01) = 100: the damping of slower impacts than the
+#: touch-down speed would clip the force to zero)
+E_MIN = 0.01
 
 
 def _number(item: str, fld: str, v: Any, *, positive: bool = False, upper: float | None = None,
@@ -54,13 +57,14 @@ class ContactMaterial:
     Parameters
     ----------
     stiffness : float, optional
-        Hertz constant ``k`` of ``F_n = k delta^{3/2}`` (N/m^1.5), used as given for the pair.
+        Hertz constant ``k`` of ``F_n = k delta^{3/2}`` (N/m^1.5): the pair's when both shapes
+        have it (:func:`combine` otherwise).
     young, poisson : float, optional
         Young's modulus (Pa) and Poisson's ratio: ``k = 4/3 E* sqrt(R)`` of Hertz's theory,
         ``1/E* = (1 - nu_a^2)/E_a + (1 - nu_b^2)/E_b``, ``R`` the pair's effective radius.
         One of ``stiffness`` and ``young`` is required (``young=1e9`` when neither).
     restitution : float
-        Coefficient of restitution ``e`` in [0, 1]: the rebound speed is ``e`` times the impact
+        Coefficient of restitution ``e`` in [0.01, 1]: the rebound speed is ``e`` times the impact
         speed, exactly, for any stiffness, mass and impact speed above ``min_impact_speed``.
     friction : float
         Coulomb coefficient ``mu`` >= 0 (stick below ``mu F_n``, slide at it).
@@ -95,6 +99,11 @@ class ContactMaterial:
             st(self, "young", 1e9)
         st(self, "poisson", _number(item, "poisson", self.poisson, upper=0.5))
         st(self, "restitution", _number(item, "restitution", self.restitution, upper=1.0))
+        if self.restitution < E_MIN:
+            raise ModelError(item, "restitution", f"a coefficient in [{E_MIN:g}, 1]",
+                             self.restitution, "the damping constant c(e) grows as 1/e: "
+                             "a perfectly plastic impact needs the rigid contact of a later "
+                             "stage")
         st(self, "friction", _number(item, "friction", self.friction))
         st(self, "stiction_length", _number(item, "stiction_length", self.stiction_length,
                                             positive=True))
@@ -173,14 +182,15 @@ def restitution_constant(e: float) -> float:
 def combine(a: ContactMaterial, b: ContactMaterial) -> ContactMaterial:
     """The material of a pair of shapes (``a`` and ``b`` may be the same): Hertz's
     ``E* = 1/((1 - nu_a^2)/E_a + (1 - nu_b^2)/E_b)`` of both moduli (as ``young`` with
-    ``poisson`` 0) (or two stiffnesses in series, ``k^-2/3 = k_a^-2/3 + k_b^-2/3``, a stiffness and a
-    modulus: the stiffness's), the smaller restitution, the geometric mean of the friction
+    ``poisson`` 0); two stiffnesses as the pair's own when equal, as two Hertz springs in series
+    sharing the penetration otherwise, ``k = ((k_a^-2/3 + k_b^-2/3) / 2)^-3/2``; a stiffness
+    and a modulus: the stiffness; the smaller restitution, the geometric mean of the friction
     coefficients, the larger stiction length and impact-speed floor."""
     ys = [m.young / (1 - m.poisson ** 2) for m in (a, b) if m.stiffness is None]
     ks = [m.stiffness for m in (a, b) if m.stiffness is not None]
     kw = {}
     if len(ks) == 2:
-        kw["stiffness"] = (ks[0] ** (-2 / 3) + ks[1] ** (-2 / 3)) ** -1.5
+        kw["stiffness"] = ((ks[0] ** (-2 / 3) + ks[1] ** (-2 / 3)) / 2) ** -1.5
     elif ks:
         kw["stiffness"] = ks[0]
     else:  # E* as one modulus with poisson 0
