@@ -95,9 +95,10 @@ def contact_ratio(s, st0, st1, h: float) -> float:
     (<= 1: accepted; the step is to shrink by about this factor otherwise).
 
     Per contact pair (``s.contacts``, states in ``State.ctrl``: se3dyn.elements.contact) the
-    rate ``sqrt(k_lin / m) + c k delta^{3/2} / (v_in m)`` of the law at the larger of the
+    rate ``sqrt(k_lin / m) (1 + c min(1, |delta'| / v_in))`` of the law at the larger of the
     step's two penetrations (``k_lin = 3/2 k sqrt(delta)``, the tangent of Hertz's force,
-    and the damping's rate; ``m`` the pair's reduced mass of its nodes) times ``h``, over
+    raised by the damping's share of the force as it is during an impact; ``m`` the pair's
+    reduced mass of its nodes) times ``h``, over
     :data:`CONTACT_ETA`: the step resolves the contact's own motion. A step that jumps from
     apart to deep penetration is refused the same way, which localises the touch-down. The
     rate counts in full while the penetration changes at the material's ``min_impact_speed``
@@ -112,9 +113,9 @@ def contact_ratio(s, st0, st1, h: float) -> float:
     c1 = np.asarray(st1.ctrl[off:], float).reshape(-1, 9)
     d = np.maximum(np.maximum(c0[:, 6], c1[:, 6]), 0.0)
     vin = np.maximum(np.maximum(c1[:, 8], c0[:, 8]), tab["vmin"])
-    rate = np.sqrt(1.5 * tab["k"] * np.sqrt(d) / tab["m"]) + \
-        tab["c"] * tab["k"] * d ** 1.5 / (vin * tab["m"])
     speed = np.maximum(np.abs(c0[:, 7]), np.abs(c1[:, 7]))
+    damp = tab["c"] * np.minimum(speed / vin, 1.0)
+    rate = np.sqrt(1.5 * tab["k"] * np.sqrt(d) / tab["m"]) * (1.0 + damp)
     return float(np.max(h * rate * np.minimum(1.0, speed / tab["vmin"]), initial=0.0)) / \
         CONTACT_ETA
 

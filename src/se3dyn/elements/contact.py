@@ -46,7 +46,8 @@ def tables(s, lay) -> dict:
 
 def examples(rng):
     """A sphere pressed into a tilted plane on a moving body (sticking, large friction) and
-    two spheres overlapping (sliding, small friction), with spin and offset centres."""
+    into a fixed floor, and two spheres overlapping (sliding, small friction), with spin and
+    offset centres."""
     from se3dyn.model.builder import ModelBuilder
     from se3dyn.model.contact import ContactMaterial
 
@@ -69,4 +70,7 @@ def examples(rng):
                  exclude=("plane",))
     mb.collision("s3", "a", "sphere", size=1.0, at=(0.4, 0.2, 0.3), material=slide,
                  exclude=("plane",))
+    # a floor on the fixed node (the kernel's path with one moving frame)
+    mb.collision("floor", "g", "plane", at=(0.0, 0.0, 0.0), material=slide,
+                 exclude=("s2", "s3"))
     return [mb.build()]

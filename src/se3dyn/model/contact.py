@@ -85,7 +85,7 @@ class ContactMaterial:
     poisson: float = 0.3
     restitution: float = 0.5
     friction: float = 0.5
-    stiction_length: float = 1e-6
+    stiction_length: float = 1e-5
     stiction_damping: float | None = None
     min_impact_speed: float = 1e-3
 
