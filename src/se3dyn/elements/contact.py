@@ -74,3 +74,75 @@ def examples(rng):
     mb.collision("floor", "g", "plane", at=(0.0, 0.0, 0.0), material=slide,
                  exclude=("s2", "s3"))
     return [mb.build()]
+
+
+def model_file(mf):
+    """The ``collisions:`` section of model files (:class:`se3dyn.io.modelfile.ElementSection`);
+    ``mf`` is :mod:`se3dyn.io.modelfile` (its field types)."""
+    from se3dyn.model.contact import SHAPES, ContactMaterial
+
+    F = mf.Field
+    v3 = mf.Vec(3)
+    fields = (
+        F("node", mf.Str(ref="node"), None, "The node the shape moves with (required).", True),
+        F("shape", mf.Str(choices=SHAPES), None, "`sphere`, or `plane` (the half-space below "
+          "it) (required).", True),
+        F("size", mf.Num(exclusive_minimum=0), None, "Radius of a sphere (m)."),
+        F("at", v3, "position of node", "Centre of a sphere, a point of a plane (inertial "
+          "frame, initial configuration)."),
+        F("normal", v3, [0, 0, 1], "Outward normal of a plane (inertial frame, initial "
+          "configuration)."),
+        F("material", mf.Section("contact_material"), "ContactMaterial()", "The contact law "
+          "of the shape (docs/contact.md)."),
+        F("exclude", mf.StrList(), [], "Shapes or nodes this shape never touches."),
+    )
+    material = (
+        F("stiffness", mf.Num(exclusive_minimum=0), None, "Hertz constant k of k delta^3/2 "
+          "(N/m^1.5)."),
+        F("young", mf.Num(exclusive_minimum=0), 1e9, "Young's modulus (Pa), when no "
+          "`stiffness`."),
+        F("poisson", mf.Num(minimum=0), 0.3, "Poisson's ratio."),
+        F("restitution", mf.Num(minimum=0), 0.5, "Coefficient of restitution in [0.01, 1] "
+          "(exact for any stiffness and impact speed)."),
+        F("friction", mf.Num(minimum=0), 0.5, "Coulomb coefficient."),
+        F("stiction_length", mf.Num(exclusive_minimum=0), 1e-5, "Elastic slip of the "
+          "bristle at the onset of sliding (m)."),
+        F("stiction_damping", mf.Num(minimum=0), "2 sqrt(stiction_length / (friction g0))",
+          "Damping time of the bristle (s)."),
+        F("min_impact_speed", mf.Num(exclusive_minimum=0), 1e-3, "Floor of the impact "
+          "speed of the damping law (m/s)."),
+    )
+
+    def add(mb, name, kw):
+        if "material" in kw:
+            kw["material"] = dict(kw["material"].values)
+        mb.collision(name, kw.pop("node"), kw.pop("shape"), **kw)
+
+    def save(model) -> dict:
+        out = {}
+        ref = ContactMaterial()
+        for c in model.collisions:
+            e = {"node": c.node, "shape": c.shape}
+            if c.shape == "sphere":
+                e["size"] = float(c.size)
+            e["at"] = mf.plain(c.at)
+            if c.shape == "plane":
+                e["normal"] = mf.plain(c.normal)
+            mat = {k: v for k, v in c.material.as_dict().items()
+                   if v is not None and v != getattr(ref, k)}
+            if c.material.stiffness is not None:
+                mat.pop("young", None)
+            if mat:
+                e["material"] = mat
+            if c.exclude:
+                e["exclude"] = list(c.exclude)
+            out[c.name] = e
+        return out
+
+    return mf.ElementSection(
+        key="collisions", kind="collision", doc="Collision shapes on nodes, by name "
+        "(compliant contact, docs/contact.md): every sphere touches every plane and sphere "
+        "of another node unless excluded.",
+        entry_doc="An entry of `collisions:` (key: the shape name).", fields=fields, add=add,
+        save=save, subsections=(("contact_material", "The `material:` mapping of a shape "
+                                 "(se3dyn.ContactMaterial).", material),))
