@@ -246,3 +246,43 @@ def test_bad_input_is_a_one_line_error_naming_the_shape(call, words):
     assert "\n" not in msg
     for w in words:
         assert w in msg, msg
+
+
+BALL_FILE = """\
+se3dyn: 1
+name: drop
+gravity: [0, 0, -9.81]
+nodes:
+  ground: {fixed: true}
+  ball: {position: [0, 0, 1.1], mass: 1, inertia: [0.004, 0.004, 0.004]}
+collisions:
+  floor: {node: ground, shape: plane, material: {stiffness: 1.0e+10, restitution: 0.5}}
+  ball: {node: ball, shape: sphere, size: 0.1,
+         material: {stiffness: 1.0e+10, restitution: 0.5}}
+"""
+
+
+def test_model_file_collisions_and_check(tmp_path):
+    """The collisions: section gives the model of the Python API (the same bits), saves back
+    to itself, and `se3dyn check` lists the shapes and the pair with its law."""
+    import subprocess
+    import sys
+
+    from se3dyn.io.modelfile import loads_model, save_model
+
+    m, _ = loads_model(BALL_FILE)
+    a = sd.simulate(m, 0.5, 1e-3)
+    b = sd.simulate(ball(e=0.5, k=1e10, mu=0.5), 0.5, 1e-3)
+    assert np.array_equal(a.H, b.H)
+    text = save_model(m)
+    assert save_model(loads_model(text)[0]) == text
+    p = tmp_path / "drop.yaml"
+    p.write_text(BALL_FILE)
+    out = subprocess.run([sys.executable, "-m", "se3dyn.cli", "check", str(p)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "collision shapes: 2 (floor: plane on ground, ball: sphere r=0.1 on ball)" in out.stdout
+    assert "contact pairs: 1 (floor/ball: k=1e+10 N/m^1.5, e=0.5, mu=0.5)" in out.stdout
+    bad = BALL_FILE.replace("size: 0.1", "size: -0.1")
+    with pytest.raises(ModelError, match="ball.*size"):
+        loads_model(bad)

@@ -220,6 +220,7 @@ class Pair:
     slen: float
     tau: float
     vmin: float
+    e: float = 1.0
 
     @property
     def name(self) -> str:
@@ -239,7 +240,7 @@ def pair_of(a: CollisionSpec, b: CollisionSpec, m: ContactMaterial) -> Pair:
     if tau is None:
         tau = 2.0 * math.sqrt(m.stiction_length / (max(m.friction, 1e-12) * G0))
     return Pair(a, b, _hertz(m, a, b), restitution_constant(m.restitution), m.friction,
-                m.stiction_length, tau, m.min_impact_speed)
+                m.stiction_length, tau, m.min_impact_speed, m.restitution)
 
 
 def contact_pairs(model) -> list[Pair]:
@@ -267,4 +268,18 @@ def contact_pairs(model) -> list[Pair]:
             else:
                 mat = combine(a.material, b.material)
             out.append(pair_of(a, b, mat))
+    return out
+
+
+def describe(model, pairs, show: int = 12) -> list[str]:
+    """Lines for ``se3dyn check``: the shapes and the contact pairs with their laws."""
+    shapes = model.collisions
+    out = [f"collision shapes: {len(shapes)} (" + ", ".join(
+        f"{c.name}: {c.shape}" + (f" r={c.size:g}" if c.shape == "sphere" else "")
+        + f" on {c.node}" for c in shapes[:show]) + (", ..." if len(shapes) > show else "")
+        + ")"]
+    out.append(f"contact pairs: {len(pairs)}" + (" (" + ", ".join(
+        f"{p.name}: k={p.k:.3g} N/m^1.5, e={p.e:.3g}, mu={p.mu:g}" for p in pairs[:show])
+        + (", ..." if len(pairs) > show else "") + ")" if pairs else
+        " (no sphere meets a plane or a sphere of another node: nothing can touch)"))
     return out
