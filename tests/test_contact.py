@@ -286,3 +286,31 @@ def test_model_file_collisions_and_check(tmp_path):
     bad = BALL_FILE.replace("size: 0.1", "size: -0.1")
     with pytest.raises(ModelError, match="ball.*size"):
         loads_model(bad)
+
+
+def test_contact_outputs_of_a_ball_at_rest_and_an_impact():
+    """A ball set on the floor settles where Hertz's force carries its weight: normal force
+    m g, penetration (m g / k)^(2/3), the point in the middle of the overlap, the normal +z.
+    Over an impact the force's impulse is the change of momentum m (v_out + v_in)."""
+    k = 1e8
+    res = sd.simulate(ball(e=0.5, k=k, h0=0.0), 0.5, 1e-3)
+    name = "floor/ball"
+    assert res.contact_pairs() == [name]
+    d0 = (G / k) ** (2 / 3)
+    assert abs(res.contact_normal_force(name)[-1] / G - 1) < 1e-6
+    assert abs(res.contact_penetration(name)[-1] / d0 - 1) < 1e-6
+    np.testing.assert_allclose(res.contact_force(name)[-1], (0, 0, G), atol=1e-6 * G)
+    np.testing.assert_allclose(res.contact_normal(name)[-1], (0, 0, 1), atol=1e-12)
+    np.testing.assert_allclose(res.contact_point(name)[-1], (0, 0, -d0 / 2), atol=1e-9)
+    from se3dyn.results.channels import get_channel, list_channels
+
+    ch = "contact/floor%2Fball/force/z"
+    assert ch in list_channels(res)
+    assert np.array_equal(get_channel(res, ch), res.contact_force(name)[:, 2])
+    # an impact at 1 m/s without gravity: the impulse of the stored forces (trapezoidal rule
+    # on the rows, h = 1e-5 << contact time 1.2 ms) is m (v_out + v_in)
+    res = sd.simulate(ball(e=0.5, k=k, h0=0.001, v0=-1.0, g=0.0), 0.005, 1e-5)
+    F = res.contact_force(name)[:, 2]
+    impulse = float(np.sum(0.5 * (F[1:] + F[:-1]) * np.diff(res.t)))
+    vout = res.node_velocity("ball", "inertial")[-1, 2]
+    assert abs(impulse / (vout + 1.0) - 1) < 1e-4, (impulse, vout + 1.0)

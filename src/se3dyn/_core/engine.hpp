@@ -91,10 +91,10 @@ struct Engine {
   std::vector<double> ctrl_ts;  // (npid,) sample time of a sampled law, 0 for a continuous one
   std::vector<int> ctrl_dof;    // (npid,) the controlled unknown
   int npid() const { return int(ctrl_slot.size()); }
-  // contacts (elements/contact.hpp): per contact the first input slot of its state (9 numbers
-  // and h/2), the states in ctrl after the PID states' (Stepper::controller_inputs)
+  // contacts (elements/contact.hpp): per contact the first input slot of its state (CSTATE
+  // numbers and h/2), the states in ctrl after the PID states' (Stepper::controller_inputs)
   std::vector<int> cs_slot;
-  static constexpr int CSTATE = 9;
+  static constexpr int CSTATE = 19;  // (elements/contact.hpp: 9 state numbers, 10 outputs)
   int ncs() const { return int(cs_slot.size()); }
   // the states a step carries (State.ctrl): 2 per PID law, CSTATE per contact
   long nctrl() const { return 2L * npid() + long(CSTATE) * ncs(); }

@@ -75,6 +75,7 @@ import dataclasses
 
 import numpy as np
 
+from se3dyn.engine.inputs import CONTACT_STATE
 from se3dyn.errors import NewtonError
 
 #: Safety factor on the proposed step, its bounds per step and the dead band of growth.
@@ -109,8 +110,8 @@ def contact_ratio(s, st0, st1, h: float) -> float:
         return 0.0
     tab = _contact_table(s)
     off = 2 * len(s.inputs.pid_slots)
-    c0 = np.asarray(st0.ctrl[off:], float).reshape(-1, 9)
-    c1 = np.asarray(st1.ctrl[off:], float).reshape(-1, 9)
+    c0 = np.asarray(st0.ctrl[off:], float).reshape(-1, CONTACT_STATE)
+    c1 = np.asarray(st1.ctrl[off:], float).reshape(-1, CONTACT_STATE)
     d = np.maximum(np.maximum(c0[:, 6], c1[:, 6]), 0.0)
     vin = np.maximum(np.maximum(c1[:, 8], c0[:, 8]), tab["vmin"])
     speed = np.maximum(np.abs(c0[:, 7]), np.abs(c1[:, 7]))
@@ -129,8 +130,8 @@ def contact_restart(s, st0, st1):
     if not s.contacts:
         return st1
     off = 2 * len(s.inputs.pid_slots)
-    on0 = np.asarray(st0.ctrl[off:], float).reshape(-1, 9)[:, 8] > 0
-    on1 = np.asarray(st1.ctrl[off:], float).reshape(-1, 9)[:, 8] > 0
+    on0 = np.asarray(st0.ctrl[off:], float).reshape(-1, CONTACT_STATE)[:, 8] > 0
+    on1 = np.asarray(st1.ctrl[off:], float).reshape(-1, CONTACT_STATE)[:, 8] > 0
     if np.array_equal(on0, on1):
         return st1
     return dataclasses.replace(st1, a=np.array(st1.vd, float))

@@ -21,9 +21,10 @@ sp = LazyModule("scipy.sparse")
 spla = LazyModule("scipy.sparse.linalg")
 
 
-#: state numbers of a contact pair in State.ctrl (elements/contact.hpp: bristle (3), slip
-#: velocity (3), penetration, its rate, the impact speed)
-CONTACT_STATE = 9
+#: numbers of a contact pair in State.ctrl (elements/contact.hpp): its state, bristle (3), slip
+#: velocity (3), penetration, its rate, the impact speed; then its outputs, the normal force,
+#: the force on shape b (3), the contact point (3) and the normal (3), inertial frame
+CONTACT_STATE = 19
 
 
 class _Inputs:
@@ -122,7 +123,7 @@ class _Inputs:
             self.time_slot = len(kind)
             self.sources.append((len(kind), 1, _Time(), "the model", "time", 0))
             kind.append(9)
-        #: per contact pair (System.contacts): the first of its state slots (9 numbers and h/2,
+        #: per contact pair (System.contacts): the first of its state slots (19 numbers and h/2,
         #: elements/contact.hpp), which the time loop fills (zero in the tables), kind 10
         self.contact_slots: list[int] = []
         for _ in d.get("contacts", ()):

@@ -598,7 +598,7 @@ _SERIES = ("nodes/position", "nodes/rotation", "nodes/velocity", "nodes/accelera
 _STATE_DOC = ("t, h_last, work_act, work_ext, dissipated, power (3), number of dropped "
               "equations nr, dropped (nm, first nr used), H (M x 16), HJ (m x 16), v, vd, a "
               "(nq each), lam (nm), alpha (nq), the states of State.ctrl (the PID states (z, e), 2 per "
-              "PID-controlled coordinate, then 9 per contact pair), nv (the values of the linear solver's memory "
+              "PID-controlled coordinate, then 19 per contact pair), nv (the values of the linear solver's memory "
               "in /restart/solver, -1: none)")
 _MEMORY_DOC = ("State.solver.ref of the checkpoint in the slot of the same index of "
                "/restart/state (its first nv values): the iteration matrix of the last full "
@@ -607,7 +607,7 @@ _MEMORY_DOC = ("State.solver.ref of the checkpoint in the slot of the same index
 
 
 def _nctrl(s) -> int:
-    """The states a step carries (State.ctrl): 2 per PID-controlled coordinate, 9 per
+    """The states a step carries (State.ctrl): 2 per PID-controlled coordinate, 19 per
     contact pair."""
     ins = getattr(s, "inputs", None)
     return int(getattr(ins, "nctrl", 2 * len(getattr(ins, "pid_slots", ()))))

@@ -21,7 +21,8 @@
 //
 // State of a contact, 9 numbers (State.ctrl after the PID states, written into its input
 // slots with h/2 by Stepper::controller_inputs): s (3), w_t (3) in frame a, delta, delta',
-// v_in (0: apart). The kernel writes those of the iterate to Context::ctrl.
+// v_in (0: apart); then 10 outputs (the normal force, the force on b, the contact point and
+// the normal, inertial frame). The kernel writes those of the iterate to Context::ctrl.
 //
 // Residual: the force F = F_n n + F_t on b at p_c and -F on a, as tangent-space forces
 // g = -+[R^T F; rho x R^T F], rho = R^T (p_c - x). Its exact linearisation in configuration
@@ -38,7 +39,9 @@
 namespace se3dyn {
 namespace contact_detail {
 
-constexpr int CS = 9;  // state numbers per contact
+// numbers per contact in Context::ctrl: the state (9) and the outputs of the iterate (10,
+// Results.contact_*): normal force, force on b (3, inertial), contact point (3), normal (3)
+constexpr int CS = 19;
 
 // forward-mode number with N derivatives
 template <int N>
@@ -313,7 +316,12 @@ struct Contacts : ElementBatch {
     mat_tvec(A.R, n, nA);
     const double* st = X.u + slot[e];
     const double hh = st[CS];
-    double out[CS] = {0, 0, 0, val(wt[0]), val(wt[1]), val(wt[2]), val(delta), val(rate), 0.0};
+    double out[CS] = {0, 0, 0, val(wt[0]), val(wt[1]), val(wt[2]), val(delta), val(rate), 0.0,
+                      0.0, 0.0, 0.0, 0.0};
+    for (int i = 0; i < 3; ++i) {
+      out[13 + i] = val(pc[i]);
+      out[16 + i] = val(n[i]);
+    }
     if (val(delta) > 0) {
       S vin, Ft[3] = {S(0.0), S(0.0), S(0.0)}, F[3], FtW[3], g[2][6];
       S Fn = normal_force(e, delta, rate, st, vin);
@@ -321,6 +329,8 @@ struct Contacts : ElementBatch {
       if (mu[e] > 0 && val(Fn) > 0) friction(e, Fn, nA, wt, st, hh, st[8] <= 0, Ft, out);
       mat_vec(A.R, Ft, FtW);
       for (int i = 0; i < 3; ++i) F[i] = Fn * n[i] + FtW[i];
+      out[9] = val(Fn);
+      for (int i = 0; i < 3; ++i) out[10 + i] = val(F[i]);
       A.wrench(F, pc, 1.0, g[0]);
       B.wrench(F, pc, -1.0, g[1]);
       for (int s = 0; s < 2; ++s) {
