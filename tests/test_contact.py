@@ -112,10 +112,10 @@ def test_bouncing_ball_apex_heights():
         vin *= 0.5
 
 
-@pytest.mark.parametrize("h", [1e-2, 5e-3, 2e-3, 1e-3])
+@pytest.mark.parametrize("h", [1e-2, 5e-3, 2e-3, 1e-3, 1e-4])
 def test_no_energy_gain_at_any_fixed_step(h):
     """The energy of the bouncing ball never exceeds its initial energy, for stiffnesses from
-    1e6 to 1e10 N/m^1.5 and any fixed step up to 10 ms (without the contact-aware steps: up to
+    1e6 to 1e10 N/m^1.5 and fixed steps from 0.1 to 10 ms (without the contact-aware steps: up to
     900 times the energy at h = 10 ms)."""
     for k in (1e6, 1e8, 1e10):
         res = sd.simulate(ball(e=0.5, k=k), 1.5, h)
