@@ -34,8 +34,8 @@ class _Inputs:
     joint its k actuator values, per controlled joint its k PD targets and k target rates, per
     driven coordinate its prescribed position (position drivers), rate and acceleration.
     ``kind`` (nu,) tells each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD
-    target rate, 5 driven position, 6 driven rate, 7 driven acceleration, 8 PID state, 9 time, 10 contact state), for
-    load stepping in statics. ``names`` lists, per input a user may set
+    target rate, 5 driven position, 6 driven rate, 7 driven acceleration, 8 PID state, 9 time,
+    10 contact state), for load stepping in statics. ``names`` lists, per input a user may set
     (:class:`se3dyn.dynamics.simulator.Simulator`), ``(kind, item, field, slot, k)``: kind
     ``"gravity"``, ``"load"`` or ``"joint"``, the item's name, the field (``"force"``,
     ``"torque"``, ``"actuator"``, ``"target"``, ``"target_rate"``; None for gravity).

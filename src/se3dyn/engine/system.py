@@ -28,10 +28,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from se3dyn import lie
-from se3dyn.model.contact import contact_pairs
 from se3dyn._lazy import LazyModule
 from se3dyn.engine.inputs import _Inputs
 from se3dyn.errors import ModelError
+from se3dyn.model.contact import contact_pairs
 from se3dyn.model.specs import Model
 
 sla = LazyModule("scipy.linalg")

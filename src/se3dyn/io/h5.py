@@ -597,9 +597,9 @@ _SERIES = ("nodes/position", "nodes/rotation", "nodes/velocity", "nodes/accelera
 
 _STATE_DOC = ("t, h_last, work_act, work_ext, dissipated, power (3), number of dropped "
               "equations nr, dropped (nm, first nr used), H (M x 16), HJ (m x 16), v, vd, a "
-              "(nq each), lam (nm), alpha (nq), the states of State.ctrl (the PID states (z, e), 2 per "
-              "PID-controlled coordinate, then 19 per contact pair), nv (the values of the linear solver's memory "
-              "in /restart/solver, -1: none)")
+              "(nq each), lam (nm), alpha (nq), the states of State.ctrl (the PID states "
+              "(z, e), 2 per PID-controlled coordinate, then 19 per contact pair), nv (the "
+              "values of the linear solver's memory in /restart/solver, -1: none)")
 _MEMORY_DOC = ("State.solver.ref of the checkpoint in the slot of the same index of "
                "/restart/state (its first nv values): the iteration matrix of the last full "
                "sparse LU factorisation, whose pivot sequence the next steps reuse; index 2: "
