@@ -314,3 +314,9 @@ def test_contact_outputs_of_a_ball_at_rest_and_an_impact():
     impulse = float(np.sum(0.5 * (F[1:] + F[:-1]) * np.diff(res.t)))
     vout = res.node_velocity("ball", "inertial")[-1, 2]
     assert abs(impulse / (vout + 1.0) - 1) < 1e-4, (impulse, vout + 1.0)
+
+
+def test_the_simulator_refuses_contacts_clearly():
+    """sd.Simulator steps in the compiled loop, which has no contact-aware substeps yet."""
+    with pytest.raises(ModelError, match="Simulator.*contact"):
+        sd.Simulator(ball(), 1e-3)
