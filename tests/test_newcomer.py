@@ -315,7 +315,7 @@ def test_readme_says_what_is_not_there_yet_and_the_units():
     text = (ROOT / "README.md").read_text()
     assert "## Not yet" in text
     section = text.split("## Not yet", 1)[1].split("\n## ", 1)[0]
-    for word in ("URDF", "contact", "limits", "Coulomb", "eigenvalues", "sensor"):
+    for word in ("URDF", "contact", "limits", "Coulomb", "Campbell", "sensor"):
         assert word in section, word
     assert "SI" in text and "lengths in m" in text
 

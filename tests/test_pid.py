@@ -347,7 +347,8 @@ def test_a_pid_coordinate_is_not_driven_or_coupled_as_a_follower():
 
 def test_a_long_controlled_chain_gives_the_same_bits_on_one_and_two_threads():
     # 120 hinges (the joint-force kernel's elements in several chunks, evaluated in parts):
-    # continuous and sampled PID laws, a law of the user's, a drive and a coupling
+    # continuous and sampled PID laws (two reading sensors), a law of the user's, a drive and
+    # a coupling
     def chain(n=120):
         mb = sd.ModelBuilder(gravity=(0, -9.81, 0))
         mb.node("g", fixed=True)
@@ -357,13 +358,16 @@ def test_a_long_controlled_chain_gives_the_same_bits_on_one_and_two_threads():
             kw = {}
             if i % 3 == 0:
                 kw["control"] = sd.PID(1.0, 0.5, 0.02, target=0.01, limit=3.0)
-            elif i % 3 == 1:
-                kw["control"] = sd.PID(1.0, 0.5, 0.02, target=0.0, sample_time=0.002)
+            elif i % 3 == 1:  # (two read sensors: the chain's end, another joint)
+                sensor = {4: "marker/end/position/y", 7: "joint/j3/alpha/0"}.get(i)
+                kw["control"] = sd.PID(1.0, 0.5, 0.02, target=0.0, sample_time=0.002,
+                                       sensor=sensor)
             elif i == 2:
                 kw["torque"] = lambda t, q, v: -2.0 * q - 0.1 * v
             mb.joint(f"j{i}", "hinge", prev, f"b{i}", axis=(0, 0, 1), at=(0.1 * i, 0, 0),
                      armature=1e-4, **kw)
             prev = f"b{i}"
+        mb.marker("end", prev, offset=(0.05, 0, 0))
         mb.drive("d", "j5", velocity=0.3)
         mb.coupling("c", leader="j7", follower="j8", ratio=-0.5)
         return mb.build()

@@ -6,8 +6,11 @@ from se3dyn._version import __version__ as __version__
 from se3dyn.analysis.assemble import Assembly as Assembly
 from se3dyn.analysis.assemble import AssemblyError as AssemblyError
 from se3dyn.analysis.assemble import assemble as assemble
+from se3dyn.analysis.jointspace import JointSpace as JointSpace
 from se3dyn.analysis.kinematics import KinematicsResult as KinematicsResult
 from se3dyn.analysis.kinematics import kinematics as kinematics
+from se3dyn.analysis.linearize import Linearization as Linearization
+from se3dyn.analysis.linearize import linearize as linearize
 from se3dyn.analysis.statics import StaticResult as StaticResult
 from se3dyn.analysis.statics import static_equilibrium as static_equilibrium
 from se3dyn.dynamics.integrator import GeneralizedAlpha as GeneralizedAlpha

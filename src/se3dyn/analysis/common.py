@@ -71,9 +71,12 @@ class _Blocks:
         self.solver = LinearSolver(s, dense_max=2000)
 
     def __call__(self, ev, coef=(0.0, 0.0, 0.0)):
-        s = self.s
-        A = self.solver.matrix(matrix_values(s, ev, coef))
-        nq = s.nq
+        return self.split(matrix_values(self.s, ev, coef))
+
+    def split(self, values: np.ndarray):
+        """``(K, Phi_q^T, B)`` dense, from the values of an evaluation with coefficients."""
+        A = self.solver.matrix(values)
+        nq = self.s.nq
         if not isinstance(A, np.ndarray):
             A = A.tocsr()
             return (A[:nq, :nq].toarray(), A[:nq, nq:].toarray(), A[nq:, :nq].toarray())

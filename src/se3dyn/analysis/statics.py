@@ -336,6 +336,13 @@ def static_equilibrium(model_or_system: Model | System, *, load_steps: int = 1,
         raise ModelError("static_equilibrium", "tol", "a positive tolerance below 1", tol)
     if not (isinstance(t, int | float) and math.isfinite(t)):
         raise ModelError("static_equilibrium", "t", "a finite time", t)
+    if len(s.sensor_dof):
+        d = int(s.sensor_dof[0])
+        raise ModelError("static_equilibrium", "model", "PID laws on their joints' own "
+                         "coordinates (held at their targets at equilibrium)",
+                         f"a sampled law on {s.labels[d]} reading a sensor",
+                         hint="the equilibrium a law on a sensor holds is not solved for; "
+                              "simulate to rest, or use a drive")
     full = dict(step_inputs(s, float(t)), kind=s.inputs.kind)
     newton = _Newton(s, tol, max_iter)
     # drives hold their coordinates: a position driver at f(t) (reached by the load steps

@@ -701,7 +701,9 @@ def cmd_types(args) -> int:
     for key, kind in (("markers", "marker"), ("drives", "drive"), ("couplings", "coupling")):
         _section_fields(key, top[key].doc, FIELDS[kind])
     print("control laws (joints: control): PD (kp, kd, target, target_rate), PID (kp, ki, kd, "
-          "target, target_rate, limit, sample_time); laws of your own in Python: "
+          "target, target_rate, limit, sample_time, gear, rotor_inertia, sensor: a sampled "
+          "law reading marker/<m>/position/x|y|z, marker/<a>/distance/<b> or "
+          "joint/<j>/alpha/<i>); laws of your own in Python: "
           "torque=lambda t, q, v: ...")
     return 0
 
@@ -832,6 +834,44 @@ def cmd_export_fmu(args) -> int:
     return 0
 
 
+def cmd_linearize(args) -> int:
+    """Linearise a model file about its static equilibrium or its initial state
+    (se3dyn.analysis.linearize): print the minimal coordinates and the modes; with
+    ``--export``, write the matrices, names and modes to a NumPy ``.npz`` file."""
+    from se3dyn.analysis.linearize import linearize
+    from se3dyn.analysis.statics import static_equilibrium
+    from se3dyn.errors import Se3dynError
+
+    model, _ = _load(args.model)
+    try:
+        at = static_equilibrium(model) if args.at == "static" else None
+        lin = linearize(model, at=at, inputs=args.inputs or (), outputs=args.outputs or ())
+        md = lin.modes(args.modes)
+    except Se3dynError as exc:
+        raise _Usage(str(exc)) from None
+    print(f"{model.name}: {len(lin.names)} minimal coordinates about the "
+          f"{'static equilibrium' if args.at == 'static' else 'initial state'}: "
+          + ", ".join(lin.names))
+    print("  mode  frequency [Hz]  omega [rad/s]  damping ratio")
+    for i in range(len(md)):
+        kind = " rigid" if md.rigid[i] else ("" if md.stable[i] else " UNSTABLE")
+        print(f"  {i + 1:4d}  {md.frequency[i]:14.6g}  {md.omega[i]:13.6g}  "
+              f"{md.damping[i]:13.4g}{kind}")
+    if args.export:
+        data = dict(M=lin.M, C=lin.C, K=lin.K, B=lin.B, C_y=lin.C_y, T=lin.T, A=lin.A,
+                    B_x=lin.B_x, names=np.array(lin.names), input_names=np.array(
+                        lin.input_names, dtype=str), output_names=np.array(
+                        lin.output_names, dtype=str), unknowns=np.array(lin.system.labels[
+                            :lin.system.nq]), omega=md.omega, damping=md.damping,
+                    rigid=md.rigid, shapes=md.shapes)
+        try:
+            np.savez(args.export, **data)
+        except OSError as exc:
+            raise _Usage(f"--export {args.export}: cannot write ({exc.strerror})") from None
+        print(f"wrote {args.export}")
+    return 0
+
+
 def _viewer(func: str, res, *args, **kwargs):
     """Call se3dyn.viewer.<func>; its input errors become one-line usage errors."""
     from se3dyn import viewer
@@ -870,6 +910,13 @@ class _Parser(argparse.ArgumentParser):
         self.print_usage(sys.stderr)
         _err(message)
         raise SystemExit(2)
+
+
+def _count(text):
+    """A positive integer argument."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return int(text)
 
 
 def _positive(kind):
@@ -1100,6 +1147,21 @@ def _export_fmu_args(ef) -> None:
     ef.set_defaults(func=cmd_export_fmu)
 
 
+def _linearize_args(li) -> None:
+    li.add_argument("model")
+    li.add_argument("--at", choices=("static", "initial"), default="static",
+                    help="about the static equilibrium (default) or the initial state of a "
+                    "run (e.g. a steady spin)")
+    li.add_argument("--input", dest="inputs", action="append", metavar="NAME",
+                    help="a joint or load name as an input (repeatable)")
+    li.add_argument("--output", dest="outputs", action="append", metavar="NAME",
+                    help="a joint, node or marker name as an output (repeatable)")
+    li.add_argument("--modes", type=_count, help="the lowest modes only")
+    li.add_argument("--export", metavar="FILE.npz", help="write the matrices, names and "
+                    "modes to a NumPy .npz file")
+    li.set_defaults(func=cmd_linearize)
+
+
 # the subcommands: help line, and the declaration of their arguments
 _COMMANDS = {
     "check": ("validate model files; counts and rank analysis", _check_args),
@@ -1114,6 +1176,8 @@ _COMMANDS = {
     "view": ("3D viewer page (HTML) of a results file", _view_args),
     "export-fmu": ("export a model as an FMI 2.0 co-simulation FMU (pythonfmu)",
                    _export_fmu_args),
+    "linearize": ("linear model and modes about the static equilibrium (.npz export)",
+                  _linearize_args),
 }
 
 

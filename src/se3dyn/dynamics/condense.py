@@ -417,10 +417,13 @@ def _reduced_model(s, nidx: dict, root: np.ndarray, roots: list, rigid: np.ndarr
     bushings = tuple(dataclasses.replace(b, node_a=name_of(nidx[b.node_a]),
                                          node_b=name_of(nidx[b.node_b]))
                      for b in model.bushings)
+    # (markers: the sensors of sampled PID laws read them in the time loop)
+    markers = tuple(dataclasses.replace(mk, node=name_of(nidx[mk.node]),
+                                        X=C[nidx[mk.node]] @ mk.X) for mk in model.markers)
     return Model(nodes=tuple(nodes), joints=tuple(joints), loads=tuple(loads),
                  gravity=model.gravity, composites=model.composites, name=model.name,
                  springs=springs, visuals=(), beams=model.beams, bushings=bushings,
-                 drives=model.drives, couplings=model.couplings)
+                 markers=markers, drives=model.drives, couplings=model.couplings)
 
 
 def _maps(s, r, roots: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -115,7 +115,7 @@ class _Recorder:
         self.scal = np.empty((capacity, 9))
         #: the contact pairs' states and outputs of the rows (State.ctrl after the PID states;
         #: no columns without contacts; runs with contacts go step by step: add())
-        self.ncs = s.inputs.nctrl - 2 * len(s.inputs.pid_slots) if s.contacts else 0
+        self.ncs = s.inputs.nctrl - s.inputs.contact_ctrl if s.contacts else 0
         self.cs = np.empty((capacity, self.ncs))
 
     def _resize(self, rows: int) -> None:

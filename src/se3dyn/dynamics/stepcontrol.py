@@ -109,7 +109,7 @@ def contact_ratio(s, st0, st1, h: float) -> float:
     if not s.contacts:
         return 0.0
     tab = _contact_table(s)
-    off = 2 * len(s.inputs.pid_slots)
+    off = s.inputs.contact_ctrl
     c0 = np.asarray(st0.ctrl[off:], float).reshape(-1, CONTACT_STATE)
     c1 = np.asarray(st1.ctrl[off:], float).reshape(-1, CONTACT_STATE)
     d = np.maximum(np.maximum(c0[:, 6], c1[:, 6]), 0.0)
@@ -129,7 +129,7 @@ def contact_restart(s, st0, st1):
     (h / h_last)(a - vd)``): a ball leaving the floor gained 20 % of its energy at h = 5 ms."""
     if not s.contacts:
         return st1
-    off = 2 * len(s.inputs.pid_slots)
+    off = s.inputs.contact_ctrl
     on0 = np.asarray(st0.ctrl[off:], float).reshape(-1, CONTACT_STATE)[:, 8] > 0
     on1 = np.asarray(st1.ctrl[off:], float).reshape(-1, CONTACT_STATE)[:, 8] > 0
     if np.array_equal(on0, on1):

@@ -36,7 +36,7 @@ def tables(s, lay) -> dict:
              k=col(lambda p: p.k), c=col(lambda p: p.c), mu=col(lambda p: p.mu),
              slen=col(lambda p: p.slen), tau=col(lambda p: p.tau), vmin=col(lambda p: p.vmin),
              slot=np.array(s.inputs.contact_slots, np.int64),
-             ctrl0=np.array([2 * len(s.inputs.pid_slots)], np.int64))
+             ctrl0=np.array([s.inputs.contact_ctrl], np.int64))
     ga, gb = lay.frame_groups(fa), lay.frame_groups(fb)
     for key, (p, q) in (("aa", (ga, ga)), ("ab", (ga, gb)), ("ba", (gb, ga)), ("bb", (gb, gb))):
         t["off_" + key] = lay.blocks(p, q).astype(np.int64)

@@ -141,6 +141,9 @@ def model_file(mf):
         F("sample_time", mf.Num(exclusive_minimum=0), None, "A sampled PID law: evaluated "
           "at the times k sample_time only and held between them (zero-order hold), the "
           "integral summed; the step must divide it. Absent: the continuous law."),
+        F("sensor", mf.Strs(), None, "A sampled PID law reading a sensor instead of the "
+          "joint's coordinates (one channel name per coordinate): marker/<m>/position/x|y|z, "
+          "marker/<a>/distance/<b> or joint/<j>/alpha/<i>; e = sensor - target."),
         F("target", mf.TimeFunc(), 0, "Target relative coordinates alpha_ref(t)."),
         F("target_rate", mf.TimeFunc(), "d target/dt", "Target rates (the derivative of "
           "`target` when absent)."),
@@ -152,7 +155,7 @@ def model_file(mf):
         if "control" in kw:
             law = dict(kw["control"].values)
             pid = any(f in law for f in ("ki", "limit", "sample_time", "gear",
-                                         "rotor_inertia"))
+                                         "rotor_inertia", "sensor"))
             kw["control"] = PID(**law) if pid else PD(**law)
         mb.joint(name, kw.pop("type"), kw.pop("a"), kw.pop("b"), **kw)
 
@@ -248,7 +251,9 @@ def _universal_out(mf, name: str, parts: tuple[str, ...], model) -> dict:
             d["control"].update(_pid_out(PID(np.r_[c1.kp, c2.kp], np.r_[c1.ki, c2.ki],
                                              np.r_[c1.kd, c2.kd], 0.0, None,
                                              np.r_[c1.limit, c2.limit], c1.sample_time,
-                                             c1.gear, c1.rotor_inertia), item))
+                                             c1.gear, c1.rotor_inertia,
+                                             None if c1.sensor is None
+                                             else [*c1.sensor, *c2.sensor]), item))
         if c1.target_rate is not None:
             d["control"]["target_rate"] = source(c1.target_rate, "control.target_rate")
     return d
@@ -261,6 +266,8 @@ def _pid_out(c, item: str) -> dict:
     out = {"ki": [float(x) for x in c.ki]}
     if c.sample_time is not None:
         out["sample_time"] = float(c.sample_time)
+    if c.sensor is not None:
+        out["sensor"] = list(c.sensor)
     if c.gear != 1.0:
         out["gear"] = float(c.gear)
     if c.rotor_inertia:

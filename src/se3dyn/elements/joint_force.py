@@ -69,7 +69,24 @@ def tables(s, lay) -> dict:
                 tau=np.array([slots["tau"].get(j, -1) for j in ids.tolist()], np.int64),
                 pref=np.array([slots["ref"].get(j, -1) for j in ids.tolist()], np.int64),
                 prate=np.array([slots["rate"].get(j, -1) for j in ids.tolist()], np.int64),
-                nonab=nonab, Apinv=Apinv, A=A, off=lay.blocks(fg, fg).astype(np.int64))
+                nonab=nonab, Apinv=Apinv, A=A, off=lay.blocks(fg, fg).astype(np.int64),
+                **_sensors(s, row, col, jd_dof[sel], n))
+
+
+def _sensors(s, row: np.ndarray, col: np.ndarray, dofs: np.ndarray, n: int) -> dict:
+    """The sensors of sampled PID laws (System.sensor_*) by element and coordinate: kind
+    ``skind`` (n, 6), markers' node frames ``snode`` (n, 6, 2), their points ``spoint``
+    (n, 6, 2, 3), the axis or the joint unknown ``sidx`` (n, 6)."""
+    at = {int(d): i for i, d in enumerate(np.asarray(s.sensor_dof).tolist())}
+    skind, sidx = np.zeros((n, 6), np.int64), np.zeros((n, 6), np.int64)
+    snode, spoint = np.zeros((n, 6, 2), np.int64), np.zeros((n, 6, 2, 3))
+    for r, c, d in zip(row.tolist(), col.tolist(), dofs.tolist(), strict=True):
+        i = at.get(int(d))
+        if i is None:
+            continue
+        skind[r, c], sidx[r, c] = s.sensor_kind[i], s.sensor_index[i]
+        snode[r, c], spoint[r, c] = s.sensor_node[i], s.sensor_point[i]
+    return dict(skind=skind, sidx=sidx, snode=snode, spoint=spoint)
 
 def _unit(rng):
     v = rng.normal(size=3)

@@ -131,7 +131,8 @@ class _Inputs:
             kind += [10] * (CONTACT_STATE + 1)
         #: the states a step carries (State.ctrl): 2 per PID-controlled coordinate, then
         #: CONTACT_STATE per contact
-        self.nctrl = 2 * len(self.pid_slots) + CONTACT_STATE * len(self.contact_slots)
+        self.contact_ctrl = 2 * len(self.pid_slots)  # (where the contacts' states begin)
+        self.nctrl = self.contact_ctrl + CONTACT_STATE * len(self.contact_slots)
         self.kind = np.array(kind, np.int64)
         self.nu = len(kind)
         self.gravity = np.asarray(model.gravity, float)

@@ -32,6 +32,7 @@ from se3dyn._lazy import LazyModule
 from se3dyn.engine.inputs import _Inputs
 from se3dyn.errors import ModelError
 from se3dyn.model.contact import contact_pairs
+from se3dyn.model.sensors import parse_sensor
 from se3dyn.model.specs import Model
 
 sla = LazyModule("scipy.linalg")
@@ -164,6 +165,12 @@ class System(LayoutCounts):
     cpl_follow: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     cpl_ratio: np.ndarray = field(default_factory=lambda: np.zeros(0))
     cpl_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: sensors read by sampled PID laws (_sensor_tables), one entry per controlled coordinate
+    sensor_dof: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    sensor_kind: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    sensor_node: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    sensor_point: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
+    sensor_index: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def N(self) -> int:
@@ -250,8 +257,41 @@ def compile_model(model: Model) -> System:
         contacts=tuple(contact_pairs(model)))
     _lump_beam_masses(sysd, model, nidx)
     sysd.update(_drive_tables(model, joint["joint_dofadr"]))
+    sysd.update(_sensor_tables(model, nidx, joint["joint_dofadr"]))
     sysd["inputs"] = _Inputs(sysd, model)
     return System(**sysd)
+
+
+#: sensor kinds of the compiled kernel (joint_force.hpp): a marker's position component, the
+#: distance of two markers, a joint coordinate
+SENSOR_KINDS = {"position": 1, "distance": 2, "coordinate": 3}
+
+
+def _sensor_tables(model: Model, nidx: dict, joint_dofadr: np.ndarray) -> dict:
+    """The sensors read by sampled PID laws (``PID(sensor=...)``), one entry per controlled
+    coordinate that reads one: ``sensor_dof`` (the coordinate's unknown), ``sensor_kind``
+    (:data:`SENSOR_KINDS`), ``sensor_node`` (ns, 2) the markers' nodes, ``sensor_point``
+    (ns, 2, 3) their origins in the nodes' material frames, ``sensor_index`` the axis of a
+    position or the unknown of a joint coordinate."""
+    jidx = {j.name: i for i, j in enumerate(model.joints)}
+    out = dict(dof=[], kind=[], node=[], point=[], index=[])
+    for jj, j in enumerate(model.joints):
+        for c, name in enumerate(getattr(j.control, "sensor", None) or ()):
+            ref = parse_sensor(name, f"joint {j.name!r}", "control.sensor")
+            mks = [model.marker(m) for m in ref.names] if ref.kind != "coordinate" else []
+            mks += [None] * (2 - len(mks))
+            out["dof"].append(int(joint_dofadr[jj]) + c)
+            out["kind"].append(SENSOR_KINDS[ref.kind])
+            out["node"].append([-1 if m is None else nidx[m.node] for m in mks])
+            out["point"].append([np.zeros(3) if m is None else m.X[:3, 3] for m in mks])
+            out["index"].append(int(joint_dofadr[jidx[ref.names[0]]]) + ref.index
+                                if ref.kind == "coordinate" else ref.index)
+    n = len(out["dof"])
+    return dict(sensor_dof=np.array(out["dof"], np.int64),
+                sensor_kind=np.array(out["kind"], np.int64),
+                sensor_node=np.array(out["node"], np.int64).reshape(n, 2),
+                sensor_point=np.array(out["point"], float).reshape(n, 2, 3),
+                sensor_index=np.array(out["index"], np.int64))
 
 
 def _drive_tables(model: Model, joint_dofadr: np.ndarray) -> dict:

@@ -14,6 +14,7 @@ import numpy as np
 from se3dyn.errors import ModelError, close_matches
 from se3dyn.model.contact import SHAPES, CollisionSpec, ContactMaterial, ContactPairSpec
 from se3dyn.model.joint_types import JOINT_SYNONYMS, JOINT_TYPES, is_abelian, unit_vector
+from se3dyn.model.sensors import check_sensor, parse_sensor
 from se3dyn.model.specs import (
     INERTIA_RANGE,
     MAX_ABS,
@@ -37,6 +38,7 @@ from se3dyn.model.specs import (
     _sym6,
     _unknown,
     _vec,
+    sensor_names,
     state_law,
 )
 from se3dyn.model.timefunc import Component, as_timefunc
@@ -442,10 +444,14 @@ class ModelBuilder:
                 if isinstance(control, PID):
                     lim = None if control.limit is None else part(control.limit, i,
                                                                   "control.limit")
+                    sens = None if control.sensor is None else sensor_names(
+                        control.sensor, item, "control.sensor")
                     sub_pd = PID(part(control.kp, i, "control.kp"),
                                  part(control.ki, i, "control.ki"),
                                  part(control.kd, i, "control.kd"), tgt, rate, lim,
-                                 control.sample_time, control.gear, control.rotor_inertia)
+                                 control.sample_time, control.gear, control.rotor_inertia,
+                                 None if sens is None else _universal_sensor(sens, i,
+                                                                             item))
                 else:
                     sub_pd = PD(part(control.kp, i, "control.kp"),
                                 part(control.kd, i, "control.kd"), tgt, rate)
@@ -1099,16 +1105,18 @@ class ModelBuilder:
                                  "a free massless node with no joint has no equation of motion"
                                  + (" (a load alone is not enough)" if n.name in loaded
                                     else ""))
-        return Model(tuple(self._nodes.values()), tuple(self._joints.values()),
-                     tuple(self._loads.values()), self._gravity.copy(), dict(self._composites),
-                     self._name, tuple(self._springs.values()),
-                     visuals=tuple(self._visuals.values()),
-                     bushings=tuple(self._bushings.values()), beams=tuple(self._beams.values()),
-                     markers=tuple(self._markers.values()),
-                     drives=tuple(self._drives.values()),
-                     couplings=tuple(self._couplings.values()),
-                     collisions=tuple(self._collisions.values()),
-                     contact_pairs=tuple(self._contact_pairs.values()))
+        model = Model(tuple(self._nodes.values()), tuple(self._joints.values()),
+                      tuple(self._loads.values()), self._gravity.copy(), dict(self._composites),
+                      self._name, tuple(self._springs.values()),
+                      visuals=tuple(self._visuals.values()),
+                      bushings=tuple(self._bushings.values()),
+                      beams=tuple(self._beams.values()), markers=tuple(self._markers.values()),
+                      drives=tuple(self._drives.values()),
+                      couplings=tuple(self._couplings.values()),
+                      collisions=tuple(self._collisions.values()),
+                      contact_pairs=tuple(self._contact_pairs.values()))
+        _check_sensors(model)
+        return model
 
 
 def _did_you_mean(word: str, names: list) -> str:
@@ -1146,8 +1154,30 @@ def _control_law(control: PD | PID, k: int, item: str) -> PD | PID:
     lim = (np.full(k, np.inf) if control.limit is None
            else _limits(control.limit, k, item, "control.limit"))
     ts = None if control.sample_time is None else float(control.sample_time)
+    sensor = None
+    if control.sensor is not None:
+        sensor = sensor_names(control.sensor, item, "control.sensor")
+        if len(sensor) != k:
+            raise ModelError(item, "control.sensor", f"{k} sensor channel name(s), one per "
+                             "coordinate of the joint", control.sensor)
     return PID(kp, ki, kd, tgt, rate, lim, ts, float(control.gear),
-               float(control.rotor_inertia))
+               float(control.rotor_inertia), sensor)
+
+
+def _universal_sensor(sens: tuple[str, ...], i: int, item: str) -> str:
+    """The sensor of hinge ``i`` of a universal joint's law (one name per hinge)."""
+    if len(sens) != 2:
+        raise ModelError(item, "control.sensor", "2 sensor channel names, one per hinge of "
+                         "the universal joint", sens)
+    return sens[i]
+
+
+def _check_sensors(model: Model) -> None:
+    """The sensors read by sampled PID laws name markers and joint coordinates of the model."""
+    for j in model.joints:
+        for name in getattr(j.control, "sensor", None) or ():
+            check_sensor(parse_sensor(name, f"joint {j.name!r}", "control.sensor"), model,
+                         f"joint {j.name!r}", "control.sensor")
 
 
 def marker_offset(node: NodeSpec, at: np.ndarray | None, offset: np.ndarray | None,

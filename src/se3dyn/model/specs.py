@@ -31,6 +31,7 @@ import numpy as np
 
 from se3dyn.errors import ModelError, UnknownNameError, close_matches
 from se3dyn.model.joint_types import is_abelian
+from se3dyn.model.sensors import parse_sensor
 from se3dyn.model.timefunc import TimeFunction, as_timefunc
 
 if TYPE_CHECKING:
@@ -105,6 +106,13 @@ class PID:
     rotor_inertia : float, optional
         The motor's rotor inertia; the joint's coordinates carry ``gear^2 rotor_inertia`` of
         it (its reflected inertia, added to the joint's ``armature``).
+    sensor : str or sequence of str, optional
+        A sampled law (``sample_time`` required) may measure a sensor instead of the joint's
+        coordinate: ``e = s - target(t)``, ``e' = s' - target_rate(t)`` with ``s`` one of the
+        results channels ``marker/<m>/position/x|y|z``, ``marker/<a>/distance/<b>`` or
+        ``joint/<j>/alpha/<i>`` (:mod:`se3dyn.model.sensors`), evaluated by the compiled
+        kernel at the sample times; one name per coordinate of the joint (a single name for
+        a one-coordinate joint). None: the joint's own coordinates.
     """
 
     kp: Any
@@ -116,6 +124,7 @@ class PID:
     sample_time: Any = None
     gear: Any = 1.0
     rotor_inertia: Any = 0.0
+    sensor: Any = None
 
     def __post_init__(self):
         for fld in ("kp", "ki", "kd"):
@@ -142,6 +151,24 @@ class PID:
         as_timefunc(self.target, "PID", "target")
         if self.target_rate is not None:
             as_timefunc(self.target_rate, "PID", "target_rate")
+        if self.sensor is not None:
+            sensor_names(self.sensor, "PID", "sensor")
+            if self.sample_time is None:
+                raise ModelError("PID", "sensor", "a sampled law (sample_time=...) to read a "
+                                 "sensor: a continuous law on a sensor is not built (its "
+                                 "tangent would couple the joint to the sensor's bodies)",
+                                 self.sensor)
+
+
+def sensor_names(v: Any, item: str, fld: str) -> tuple[str, ...]:
+    """A PID law's ``sensor``: a channel name or a sequence of them, as a tuple, each checked
+    for its form (:func:`se3dyn.model.sensors.parse_sensor`)."""
+    names = (v,) if isinstance(v, str) else tuple(v) if isinstance(v, list | tuple) else None
+    if not names:
+        raise ModelError(item, fld, "a sensor channel name or a list of them", v)
+    for name in names:
+        parse_sensor(name, item, fld)
+    return names
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,12 @@ struct JointForces : ElementBatch {
   std::vector<double> Ja;                   // (n, 6) armature: inertia on the coordinates
   std::vector<double> ts;                   // (n, 6) sample time of a sampled PID law, or 0
   std::vector<int> lidx;                    // (n,) the user's law: its offset in Context::law
+  // (n, 6) the sensor a sampled PID law reads instead of its coordinate (se3dyn.model.sensors):
+  // kind 0 none, 1 a marker's position component, 2 the distance of two markers, 3 a joint
+  // coordinate; sidx the axis or the joint unknown; snode (n, 6, 2) the markers' node frames,
+  // spoint (n, 6, 2, 3) their origins in the nodes' material frames
+  std::vector<int> skind, sidx, snode;
+  std::vector<double> spoint;
   std::vector<int> zslot, zidx;             // (n,) PID: first input slot (3 per coordinate:
                                             // z_n, e_n, h/2) and first state index, or -1
   std::vector<int> tau, pref, prate;        // (n,) first input slot (k consecutive) or -1
@@ -77,6 +83,10 @@ struct JointForces : ElementBatch {
     zslot = t.ints<int>("zslot");
     zidx = t.ints<int>("zidx");
     lidx = t.ints<int>("lidx");
+    skind = t.ints<int>("skind");
+    sidx = t.ints<int>("sidx");
+    snode = t.ints<int>("snode");
+    spoint = t.real("spoint");
     tau = t.ints<int>("tau");
     pref = t.ints<int>("pref");
     prate = t.ints<int>("prate");
@@ -201,7 +211,11 @@ struct JointForces : ElementBatch {
     const double* zs = X.u + zslot[e] + 3 * c;  // z_n, e_n, h/2
     const double err = alpha - X.u[pref[e] + c];
     const double gi = ki[6 * e + c], L = lim[6 * e + c];
-    if (ts[6 * e + c] > 0) return sampled(X, e, c, err, pd, wk, wd);
+    if (ts[6 * e + c] > 0) {
+      double es = err;
+      if (skind[6 * e + c]) pd = sensor_law(X, e, c, es);
+      return sampled(X, e, c, es, pd, wk, wd);
+    }
     double z = zs[0] + zs[2] * (zs[1] + err);
     double out = pd - gi * z;
     wk[c] += gi * zs[2];
@@ -242,6 +256,55 @@ struct JointForces : ElementBatch {
       X.ctrl[2 * (zidx[e] + c) + 1] = I;
     }
     return zs[0];
+  }
+
+  // A sampled law reading a sensor s (the header's skind): err = s - target, and its PD part
+  // -kp err - kd (s' - target_rate) returned. The sensor comes from the iterate's frames and
+  // velocities (read only: no tangent, the law being sampled)
+  double sensor_law(Context& X, int e, int c, double& err) const {
+    const int i = 6 * e + c, kind = skind[i];
+    double s = 0.0, sd = 0.0;
+    if (kind == 3) {
+      s = X.coords[sidx[i]];
+      sd = X.vq[sidx[i]];
+    } else {
+      double p[2][3], pd[2][3];
+      for (int m = 0; m < kind; ++m) marker_point(X, snode[2 * i + m], &spoint[6 * i + 3 * m],
+                                                  p[m], pd[m]);
+      if (kind == 1) {
+        s = p[0][sidx[i]];
+        sd = pd[0][sidx[i]];
+      } else {
+        double d[3], dd[3];
+        for (int a = 0; a < 3; ++a) {
+          d[a] = p[1][a] - p[0][a];
+          dd[a] = pd[1][a] - pd[0][a];
+        }
+        s = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        sd = s > 0 ? (d[0] * dd[0] + d[1] * dd[1] + d[2] * dd[2]) / s : 0.0;
+      }
+    }
+    err = s - X.u[pref[e] + c];
+    const double rate = prate[e] >= 0 ? X.u[prate[e] + c] : 0.0;
+    return -kp[i] * err - kd[i] * (sd - rate);
+  }
+
+  // A point a (material frame of node frame f) in the inertial frame, x + R a, and its
+  // velocity R (U + Omega x a) (Eq. (4): material velocities (U, Omega))
+  static void marker_point(const Context& X, int f, const double* a, double* p, double* pd) {
+    const Frame& H = X.S->H[f];
+    const double* v = &X.S->v[6 * f];
+    const double w[3] = {v[1 + 3] * a[2] - v[2 + 3] * a[1] + v[0],
+                         v[2 + 3] * a[0] - v[0 + 3] * a[2] + v[1],
+                         v[0 + 3] * a[1] - v[1 + 3] * a[0] + v[2]};
+    for (int r = 0; r < 3; ++r) {
+      p[r] = H.x[r];
+      pd[r] = 0.0;
+      for (int k = 0; k < 3; ++k) {
+        p[r] += H.R[3 * r + k] * a[k];
+        pd[r] += H.R[3 * r + k] * w[k];
+      }
+    }
   }
 
   // Gauss-Jordan inverse of a k x k matrix (ld 6) with partial pivoting
