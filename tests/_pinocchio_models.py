@@ -68,8 +68,9 @@ def pinocchio_model(chain: dict) -> tuple[pin.Model, list[int]]:
     return model, ids
 
 
-def se3dyn_model(chain: dict) -> sd.Model:
-    """The same chain with ModelBuilder: nodes at the joint frames of q = 0."""
+def se3dyn_model(chain: dict, velocities: dict | None = None) -> sd.Model:
+    """The same chain with ModelBuilder: nodes at the joint frames of q = 0; ``velocities``:
+    node name -> (linear, angular) initial velocity in the inertial frame."""
     mb = sd.ModelBuilder(gravity=(0.0, 0.0, -G), name="chain")
     mb.node("ground", fixed=True)
     world = {-1: np.eye(4)}
@@ -85,8 +86,9 @@ def se3dyn_model(chain: dict) -> sd.Model:
         world[i] = W
         R, x = W[:3, :3], W[:3, 3]
         m, c, I = lk["body"]
+        vel = (velocities or {}).get(f"L{i}", (None, None))
         mb.node(f"L{i}", position=x, orientation=R, mass=m, com=x + R @ c,
-                inertia=R @ I @ R.T)
+                inertia=R @ I @ R.T, velocity=vel[0], angular_velocity=vel[1])
         typ = "hinge" if lk["type"] == "R" else "prismatic"
         mb.joint(f"j{i}", typ, parent_name[lk["parent"]], f"L{i}", axis=R @ lk["axis"])
         parent_name[i] = f"L{i}"

@@ -114,3 +114,40 @@ def test_closed_loop_parallelogram():
     # the coupler translates: with theta_dot the centripetal terms cancel in the bias (the
     # mass matrix does not depend on theta): b = g(theta)
     assert np.abs(js.bias(th, 2.0 * np.ones_like(th))[:, 0] - gref).max() <= 1e-9
+
+
+def test_linearization_about_a_moving_state_against_pinocchio_derivatives():
+    """About a state with motion (the 6-axis arm started with joint rates v: the initial state
+    of a run, consistent accelerations and multipliers), the linear model is the derivative of
+    the inverse dynamics: K = d rnea/dq, C = d rnea/dv, M = crba (Pinocchio's
+    computeRNEADerivatives at q = 0, v, a); the velocity map's derivatives along the
+    configuration are differences of the exact Jacobian (1e-8)."""
+    chain = random_chain("RRRRRR", seed=7)
+    pm, _ = pinocchio_model(chain)
+    pd = pm.createData()
+    v = np.array([0.8, -1.1, 0.5, 1.3, -0.7, 0.9])
+    js = sd.JointSpace(se3dyn_model(chain))
+    q0 = np.zeros(6)
+    vel = {f"L{i}": np.split(js.jacobian(q0, f"L{i}", "local_world_aligned") @ v, 2)
+           for i in range(6)}
+    model = se3dyn_model(chain, vel)
+    st = sd.GeneralizedAlpha().init(sd.compile_model(model))
+    lin = sd.linearize(model)
+    ind = lin.partition.independent
+    assert np.abs(st.v[ind] - v).max() <= 1e-12  # the joint rates given
+    a = st.vd[ind]
+    assert rel(a, pin.aba(pm, pd, q0, v, np.zeros(6))) <= 1e-10
+    dq, dv, M = pin.computeRNEADerivatives(pm, pd, q0, v, a)
+    M = np.triu(M) + np.triu(M, 1).T
+    assert rel(lin.M, M) <= 1e-10
+    assert rel(lin.C, dv) <= 1e-8
+    assert rel(lin.K, dq) <= 1e-8
+
+
+def test_non_abelian_coordinates_refused():
+    mb = sd.ModelBuilder(gravity=(0, 0, -9.81))
+    mb.node("ground", fixed=True)
+    mb.node("bob", position=(0, 0, -1), mass=1.0, inertia=(0.1, 0.1, 0.1))
+    mb.joint("ball", "spherical", "ground", "bob", at=(0, 0, 0))
+    with pytest.raises(ModelError, match="joint 'ball' \\(spherical\\)"):
+        sd.JointSpace(mb.build())

@@ -291,3 +291,52 @@ def test_cli_linearize_exports_the_linear_model(tmp_path, capsys):
     assert list(data["input_names"]) == ["h1"] and list(data["output_names"]) == ["h2"]
     assert data["A"].shape == (4, 4) and data["T"].shape[1] == 2
     assert main(["linearize", str(path), "--input", "nope"]) == 2
+
+
+def two_pendulums(ratio: float = 0.0, drive: bool = False) -> sd.Model:
+    """Two pendulums on parallel hinges (bars with nodes at their centres of mass), coupled
+    by ``alpha_b = ratio alpha_a`` (a gear, a URDF mimic), or the second carried by the first
+    and held by a position drive."""
+    mb = sd.ModelBuilder(gravity=(0, 0, -G))
+    mb.node("ground", fixed=True)
+    mb.node("a", position=(0, 0, -0.3), mass=1.5, inertia=(0.05, 0.04, 0.02))
+    mb.node("b", position=(1.0, 0, -0.5) if not drive else (0, 0, -0.9), mass=0.7,
+            inertia=(0.03, 0.02, 0.01))
+    mb.joint("ja", "hinge", "ground", "a", axis=(0, 1, 0), at=(0, 0, 0))
+    if drive:
+        mb.joint("jb", "hinge", "a", "b", axis=(0, 1, 0), at=(0, 0, -0.6))
+        mb.drive("hold", "jb", position=0.0)
+    else:
+        mb.joint("jb", "hinge", "ground", "b", axis=(0, 1, 0), at=(1.0, 0, 0))
+        mb.coupling("gear", leader="ja", follower="jb", ratio=ratio)
+    return mb.build()
+
+
+def test_coupled_pendulums():
+    """A coupling's follower is dependent: omega^2 = g (m_a c_a + r^2 m_b c_b) / (I_a + r^2
+    I_b), I about the pivots (the follower's virtual work r times the leader's); in joint space
+    the mass matrix and gravity torque of the same closed form."""
+    r = -1.6
+    model = two_pendulums(r)
+    Ia, Ib = 0.04 + 1.5 * 0.3**2, 0.02 + 0.7 * 0.5**2
+    lin = sd.linearize(model, at=sd.static_equilibrium(model))
+    assert lin.names == ("joint 'ja' alpha_0",)
+    w2 = G * (1.5 * 0.3 + r * r * 0.7 * 0.5) / (Ia + r * r * Ib)
+    assert abs(lin.modes().omega[0] / math.sqrt(w2) - 1) <= 1e-10
+    js = sd.JointSpace(model)
+    th = np.array([[0.4], [-1.1]])
+    assert np.abs(js.mass_matrix(th)[:, 0, 0] / (Ia + r * r * Ib) - 1).max() <= 1e-10
+    g_ref = G * (1.5 * 0.3 * np.sin(th[:, 0]) + r * 0.7 * 0.5 * np.sin(r * th[:, 0]))
+    assert np.abs(js.gravity(th)[:, 0] - g_ref).max() <= 1e-10 * np.abs(g_ref).max()
+
+
+def test_driven_coordinate_is_held():
+    """A position drive holds its coordinate: the double pendulum with its second hinge driven
+    swings as one compound pendulum, omega^2 = g (m_a c_a + m_b c_b) / (I_a + I_b) about the
+    pivot (c_b = 0.9)."""
+    model = two_pendulums(drive=True)
+    lin = sd.linearize(model, at=sd.static_equilibrium(model))
+    assert lin.names == ("joint 'ja' alpha_0",)
+    Ia, Ib = 0.04 + 1.5 * 0.3**2, 0.02 + 0.7 * 0.9**2
+    w2 = G * (1.5 * 0.3 + 0.7 * 0.9) / (Ia + Ib)
+    assert abs(lin.modes().omega[0] / math.sqrt(w2) - 1) <= 1e-10

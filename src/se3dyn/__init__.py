@@ -8,7 +8,9 @@ generalized-alpha integrator. Conventions are written once in :mod:`se3dyn.lie`.
 >>> result = sd.simulate(model, t_end=5.0, step=1e-2, rho_inf=0.9)  # doctest: +SKIP
 
 Beyond dynamics: :func:`static_equilibrium` (load stepping), :func:`assemble` (inconsistent
-initial configurations), :func:`kinematics` (driven mechanisms, inverse dynamics).
+initial configurations), :func:`kinematics` (driven mechanisms, inverse dynamics),
+:class:`JointSpace` (mass matrix, inverse and forward dynamics, Jacobians in the joint
+coordinates) and :func:`linearize` (linear models, modes, state space).
 Parameter studies on dask.distributed: ``se3dyn.sweep(...)`` (:mod:`se3dyn.sweep`).
 Results in the browser: ``sd.show(result)`` (:mod:`se3dyn.viewer`).
 

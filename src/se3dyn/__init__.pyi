@@ -27,6 +27,7 @@ from se3dyn.errors import NewtonError as NewtonError
 from se3dyn.errors import Se3dynError as Se3dynError
 from se3dyn.errors import SimulationError as SimulationError
 from se3dyn.io.fmu import export_fmu as export_fmu
+from se3dyn.io.urdf import load_urdf as load_urdf
 from se3dyn.model import examples as examples
 from se3dyn.model.builder import ModelBuilder as ModelBuilder
 from se3dyn.model.contact import ContactMaterial as ContactMaterial

@@ -84,7 +84,7 @@ class JointSpace:
         self.system = s
         self._con = Constraints(s)
         B0 = self._con.jacobian(s.node_H0, s.joint_H0, s.alpha0)
-        self.partition = partition(s, B0, independent)
+        self.partition = partition(s, B0, independent, self._con.first)
         self.joint_names = self.partition.names
         self._layout()
         self._plan = _tree_plan(s, self._roots)
@@ -117,7 +117,7 @@ class JointSpace:
                 j = int(jid[i])
                 raise ModelError(f"joint {s.joint_names[j]!r} ({s.joint_type[j]})", "type",
                                  "abelian joints for JointSpace coordinates (hinge, "
-                                 "prismatic, cylindrical, screw, planar, universal)",
+                                 "prismatic, cylindrical, screw, universal)",
                                  s.joint_type[j], "its coordinates are not coordinates of "
                                  "a configuration; linearize handles it")
         self._jointdofs = np.array(jointdofs, np.int64)
@@ -160,6 +160,10 @@ class JointSpace:
         """Coordinates (N, nq): the independent joint coordinates from q, the others kept."""
         for d in self._jointdofs:
             alpha[:, d] = q[:, self._qpos[np.searchsorted(self.partition.independent, d)]]
+        s = self.system
+        for a, b, r, o in zip(s.cpl_lead, s.cpl_follow, s.cpl_ratio, s.cpl_offset,
+                              strict=True):  # couplings, in order (a follower may lead)
+            alpha[:, b] = r * alpha[:, a] + o
         return alpha
 
     def _tree(self, q: np.ndarray, alpha: np.ndarray, HJ: np.ndarray):
@@ -215,8 +219,9 @@ class JointSpace:
             H, HJ, alpha = ev.H, ev.HJ, ev.alpha
             if float(np.abs(self._rs * ev.phi).max(initial=0.0)) <= tol:
                 return H, HJ, alpha
-            rm = reduced_map(s, con.blocks.split(ev.values)[2], self.partition, con.cs)
-            n = -rm.solve_dependent(ev.phi)
+            rm = reduced_map(s, con.rows(con.blocks.split(ev.values)[2]), self.partition,
+                             con.cs)
+            n = -rm.solve_dependent(con.residual(ev))
         raise SimulationError("JointSpace: the closed loops do not close at these "
                               "independent coordinates (Newton did not converge; the "
                               "configuration may be out of reach)")
@@ -229,7 +234,7 @@ class JointSpace:
         ev = evaluate(s, H, HJ, alpha, z, z, z, con.lam0, con.zin, (1.0, 0.0, 0.0),
                       full_alpha=False)
         M, _, B = con.blocks.split(ev.values)
-        return M, reduced_map(s, B, self.partition, con.cs)
+        return M, reduced_map(s, con.rows(B), self.partition, con.cs)
 
     def _tau(self, H, HJ, alpha, zd, zdd, inputs) -> tuple[np.ndarray, np.ndarray]:
         """``(tau, M_z)``: generalized forces on the independent coordinates and the mass

@@ -43,7 +43,7 @@ import numpy as np
 from se3dyn import lie
 from se3dyn._lazy import LazyModule
 from se3dyn.analysis.common import _as_system, _joint_ids, _unknown_name
-from se3dyn.analysis.reduced import Constraints, Partition, ReducedMap, reduced_map
+from se3dyn.analysis.reduced import Constraints, Partition, ReducedMap
 from se3dyn.analysis.statics import StaticResult
 from se3dyn.dynamics.state import State
 from se3dyn.engine.evaluate import evaluate
@@ -104,12 +104,11 @@ def _point(s: System, at: Any, t: float | None) -> _Point:
 
 
 def _check_model(s: System) -> None:
-    for what, bad in (("drives", len(s.drive_dof)), ("couplings", len(s.cpl_lead)),
-                      ("PID laws", int(np.sum(s.dof_ki > 0)))):
-        if bad:
-            raise ModelError("linearize", "model", f"a model without {what} (their states "
-                             "and prescribed coordinates are not in the linear model yet)",
-                             f"{bad} {what}")
+    bad = int(np.sum(s.dof_ki > 0))
+    if bad:
+        raise ModelError("linearize", "model", "a model without PID laws (their integral "
+                         "states are not in the linear model yet)", f"{bad} PID law(s)",
+                         "use a PD law, or linearise without the controller")
 
 
 # =============================================================================================
@@ -184,7 +183,11 @@ class Linearization:
     input_names: tuple[str, ...]
     output_names: tuple[str, ...]
     _point: _Point = field(repr=False)
-    _inputs: list = field(repr=False)
+
+    def __repr__(self) -> str:
+        return (f"Linearization({len(self.names)} minimal coordinates: "
+                f"{', '.join(self.names[:6])}{' ...' if len(self.names) > 6 else ''}; "
+                f"{len(self.input_names)} inputs, {len(self.output_names)} outputs)")
 
     @property
     def symmetric(self) -> bool:
@@ -270,7 +273,7 @@ def linearize(model_or_system: Model | System, at: Any = None, *, inputs=(), out
     s = _as_system(model_or_system, "linearize")
     _check_model(s)
     p = _point(s, at, t)
-    con = Constraints(s)
+    con = Constraints(s, locked=s.drive_dof)
     rm = con.map_at(p.H, p.HJ, p.alpha, independent=independent)
     u = step_inputs(s, p.t) if p.u is None else dict(u=p.u)
     M, C, K = _tangents(s, con, p, u)
@@ -286,7 +289,7 @@ def linearize(model_or_system: Model | System, at: Any = None, *, inputs=(), out
     Cy, out_names = _output_matrix(s, p, T, outputs)
     return Linearization(system=s, M=Mz, C=Cz, K=Kz, B=T.T @ Bf, C_y=Cy, T=T,
                          partition=rm.part, names=rm.part.names, input_names=in_names,
-                         output_names=out_names, _point=p, _inputs=list(inputs))
+                         output_names=out_names, _point=p)
 
 
 def _tangents(s: System, con: Constraints, p: _Point, u: dict):
@@ -316,10 +319,11 @@ def _motion_terms(s: System, con: Constraints, rm: ReducedMap, p: _Point, M, C):
                     - con.accel_term(rm, p.H, p.HJ, p.alpha, T @ (zd - e))) / (2 * scale)
     cs = _unknown_scale(s, _char_length(s))
 
-    def along(n):  # (T z_dot, T z_ddot + w) at the configuration H exp(n)
-        ev = evaluate(s, p.H, p.HJ, p.alpha, n, con.zq, con.zq, con.lam0, con.zin,
-                      (0.0, 0.0, 0.0), full_alpha=False)
-        r2 = reduced_map(s, con.blocks.split(ev.values)[2], rm.part)
+    def along(n):  # (T z_dot, T z_ddot + w) at the configuration H exp(n), re-based there
+        # (the matrix of an evaluation at n holds B T(n), Eq. (46): B itself is at n = 0)
+        ev = evaluate(s, p.H, p.HJ, p.alpha, n, con.zq, con.zq, con.lam0, con.zin, None,
+                      full_alpha=False)
+        r2 = con.map_at(ev.H, ev.HJ, ev.alpha, rm.part)
         v = r2.T @ zd
         return np.concatenate([v, r2.T @ zdd + con.accel_term(r2, ev.H, ev.HJ, ev.alpha, v)])
 

@@ -14,6 +14,8 @@ partitioning): ``B = [B_I, B_D]`` with ``B_D`` of full column rank ``rank B``. T
 with ``arhs`` the right-hand side of the acceleration-level constraints ``B vd = arhs`` (the
 time derivative of ``B v = 0``, exact, from the joint kernel). With redundant constraints the
 rows of ``B_D`` are dependent but consistent: ``B_D^+`` is the least-squares inverse, exact.
+Couplings (``v_follower = ratio v_leader``) and locked coordinates are rows of ``B`` too
+(:class:`Constraints`), their unknowns dependent first.
 
 Choice of the independent unknowns: columns of the scaled ``B`` (translations divided by the
 model's length L) taken greedily as dependent, by an orthogonal projection on those already taken
@@ -61,15 +63,18 @@ class Partition:
     rank: int
 
 
-def _preference(s: System) -> np.ndarray:
-    """Unknowns in the order they are taken as dependent (see the module docstring)."""
+def _preference(s: System, first=()) -> np.ndarray:
+    """Unknowns in the order they are taken as dependent (see the module docstring), the
+    unknowns ``first`` (couplings' followers, locked coordinates) before all."""
     child = set(int(b) for b in s.joint_b)
     nodes = [int(i) for i in s.node_free]
     order = [i for i in nodes if i in child] + [i for i in nodes if i not in child]
-    cols = [int(s.node_dofadr[i]) + c for i in order for c in range(6)]
+    cols = [int(c) for c in first]
+    cols += [int(s.node_dofadr[i]) + c for i in order for c in range(6)]
     for j in range(s.m - 1, -1, -1):
         cols += [int(s.joint_dofadr[j]) + c for c in range(int(s.joint_k[j]))]
-    return np.array(cols, dtype=np.int64)
+    _, idx = np.unique(cols, return_index=True)
+    return np.array(cols, dtype=np.int64)[np.sort(idx)]
 
 
 def _given_independent(s: System, names) -> np.ndarray:
@@ -81,7 +86,7 @@ def _given_independent(s: System, names) -> np.ndarray:
     return np.array(out, dtype=np.int64)
 
 
-def partition(s: System, B: np.ndarray, independent=None) -> Partition:
+def partition(s: System, B: np.ndarray, independent=None, first=()) -> Partition:
     """Coordinate partitioning of the unknowns by a QR factorisation of the scaled ``B`` with
     pivots in the preference order of :func:`_preference`.
 
@@ -93,18 +98,25 @@ def partition(s: System, B: np.ndarray, independent=None) -> Partition:
     independent : sequence of joint names, optional
         Joints whose coordinates must be independent (their columns are never pivots); refused
         when the others cannot determine the rest.
+    first : sequence of int
+        Unknowns to take as dependent first (the rows of :class:`Constraints` beyond the
+        joints' fix them: couplings' followers, locked coordinates).
 
     Returns
     -------
     Partition
     """
     L = _char_length(s)
-    Bs = _row_scale(s, L)[:, None] * B * _unknown_scale(s, L)
-    order = _preference(s)
+    cs = _unknown_scale(s, L)
+    E = np.abs(B[s.nm:]) * cs  # rows beyond the joints': scaled by their largest entry
+    rs = np.concatenate([_row_scale(s, L), 1.0 / np.maximum(E.max(axis=1, initial=0.0),
+                                                            1e-300)])
+    Bs = rs[:, None] * B * cs
+    order = _preference(s, first)
     keep = np.zeros(0, np.int64) if independent is None else _given_independent(s, independent)
     order = order[~np.isin(order, keep)]
-    tol = _RCOND * max(float(np.abs(Bs).max(initial=0.0)), 1e-300) * max(1, s.nm) ** 0.5
-    Q = np.zeros((s.nm, 0))
+    tol = _RCOND * max(float(np.abs(Bs).max(initial=0.0)), 1e-300) * max(1, len(B)) ** 0.5
+    Q = np.zeros((len(B), 0))
     dep = []
     for c in order:
         x = Bs[:, c].copy()
@@ -169,7 +181,7 @@ def reduced_map(s: System, B: np.ndarray, part: Partition,
     T = np.zeros((s.nq, len(ind)))
     T[ind, np.arange(len(ind))] = 1.0
     if len(D) == 0:
-        return ReducedMap(part=part, B=B, T=T, _qr=(np.zeros((s.nm, 0)), np.zeros((0, 0))))
+        return ReducedMap(part=part, B=B, T=T, _qr=(np.zeros((len(B), 0)), np.zeros((0, 0))))
     if cs is None:
         cs = _unknown_scale(s, _char_length(s))
     Q, R = np.linalg.qr(B[:, D] * cs[D])
@@ -185,35 +197,64 @@ def reduced_map(s: System, B: np.ndarray, part: Partition,
 
 
 class Constraints:
-    """Evaluations of ``B`` and ``arhs`` for one system (one block extractor, zero inputs)."""
+    """Evaluations of ``B`` and ``arhs`` for one system (one block extractor, zero inputs),
+    with rows beyond the joints' (``E``, ne rows, linear and constant): the couplings
+    ``v_follower - ratio v_leader = 0`` (``ModelBuilder.coupling``) and, if asked, locked
+    coordinates ``v_d = 0`` (drives held at their values)."""
 
-    def __init__(self, s: System):
+    def __init__(self, s: System, locked=()):
         self.s = s
         self.blocks = _Blocks(s)
         self.zq = np.zeros(s.nq)
         self.lam0 = np.zeros(s.nm)
         self.zin = dict(u=np.zeros(s.inputs.nu))
         self.cs = _unknown_scale(s, _char_length(s))
+        rows = []
+        for a, b, r in zip(s.cpl_lead, s.cpl_follow, s.cpl_ratio, strict=True):
+            e = np.zeros(s.nq)
+            e[b], e[a] = 1.0, -r
+            rows.append(e)
+        for d in locked:
+            e = np.zeros(s.nq)
+            e[d] = 1.0
+            rows.append(e)
+        self.E = np.array(rows).reshape(-1, s.nq)
+        #: unknowns the extra rows determine (taken as dependent first)
+        self.first = np.concatenate([s.cpl_follow, np.asarray(locked, np.int64)]).astype(
+            np.int64)
+
+    def rows(self, B: np.ndarray) -> np.ndarray:
+        """``[B; E]`` (nm + ne, nq)."""
+        return np.vstack([B, self.E]) if len(self.E) else B
 
     def jacobian(self, H, HJ, alpha) -> np.ndarray:
-        """``B`` (nm, nq) at a configuration (frames (M, 4, 4), (m, 4, 4), coordinates (nq,))."""
+        """``[B; E]`` at a configuration (frames (M, 4, 4), (m, 4, 4), coordinates (nq,))."""
         z = self.zq
         ev = evaluate(self.s, H, HJ, alpha, z, z, z, self.lam0, self.zin, (0.0, 0.0, 0.0),
                       full_alpha=False)
-        return self.blocks.split(ev.values)[2]
+        return self.rows(self.blocks.split(ev.values)[2])
+
+    def residual(self, ev) -> np.ndarray:
+        """The constraints of an evaluation and the extra rows' (the couplings' ``alpha_b -
+        ratio alpha_a - offset``; 0 for locked rows), (nm + ne,)."""
+        s = self.s
+        cpl = ev.alpha[s.cpl_follow] - s.cpl_ratio * ev.alpha[s.cpl_lead] - s.cpl_offset
+        return np.concatenate([ev.phi, cpl, np.zeros(len(self.E) - len(cpl))])
 
     def arhs(self, H, HJ, alpha, v: np.ndarray) -> np.ndarray:
-        """The acceleration-level right-hand side ``arhs(v)`` (nm,): ``B vd = arhs``."""
+        """The acceleration-level right-hand side ``arhs(v)`` (nm + ne,): ``B vd = arhs``
+        (zero on the extra rows: they are linear)."""
         z = self.zq
-        return evaluate(self.s, H, HJ, alpha, z, v, z, self.lam0, self.zin, None,
-                        full_alpha=False, accel=True).arhs
+        a = evaluate(self.s, H, HJ, alpha, z, v, z, self.lam0, self.zin, None,
+                     full_alpha=False, accel=True).arhs
+        return np.concatenate([a, np.zeros(len(self.E))])
 
     def map_at(self, H, HJ, alpha, part: Partition | None = None,
                independent=None) -> ReducedMap:
         """The :class:`ReducedMap` at a configuration (a partition chosen there if not given)."""
         B = self.jacobian(H, HJ, alpha)
         if part is None:
-            part = partition(self.s, B, independent)
+            part = partition(self.s, B, independent, self.first)
         return reduced_map(self.s, B, part, self.cs)
 
     def accel_term(self, rm: ReducedMap, H, HJ, alpha, v: np.ndarray) -> np.ndarray:

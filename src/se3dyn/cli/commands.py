@@ -20,6 +20,11 @@ traceback.
     se3dyn export RESULTS --gltf FILE.glb
     se3dyn view RESULTS [-o FILE.html] [--model MODEL] [--channel PATTERN] [--trace NODE]
     se3dyn export-fmu MODEL -o FILE.fmu [--step H] [--out-channel CHANNEL...]
+    se3dyn import-urdf ROBOT.urdf -o MODEL.yaml [--floating-base] [--fixed keep|merge]
+                  [--mimic enforce|ignore] [--package-dir DIR...]
+
+A MODEL may be a URDF file (``*.urdf``) for check and run: imported with the defaults of
+``se3dyn.load_urdf`` (docs/urdf.md).
 """
 
 from __future__ import annotations
@@ -44,16 +49,50 @@ def _err(msg: str) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-def _load(path: str):
+def _load(path: str, say=None):
+    """``(model, settings)`` of a model file, or of a URDF file (``*.urdf``: imported with
+    the defaults of ``se3dyn.load_urdf``, no settings; its import report said by ``say``)."""
     from se3dyn.errors import ModelError
     from se3dyn.io.modelfile import load_model
 
     if not Path(path).is_file():
         raise _Usage(f"{path}: no such model file")
     try:
+        if _is_urdf(path):
+            return _load_urdf(path, say, {})
         return load_model(Path(path))
     except ModelError as exc:
         raise _Usage(str(exc)) from None
+
+
+def _is_urdf(path: str) -> bool:
+    return Path(path).suffix.lower() == ".urdf"
+
+
+def _load_urdf(path: str, say, options: dict):
+    """A URDF file's model (no settings); the import report (what was not mapped) said line
+    by line by ``say`` instead of a Python warning."""
+    import warnings
+
+    from se3dyn.io.urdf import load_urdf
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mb = load_urdf(path, **options)
+    if say is not None:
+        for line in mb.urdf.report().splitlines()[1:]:
+            say("  urdf " + line.strip())
+    return mb.build(), {}
+
+
+def _model_text(path: str, model) -> str:
+    """The model text a results file stores: a model file as given; a URDF's model written
+    as a model file (the viewer and ``--resume`` read it)."""
+    if _is_urdf(path):
+        from se3dyn.io.modelfile import save_model
+
+        return save_model(model)
+    return Path(path).read_text(encoding="utf-8")
 
 
 def _loaded() -> None:
@@ -89,7 +128,8 @@ def _check_one(path: str, rank_max: int) -> None:
     from se3dyn.engine.system import compile_model
     from se3dyn.errors import ModelError
 
-    model, settings = _load(path)
+    notes = []
+    model, settings = _load(path, notes.append)
     try:
         s = compile_model(model)
     except ModelError as exc:
@@ -97,6 +137,8 @@ def _check_one(path: str, rank_max: int) -> None:
     n_free = int(np.sum(~s.node_fixed))
     bodies = int(np.sum(s.node_mass > 0))
     print(f"{path}: ok")
+    for line in notes:
+        print(line)
     from se3dyn.model.checks import off_axis_joints
 
     for line in off_axis_joints(model):
@@ -291,8 +333,9 @@ def cmd_run(args) -> int:
     say = print if not args.quiet else (lambda *a, **k: None)
 
     _run_threads(args)
-    model, settings = _load(args.model)
-    text = Path(args.model).read_text(encoding="utf-8")  # stored as metadata, as given
+    model, settings = _load(args.model, lambda line: print("se3dyn: " + line.strip(),
+                                                           file=sys.stderr))
+    text = _model_text(args.model, model)  # stored as metadata
     try:
         s = compile_model(model)
     except ModelError as exc:
@@ -1147,6 +1190,39 @@ def _export_fmu_args(ef) -> None:
     ef.set_defaults(func=cmd_export_fmu)
 
 
+def cmd_import_urdf(args) -> int:
+    """Write a URDF file's model as a model file (``se3dyn.load_urdf`` with the options)."""
+    from se3dyn.errors import ModelError
+    from se3dyn.io.modelfile import save_model
+
+    if not Path(args.urdf).is_file():
+        raise _Usage(f"{args.urdf}: no such URDF file")
+    options = {"floating_base": args.floating_base, "fixed": args.fixed,
+               "mimic": args.mimic, "package_dirs": args.package_dir or ()}
+    try:
+        model, _ = _load_urdf(args.urdf, print, options)
+        save_model(model, args.output)
+    except ModelError as exc:
+        raise _Usage(str(exc)) from None
+    print(f"{args.output}: {len(model.nodes)} nodes, {len(model.joints)} joints written "
+          f"from {args.urdf}")
+    return 0
+
+
+def _import_urdf_args(iu) -> None:
+    iu.add_argument("urdf")
+    iu.add_argument("-o", "--output", required=True, help="the model file to write (.yaml)")
+    iu.add_argument("--floating-base", action="store_true",
+                    help="the root link a free body (default: clamped)")
+    iu.add_argument("--fixed", choices=("keep", "merge"), default="keep",
+                    help="fixed joints kept as rigid joints, or their links merged")
+    iu.add_argument("--mimic", choices=("enforce", "ignore"), default="enforce",
+                    help="<mimic> as exact couplings, or dropped")
+    iu.add_argument("--package-dir", action="append", metavar="DIR",
+                    help="a folder of ROS packages for package:// meshes (repeatable)")
+    iu.set_defaults(func=cmd_import_urdf)
+
+
 def _linearize_args(li) -> None:
     li.add_argument("model")
     li.add_argument("--at", choices=("static", "initial"), default="static",
@@ -1176,6 +1252,7 @@ _COMMANDS = {
     "view": ("3D viewer page (HTML) of a results file", _view_args),
     "export-fmu": ("export a model as an FMI 2.0 co-simulation FMU (pythonfmu)",
                    _export_fmu_args),
+    "import-urdf": ("write a URDF robot as a model file (docs/urdf.md)", _import_urdf_args),
     "linearize": ("linear model and modes about the static equilibrium (.npz export)",
                   _linearize_args),
 }
