@@ -9,7 +9,7 @@ Cases (closed forms of rigid bodies):
     parameter: its default soft contact is shown as it is);
   * 100 spheres in a box (every pair in se3dyn's fixed pattern: no broad phase yet).
 
-    python benchmarks/contact_speed.py          (MuJoCo: pip install mujoco)
+    python benchmarks/contact_speed.py          (MuJoCo: pip install -e ".[bench]")
 """
 
 from __future__ import annotations
@@ -186,7 +186,7 @@ def main():
             line += f" | {1e6 * theirs[case][0]:.1f}  {theirs[case][1]}"
         print(line)
     if theirs is None:
-        print("(MuJoCo not installed: pip install mujoco)")
+        print("(MuJoCo not installed: pip install -e \".[bench]\")")
 
 
 if __name__ == "__main__":
