@@ -141,7 +141,7 @@ def model_file(mf):
         F("sample_time", mf.Num(exclusive_minimum=0), None, "A sampled PID law: evaluated "
           "at the times k sample_time only and held between them (zero-order hold), the "
           "integral summed; the step must divide it. Absent: the continuous law."),
-        F("sensor", mf.Strs(), None, "A sampled PID law reading a sensor instead of the "
+        F("sensor", mf.StrList(), None, "A sampled PID law reading a sensor instead of the "
           "joint's coordinates (one channel name per coordinate): marker/<m>/position/x|y|z, "
           "marker/<a>/distance/<b> or joint/<j>/alpha/<i>; e = sensor - target."),
         F("target", mf.TimeFunc(), 0, "Target relative coordinates alpha_ref(t)."),

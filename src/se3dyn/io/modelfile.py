@@ -429,24 +429,6 @@ class Str(_Type):
         return v
 
 
-class Strs(_Type):
-    """A string, or a list of 1..6 strings (a tuple of them)."""
-
-    text = "a string or a list of 1-6 strings"
-
-    def schema(self) -> dict:
-        one = {"type": "string", "minLength": 1}
-        return {"oneOf": [one, {"type": "array", "items": one, "minItems": 1, "maxItems": 6}]}
-
-    def convert(self, ctx, node, item, fld):
-        if isinstance(node, SequenceNode) and 1 <= len(node.value) <= 6:
-            return tuple(Str().convert(ctx, n, item, f"{fld}[{i}]")
-                         for i, n in enumerate(node.value))
-        if isinstance(node, SequenceNode):
-            ctx.fail(node, item, fld, self.text)
-        return Str().convert(ctx, node, item, fld)
-
-
 @_schema_type
 class StrList(_Type):
     """A list of names (a single name is a list of one)."""
