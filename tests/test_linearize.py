@@ -145,7 +145,12 @@ def cart_pole(theta0: float = 0.0) -> sd.Model:
 def test_cart_pole_lqr_stabilises_the_nonlinear_run():
     lin = sd.linearize(cart_pole(), inputs=["cart"], outputs=["cart", "pole"])
     md = lin.modes()
-    assert not np.all(md.stable)  # upright: unstable
+    # upright: the pole diverges at s^2 = mp g l / (I + mp l^2 mc / (mc + mp)) (I = mp l^2 / 3
+    # about its centre), the cart's position is a rigid-body mode
+    mc, mp, lp = 1.0, 0.3, 0.5
+    s2 = mp * G * lp / (mp * lp**2 / 3 + mp * lp**2 * mc / (mc + mp))
+    assert np.sum(md.rigid) == 1 and np.sum(~md.stable) == 1
+    assert abs(md.omega[~md.stable][0] / math.sqrt(s2) - 1) <= 1e-10
     sys = lin.state_space()
     assert sys.input_labels == ["cart"] and sys.output_labels == ["cart", "pole"]
     Kx, _, E = control.lqr(sys, np.diag([10.0, 50.0, 1.0, 1.0]), np.array([[0.1]]))
