@@ -49,6 +49,10 @@ def _with_pid_states(s, inputs, rng):
     time loop writes them: a step's integral and its tangent ki h/2 exercised."""
     for slot in s.inputs.pid_slots:
         inputs["u"][slot:slot + 3] = (rng.normal(), rng.normal(), 0.01)
+    for i, slot in enumerate(s.inputs.contact_slots):  # contacts (contact.hpp): bristle, slip
+        # velocity, penetration, its rate, impact speed (0: touching down in the step), h/2
+        inputs["u"][slot:slot + 20] = (*rng.normal(size=6), -0.1, 1.0, 1.5 * ((i + 1) % 2),
+                                       *np.zeros(10), 0.01)
     return inputs
 
 

@@ -167,6 +167,11 @@ def everything_model() -> sd.Model:
                damping=(0.1, 0.2, 0.3, 0.01, 0.02, 0.03))
     mb.bushing("diag", "b5", "arm", stiffness=(1, 2, 3, 4, 5, 6), orientation=R,
                deformation=(0.01, 0.0, -0.02, 0.1, 0.2, 0.0))
+    mb.collision("floor", "ground", "plane", at=(0, 0, -3.0), normal=(0.1, 0, 1),
+                 material=sd.ContactMaterial(stiffness=1e7, restitution=0.3, friction=0.8))
+    mb.collision("knob", "tensor", "sphere", size=0.05, at=(0.1, 0.2, 0.3),
+                 material=sd.ContactMaterial(young=2e11, poisson=0.28, stiction_length=1e-4),
+                 exclude=("arm",))
     return mb.build()
 
 

@@ -73,6 +73,23 @@ def _beam(n=70):
     return mb.build()
 
 
+def _contacts(n=70):
+    """A row of n balls on a floor, each touching the floor and its neighbours (exclusions
+    keep the other pairs out): n + n - 1 contacts, sliding and spinning."""
+    rng = np.random.default_rng(3)
+    mb = sd.ModelBuilder(gravity=(0.0, 0.0, -9.81))
+    mb.node("g", fixed=True)
+    mat = sd.ContactMaterial(stiffness=1e6, restitution=0.6, friction=0.4)
+    mb.collision("floor", "g", "plane", material=mat)
+    for i in range(n):
+        mb.node(f"b{i}", position=(0.1999 * i, 0.0, 0.0999), mass=1.0, inertia=(4e-3,) * 3,
+                velocity=tuple(0.01 * rng.normal(size=3)),
+                angular_velocity=tuple(rng.normal(size=3)))
+        far = tuple(f"b{j}" for j in range(n) if abs(j - i) > 1)
+        mb.collision(f"s{i}", f"b{i}", "sphere", size=0.1, material=mat, exclude=far)
+    return mb.build()
+
+
 def _run(model, threads, t_end=0.02, step=2e-3):
     sd.set_threads(threads)
     try:
@@ -98,7 +115,7 @@ def test_the_models_cover_every_element_type_in_several_chunks(mixed):
     """(So that the comparisons below run every kernel in parallel parts.) A chain's chunks
     take two colours: neighbouring chunks share a node."""
     seen = {}
-    for s in (mixed, sd.compile_model(_beam())):
+    for s in (mixed, sd.compile_model(_beam()), sd.compile_model(_contacts())):
         for key, (n, chunks, colours) in _colours(s).items():
             assert chunks == -(-n // 32) and (colours >= 1 or n == 0), (key, n, chunks, colours)
             if n >= seen.get(key, (0,))[0]:
@@ -108,9 +125,10 @@ def test_the_models_cover_every_element_type_in_several_chunks(mixed):
     assert seen["joint"][2] == 2 and seen["beam"][2] == 2, seen
 
 
-@pytest.mark.parametrize("which", ["mixed", "beam"])
+@pytest.mark.parametrize("which", ["mixed", "beam", "contacts"])
 def test_results_do_not_depend_on_the_thread_count(mixed, which):
-    model = mixed if which == "mixed" else sd.compile_model(_beam())
+    model = {"mixed": lambda: mixed, "beam": lambda: sd.compile_model(_beam()),
+             "contacts": lambda: sd.compile_model(_contacts())}[which]()
     runs = [_run(model, th) for th in (1, 2, 3, 2)]
     for ch in CHANNELS:
         ref = np.asarray(getattr(runs[0], ch))

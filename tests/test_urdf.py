@@ -576,3 +576,32 @@ def test_imported_arm_falls_as_pinocchio_aba_at_order_2():
     assert np.all(np.abs(np.log2(np.array(err[:-1]) / err[1:]) - 2.0) < 0.1), err
     assert np.all(np.abs(np.log2(np.array(drift[:-1]) / drift[1:]) - 2.0) < 0.1), drift
     assert err[-1] < 1e-4
+
+
+def test_visual_mesh_the_viewer_cannot_read_drawn_with_the_collision_mesh():
+    mb = load("dae_visual.urdf")
+    (v,) = mb.build().visuals
+    assert Path(v.file) == (DATA / "meshes/tet.stl").resolve()
+    assert np.allclose(v.offset, (0, 0, 0.3))
+    text = mb.urdf.report()
+    assert "tet.dae" in text and "drawn with their <collision> mesh instead: base" in text
+
+
+def test_imported_panda_with_mimic_mass_matrix_matches_pinocchio():
+    """Panda's second finger follows the first (<mimic>, an exact coupling): the mass matrix
+    in the 8 independent coordinates at 20 random states against Pinocchio's CRBA on its model
+    with mimic joints (``buildModelFromUrdf(..., mimic=True)``)."""
+    path = str(_robots_dir() / REAL["panda"])
+    pm = pin.buildModelFromUrdf(path, mimic=True)
+    data = pm.createData()
+    js = sd.JointSpace(load(path).build())
+    ids = [pm.getJointId(label.split("'")[1]) for label in js.joint_names]
+    perm = [pm.joints[i].idx_v for i in ids]
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        q, qs = pin.neutral(pm), js.neutral().copy()
+        for k, i in enumerate(ids):
+            qs[k] = q[pm.joints[i].idx_q] = rng.uniform(-1, 1) * (0.03 if k == 7 else 1.0)
+        M = pin.crba(pm, data, q)
+        M = np.triu(M) + np.triu(M, 1).T
+        assert np.abs(js.mass_matrix(qs) - M[np.ix_(perm, perm)]).max() <= 1e-10 * np.abs(M).max()

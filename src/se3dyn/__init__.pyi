@@ -30,6 +30,7 @@ from se3dyn.io.fmu import export_fmu as export_fmu
 from se3dyn.io.urdf import load_urdf as load_urdf
 from se3dyn.model import examples as examples
 from se3dyn.model.builder import ModelBuilder as ModelBuilder
+from se3dyn.model.contact import ContactMaterial as ContactMaterial
 from se3dyn.model.joint_types import JOINT_TYPES as JOINT_TYPES
 from se3dyn.model.specs import PD as PD
 from se3dyn.model.specs import PID as PID

@@ -91,6 +91,13 @@ struct Engine {
   std::vector<double> ctrl_ts;  // (npid,) sample time of a sampled law, 0 for a continuous one
   std::vector<int> ctrl_dof;    // (npid,) the controlled unknown
   int npid() const { return int(ctrl_slot.size()); }
+  // contacts (elements/contact.hpp): per contact the first input slot of its state (CSTATE
+  // numbers and h/2), the states in ctrl after the PID states' (Stepper::controller_inputs)
+  std::vector<int> cs_slot;
+  static constexpr int CSTATE = 19;  // (elements/contact.hpp: 9 state numbers, 10 outputs)
+  int ncs() const { return int(cs_slot.size()); }
+  // the states a step carries (State.ctrl): 2 per PID law, CSTATE per contact
+  long nctrl() const { return 2L * npid() + long(CSTATE) * ncs(); }
   // couplings alpha_b = ratio alpha_a + offset (se3dyn.ModelBuilder.coupling): per coupling
   // the leader's and the follower's unknowns, the ratio and the offset; the merges of the
   // follower's matrix column and row into the leader's, (src, dst) values and factor, columns

@@ -92,6 +92,7 @@ void build(Engine& E, const nb::dict& d) {
   E.ctrl_slot = ivec<int>(d, "ctrl_slot");  // (npid,)
   E.ctrl_ts = dvec(d, "ctrl_ts");            // (npid,) sample times, 0: continuous
   E.ctrl_dof = ivec<int>(d, "ctrl_dof");     // (npid,) controlled unknowns
+  E.cs_slot = ivec<int>(d, "cs_slot");       // (ncs,) contacts' state slots
   E.law_out.assign(nb::cast<long>(item(d, "law_size")), 0.0);  // (the user's laws)
   E.law_t = nb::cast<int>(item(d, "law_t"));
   E.cpl_lead = ivec<int>(d, "cpl_lead");
@@ -260,7 +261,7 @@ NB_MODULE(_engine, m) {
             }
             if (!ctrl.is_none()) {  // the PID states (2 npid,) of the iterate
               DArr p = nb::cast<DArr>(ctrl);
-              o.ctrl = ptr(p, 2L * E.npid(), "ctrl");
+              o.ctrl = ptr(p, E.nctrl(), "ctrl");
             }
             double fs = E.evaluate(cptr(alpha_n, nq, "alpha_n"), cptr(n, nq, "n"),
                                    cptr(v, nq, "v"), cptr(vd, nq, "vd"), cptr(lam, nm, "lam"),
@@ -436,7 +437,7 @@ NB_MODULE(_engine, m) {
              // after a converged step (step()): the switch of the sampled PID laws at its end
              // (Stepper::sample_jump), vd, a, lam in place; returns the power change
              Engine& E = *S.E;
-             return S.sample_jump(cptr(ctrl_old, 2L * E.npid(), "ctrl_old"),
+             return S.sample_jump(cptr(ctrl_old, E.nctrl(), "ctrl_old"),
                                   cptr(v, E.nq, "v"), ptr(vd, E.nq, "vd"), ptr(a, E.nq, "a"),
                                   ptr(lam, E.nm, "lam"));
            })
@@ -444,7 +445,7 @@ NB_MODULE(_engine, m) {
            [](const Stepper& S, CArr ctrl, double h, double t1, DArr u) {
              // u (nu,) with the PID states of ctrl (2 npid,) for a step of size h to t1, in
              // place
-             S.controller_inputs(cptr(ctrl, 2L * S.E->npid(), "ctrl"), h, t1,
+             S.controller_inputs(cptr(ctrl, S.E->nctrl(), "ctrl"), h, t1,
                                  ptr(u, S.E->nu, "u"));
            })
       .def("memory_size", [](const Stepper& S) { return S.memory_size(); })
@@ -501,7 +502,7 @@ NB_MODULE(_engine, m) {
             Stepper::Params P{0.0, am, af, g, b, tol_r, ltol, lscale, kmax, max_iter, reuse};
             Stepper::Carry c{ptr(H, 16 * F, "H"), ptr(alpha, nq, "alpha"), ptr(v, nq, "v"),
                              ptr(vd, nq, "vd"), ptr(a, nq, "a"), ptr(lam, nm, "lam"),
-                             ptr(acc, 8, "acc"), ptr(ctrl, 2L * E.npid(), "ctrl")};
+                             ptr(acc, 8, "acc"), ptr(ctrl, E.nctrl(), "ctrl")};
             Stepper::Rows rows;
             rows.cap = static_cast<long>(rt.size());
             rows.count = count;

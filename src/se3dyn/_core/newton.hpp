@@ -160,7 +160,7 @@ struct Stepper {
     for (int b : E->cpl_follow) dropped[b] = 1;
     cforce.assign(E->ncpl(), 0.0);
     effort.assign(E->ndrive(), 0.0);
-    ctrl_out.assign(2L * E->npid(), 0.0);
+    ctrl_out.assign(E->nctrl(), 0.0);
     for (int c = 0; c < N; ++c)
       for (int p = colptr[c]; p < colptr[c + 1]; ++p) {
         int rw = rowind[p];
@@ -699,6 +699,12 @@ struct Stepper {
       z[1] = ctrl[2 * i + 1];
       z[2] = E->ctrl_ts[i] > 0 ? t1 : 0.5 * h;
     }
+    const double* cs = ctrl + 2L * E->npid();  // contacts: their states and h/2
+    for (int i = 0; i < E->ncs(); ++i) {
+      double* z = u + E->cs_slot[i];
+      for (int j = 0; j < Engine::CSTATE; ++j) z[j] = cs[Engine::CSTATE * i + j];
+      z[Engine::CSTATE] = 0.5 * h;
+    }
   }
   struct RunResult {
     int status = 0, done = 0, iterations = 0, factorisations = 0;
@@ -738,7 +744,7 @@ struct Stepper {
     for (int i = i0; i < i1; ++i) {
       double t1 = times[i], h = t1 - c.acc[7], h_last = c.acc[6];
       const double* u = U + (long)i * nu;
-      if (G.npid() > 0) {  // (the table's rows stay as they are: a copy with the PID states)
+      if (G.nctrl() > 0) {  // (the table's rows stay as they are: a copy with the states)
         std::copy(u, u + nu, ubuf.begin());
         controller_inputs(c.ctrl, h, t1, ubuf.data());
         u = ubuf.data();

@@ -155,7 +155,8 @@ def _check_one(path: str, rank_max: int) -> None:
     from se3dyn.io.modelfile import ELEMENT_SECTIONS
 
     others = [f"{len(getattr(model, es.key))} {es.key}" for es in ELEMENT_SECTIONS
-              if es.key not in ("joints", "loads", "beams") and getattr(model, es.key, ())]
+              if es.key not in ("joints", "loads", "beams", "collisions")
+              and getattr(model, es.key, ())]
     if others:  # force elements of the other element types (model attribute = file section)
         print("  force elements: " + ", ".join(others))
     if model.beams:
@@ -177,6 +178,11 @@ def _check_one(path: str, rank_max: int) -> None:
             f"{c.name}: {c.follower[0]!r} = {c.ratio:g} {c.leader[0]!r}"
             + (f" + {c.offset:g}" if c.offset else "") for c in model.couplings[:8])
             + (", ..." if len(model.couplings) > 8 else "") + ")")
+    if model.collisions:
+        from se3dyn.model.contact import describe
+
+        for line in describe(model, s.contacts):
+            print("  " + line)
     kinds: dict[str, int] = {}
     for j in model.joints:
         kinds[j.type] = kinds.get(j.type, 0) + 1

@@ -302,7 +302,7 @@ def _build(s) -> Condensation | None:
 
     nidx = {name: i for i, name in enumerate(s.node_names)}
     root, used = _rigid_groups(s, nidx)
-    if not used:
+    if not used or s.contacts:  # (contact pairs are not carried to a reduced model yet)
         return None
     rigid = np.array(sorted(used), np.int64)
     roots = [i for i in range(s.M) if root[i] == i]

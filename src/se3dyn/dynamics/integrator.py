@@ -358,7 +358,7 @@ class GeneralizedAlpha:
         # the index-3 layout; kept only when the steps use it too
         keep = not self.index2
         stp = _stepper(s, False, dropped, ws, keep=keep)
-        ctrl = np.zeros(2 * len(s.inputs.pid_slots))
+        ctrl = np.zeros(s.inputs.nctrl)
         if ctrl.size:  # PID laws: their states at t0 (a sampled law's first sample), in force
             stp.controller_inputs(ctrl, 0.0, float(t0), inputs["u"])
             ctrl = evaluate(s, H, HJ, s.alpha0, zero, v, vd0, lam0, inputs, ws=ws).ctrl

@@ -78,7 +78,7 @@ class _Recorder:
     Newton iterations) cover every row either way.
     """
 
-    _FIELDS = ("t", "H", "v", "vd", "lam", "alpha", "scal")
+    _FIELDS = ("t", "H", "v", "vd", "lam", "alpha", "scal", "cs")
 
     def __init__(self, s: System, capacity: int, sink=None, limit: int | None = None, *,
                  store: bool = True, on_rows=None, cond=None, full_ws=None):
@@ -113,6 +113,10 @@ class _Recorder:
         self.lam = np.empty((capacity, s.nm))
         self.alpha = np.empty((capacity, s.nq))
         self.scal = np.empty((capacity, 9))
+        #: the contact pairs' states and outputs of the rows (State.ctrl after the PID states;
+        #: no columns without contacts; runs with contacts go step by step: add())
+        self.ncs = s.inputs.nctrl - s.inputs.contact_ctrl if s.contacts else 0
+        self.cs = np.empty((capacity, self.ncs))
 
     def _resize(self, rows: int) -> None:
         for name in self._FIELDS:
@@ -154,6 +158,8 @@ class _Recorder:
         self.alpha[i] = st.alpha
         self.scal[i] = (kin, pot, spring, st.work_act, st.work_ext, st.dissipated, iters, res,
                         con)
+        if self.ncs:
+            self.cs[i] = st.ctrl[len(st.ctrl) - self.ncs:]
         self.n += 1
         self.total += 1
         if self.sink is not None:
@@ -197,6 +203,7 @@ class _Recorder:
             cp = (lambda x: x[lo:hi].copy()) if copy else (lambda x: x[lo:hi])  # noqa: E731
         arr = dict(t=cp(self.t), H=cp(self.H), v=cp(self.v), vd=cp(self.vd),
                    lam=cp(self.lam), alpha=cp(self.alpha))
+        extra = dict(contact_rows=cp(self.cs)) if self.ncs else {}
         if self.cond is not None:
             arr["H"], arr["v"], arr["vd"], arr["alpha"], arr["lam"] = (
                 self.cond.expand_rows(arr["H"], arr["v"], arr["vd"], arr["alpha"],
@@ -206,7 +213,7 @@ class _Recorder:
                       work_actuators=c[:, 3].copy(), work_loads=c[:, 4].copy(),
                       dissipation=c[:, 5].copy(), iterations=c[:, 6].astype(int),
                       residual=c[:, 7].copy(), constraint=c[:, 8].copy(),
-                      stats=stats if stats is not None else {})
+                      stats=stats if stats is not None else {}, **extra)
         if self.cond is not None and len(self.cond.rigid):
             out.defer_multipliers(self.cond.fill_multipliers)
         return out
@@ -294,7 +301,8 @@ class _Recorder:
                 return out
             return Results(system=self.out_system, stats=stats, **{
                 f.name: np.concatenate([getattr(first, f.name), getattr(last, f.name)])
-                for f in dataclasses.fields(Results) if f.name not in ("system", "stats")})
+                for f in dataclasses.fields(Results) if f.name not in ("system", "stats")
+                and getattr(first, f.name) is not None})
         # in place: the trimmed arrays become the results (no copy of the rows)
         self._resize(n)
         return self._block(0, n, stats, copy=False)

@@ -248,6 +248,8 @@ def simulate(model: Model | System, t_end: float, step: float, *, rho_inf: float
         on_rows=on_rows, store=store, initial_state=initial_state, condense=condense,
         global_error=global_error)
     plan = _plan(cfg, _schedule)
+    if s.contacts and plan.compiled:  # contact-aware steps (_contact_steps): step by step
+        plan = dataclasses.replace(plan, compiled=False)
     run = _Run(s, cfg, plan)
     if plan.compiled:
         _fixed_compiled(run)
@@ -592,8 +594,51 @@ def _adaptive_step(run: _Run, h: float):
         stats["newton_iterations"] += info.iterations
         return None, None, max(cfg.h_min, stepcontrol.next_step(h, err, accepted=False)), \
             None, None
+    q = stepcontrol.contact_ratio(run.s, st, new, h)
+    if q > 1 and h > cfg.h_min * (1 + 1e-9):  # a contact not resolved: shrink (docs/contact.md)
+        stats["rejected"] += 1
+        stats["newton_iterations"] += info.iterations
+        return None, None, max(cfg.h_min, h * max(0.2, 0.9 / q)), None, None
+    new = stepcontrol.contact_restart(run.s, st, new)
     stats["error_estimate"] += est
     return new, info, h, err, lim
+
+
+def _contact_steps(run: _Run, st: State, h: float):
+    """A prescribed step of size ``h`` from ``st`` in as many substeps as its contacts need
+    (:func:`se3dyn.dynamics.stepcontrol.contact_ratio` <= 1; a failed Newton iteration also
+    shrinks the substep): ``(new, info)``, info that of the last substep with the iterations
+    of all. The substep carries over to the next prescribed step while a contact is on."""
+    t1 = st.t + h
+    hs = min(getattr(run, "h_contact", h), h)
+    cur, its, floor = st, 0, 1e-9 * h
+    while True:
+        left = t1 - cur.t
+        if hs >= left * (1 - 1e-9):
+            hs = left
+        try:
+            new, info = run.integ.step(run.s, cur, hs, run.solver, run.ws)
+            q = stepcontrol.contact_ratio(run.s, cur, new, hs)
+        except NewtonError:
+            if hs / 4 < floor:
+                raise
+            new, q = None, 4.0
+        if q > 1 and hs > floor:
+            run.stats["rejected"] += 1
+            hs *= max(0.2, 0.9 / q)
+            continue
+        its += info.iterations
+        new = stepcontrol.contact_restart(run.s, cur, new)
+        if hs == left:
+            cur = dataclasses.replace(new, t=t1)
+            break
+        cur = new
+        if q == 0:  # apart: a restart (contact_restart), no history to grow the step from
+            hs = h
+        elif q < 0.5:
+            hs = min(2 * hs, h)
+    run.h_contact = hs if q > 0 else h
+    return cur, dataclasses.replace(info, iterations=its)
 
 
 def _prescribed_step(run: _Run):
@@ -609,7 +654,10 @@ def _prescribed_step(run: _Run):
         regular = t1 == cfg.t_start + (i + 1) * cfg.step
     h = t1 - st.t
     try:
-        new, info = run.integ.step(run.s, st, h, run.solver, run.ws)
+        if run.s.contacts:
+            new, info = _contact_steps(run, st, h)
+        else:
+            new, info = run.integ.step(run.s, st, h, run.solver, run.ws)
     except SimulationError as exc:
         if run.cond is not None and isinstance(exc, NewtonError):
             run.uncondense()

@@ -120,6 +120,11 @@ initial_velocities :
             k0 = _check_initial_state(s, initial_state, t_start, t_end, step, adaptive) or k0
         _check_size(s, span, step, output_every, opt["output_step"], adaptive, bool(store))
         _check_sampled(s, t_start, step, adaptive)
+        if getattr(s, "contacts", ()) and not adaptive and opt["output_step"] is not None:
+            raise ModelError("simulate", "output_step", "None for fixed steps of a model with "
+                             "contact pairs (its steps go in contact-aware substeps, which "
+                             "dense output does not follow yet): use output_every, or tol",
+                             opt["output_step"])
         if isinstance(rho_inf, numbers.Real) and not isinstance(rho_inf, bool):
             rho_inf = float(rho_inf)
         integ = GeneralizedAlpha(rho_inf=rho_inf, tol_residual=tol_residual,

@@ -162,6 +162,10 @@ redundant, newton, initial_velocities, condense :
                  newton: str = "modified", initial_velocities: str = "project",
                  condense: bool = True):
         s = system_of(model)
+        if s.contacts:  # (its compiled loop has no contact-aware substeps: docs/contact.md)
+            raise ModelError("Simulator", "model", "a model without contact pairs (the "
+                             "contact-aware substeps run in simulate only, for now)",
+                             f"{len(s.contacts)} contact pairs")
         for fld, val in (("step", step), ("t_start", t_start)):
             if (not isinstance(val, numbers.Real) or isinstance(val, bool)
                     or not math.isfinite(float(val))):

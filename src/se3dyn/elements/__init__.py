@@ -22,10 +22,11 @@ The order of the registry is the order of the batches in the engine.
 
 from __future__ import annotations
 
-from se3dyn.elements import beam, body, bushing, joint, joint_force, load, spring_damper
+from se3dyn.elements import beam, body, bushing, contact, joint, joint_force, load, spring_damper
 
 #: type key -> module, in engine order (and in the order of the model-file sections: beams
 #: create nodes that joints, springs and loads may use)
-REGISTRY = {m.KEY: m for m in (body, beam, joint, joint_force, load, spring_damper, bushing)}
+REGISTRY = {m.KEY: m for m in (body, beam, joint, joint_force, load, spring_damper, bushing,
+                               contact)}
 
 __all__ = ["REGISTRY"]

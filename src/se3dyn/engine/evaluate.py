@@ -135,7 +135,7 @@ def evaluate(s: System, Hn: np.ndarray, HJn: np.ndarray, alpha_n: np.ndarray, n:
         vals = np.empty(lay.nvals2 if idx2 else lay.nvals)
     energy = np.empty(6)
     arhs = np.empty(s.nm)
-    ctrl = np.zeros(2 * len(s.inputs.pid_slots))
+    ctrl = np.zeros(s.inputs.nctrl)
     c = (0.0, 0.0, 0.0) if coef is None else coef
     u = np.ascontiguousarray(inputs["u"], dtype=float)
     f = lambda x: np.ascontiguousarray(x, dtype=float)  # noqa: E731

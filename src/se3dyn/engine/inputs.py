@@ -21,6 +21,12 @@ sp = LazyModule("scipy.sparse")
 spla = LazyModule("scipy.sparse.linalg")
 
 
+#: numbers of a contact pair in State.ctrl (elements/contact.hpp): its state, bristle (3), slip
+#: velocity (3), penetration, its rate, the impact speed; then its outputs, the normal force,
+#: the force on shape b (3), the contact point (3) and the normal (3), inertial frame
+CONTACT_STATE = 19
+
+
 class _Inputs:
     """Slots of the time-dependent inputs ``u`` (nu,) handed to the element kernels.
 
@@ -28,8 +34,8 @@ class _Inputs:
     joint its k actuator values, per controlled joint its k PD targets and k target rates, per
     driven coordinate its prescribed position (position drivers), rate and acceleration.
     ``kind`` (nu,) tells each slot's kind (0 gravity, 1 load, 2 actuator, 3 PD target, 4 PD
-    target rate, 5 driven position, 6 driven rate, 7 driven acceleration, 8 PID state), for
-    load stepping in statics. ``names`` lists, per input a user may set
+    target rate, 5 driven position, 6 driven rate, 7 driven acceleration, 8 PID state, 9 time,
+    10 contact state), for load stepping in statics. ``names`` lists, per input a user may set
     (:class:`se3dyn.dynamics.simulator.Simulator`), ``(kind, item, field, slot, k)``: kind
     ``"gravity"``, ``"load"`` or ``"joint"``, the item's name, the field (``"force"``,
     ``"torque"``, ``"actuator"``, ``"target"``, ``"target_rate"``; None for gravity).
@@ -117,6 +123,16 @@ class _Inputs:
             self.time_slot = len(kind)
             self.sources.append((len(kind), 1, _Time(), "the model", "time", 0))
             kind.append(9)
+        #: per contact pair (System.contacts): the first of its state slots (19 numbers and h/2,
+        #: elements/contact.hpp), which the time loop fills (zero in the tables), kind 10
+        self.contact_slots: list[int] = []
+        for _ in d.get("contacts", ()):
+            self.contact_slots.append(len(kind))
+            kind += [10] * (CONTACT_STATE + 1)
+        #: the states a step carries (State.ctrl): 2 per PID-controlled coordinate, then
+        #: CONTACT_STATE per contact
+        self.contact_ctrl = 2 * len(self.pid_slots)  # (where the contacts' states begin)
+        self.nctrl = self.contact_ctrl + CONTACT_STATE * len(self.contact_slots)
         self.kind = np.array(kind, np.int64)
         self.nu = len(kind)
         self.gravity = np.asarray(model.gravity, float)

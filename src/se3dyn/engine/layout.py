@@ -209,6 +209,7 @@ class Layout:
             ctrl_slot=np.array(s.inputs.pid_slots, np.int64),
             ctrl_ts=np.array([s.dof_ts[d] for _, d in s.inputs.pid_ref], float),
             ctrl_dof=np.array([d for _, d in s.inputs.pid_ref], np.int64),
+            cs_slot=np.array(s.inputs.contact_slots, np.int64),
             law_size=_law_size(s), law_t=int(s.inputs.time_slot),
             **_log_tables(s, self.frame_A, self.F, self._logs))
         rg = self._blocks_in_value_order()

@@ -31,6 +31,7 @@ from se3dyn import lie
 from se3dyn._lazy import LazyModule
 from se3dyn.engine.inputs import _Inputs
 from se3dyn.errors import ModelError
+from se3dyn.model.contact import contact_pairs
 from se3dyn.model.sensors import parse_sensor
 from se3dyn.model.specs import Model
 
@@ -151,6 +152,8 @@ class System(LayoutCounts):
     springs: tuple = ()  # point spring-dampers (node a, node b, c_a, c_b, k, d, L0)
     beams: tuple = ()  # beam elements, see _beams
     inputs: object = None  # _Inputs: slots of the time-dependent inputs u
+    #: contact pairs (se3dyn.model.contact.Pair), by the pair rule of se3dyn.model.contact
+    contacts: tuple = ()
     #: driven coordinates (ModelBuilder.drive), one entry each: the unknown, 0 for a position
     #: driver or 1 for a velocity one, and the index of its drive in ``model.drives``
     drive_dof: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -250,7 +253,8 @@ def compile_model(model: Model) -> System:
         **_dof_tables(joints, joint["joint_dofadr"], nq),
         gravity=model.gravity.copy(), labels=tuple(labels), items=tuple(items),
         length_scale=max(L, 1.0), pattern={}, node_com=_node_com(nodes, H0),
-        springs=_springs(model, nidx, H0), beams=_beams(model, nidx))
+        springs=_springs(model, nidx, H0), beams=_beams(model, nidx),
+        contacts=tuple(contact_pairs(model)))
     _lump_beam_masses(sysd, model, nidx)
     sysd.update(_drive_tables(model, joint["joint_dofadr"]))
     sysd.update(_sensor_tables(model, nidx, joint["joint_dofadr"]))

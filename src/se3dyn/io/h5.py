@@ -597,23 +597,25 @@ _SERIES = ("nodes/position", "nodes/rotation", "nodes/velocity", "nodes/accelera
 
 _STATE_DOC = ("t, h_last, work_act, work_ext, dissipated, power (3), number of dropped "
               "equations nr, dropped (nm, first nr used), H (M x 16), HJ (m x 16), v, vd, a "
-              "(nq each), lam (nm), alpha (nq), the PID states (z, e) of State.ctrl (2 per "
-              "PID-controlled coordinate), nv (the values of the linear solver's memory "
-              "in /restart/solver, -1: none)")
+              "(nq each), lam (nm), alpha (nq), the states of State.ctrl (the PID states "
+              "(z, e), 2 per PID-controlled coordinate, then 19 per contact pair), nv (the "
+              "values of the linear solver's memory in /restart/solver, -1: none)")
 _MEMORY_DOC = ("State.solver.ref of the checkpoint in the slot of the same index of "
                "/restart/state (its first nv values): the iteration matrix of the last full "
                "sparse LU factorisation, whose pivot sequence the next steps reuse; index 2: "
                "one more value, the mode of the iteration (0 split, 1 full matrix)")
 
 
-def _npid(s) -> int:
-    """PID-controlled coordinates of a system (State.ctrl holds 2 values each)."""
-    return len(getattr(getattr(s, "inputs", None), "pid_slots", ()))
+def _nctrl(s) -> int:
+    """The states a step carries (State.ctrl): 2 per PID-controlled coordinate, 19 per
+    contact pair."""
+    ins = getattr(s, "inputs", None)
+    return int(getattr(ins, "nctrl", 2 * len(getattr(ins, "pid_slots", ()))))
 
 
 def _state_length(s) -> int:
     M, m, nq, nm = len(s.node_names), len(s.joint_names), int(s.nq), int(s.nm)
-    return 9 + nm + 16 * (M + m) + 4 * nq + nm + 2 * _npid(s) + 1
+    return 9 + nm + 16 * (M + m) + 4 * nq + nm + _nctrl(s) + 1
 
 
 def _pack_slot(s, cp, rows: int, seq: int, base_its: int):
@@ -684,7 +686,7 @@ def _read_checkpoint(f: h5py.File, s):
     HJ = take(16 * m).reshape(m, 4, 4)
     v, vd, a = take(nq), take(nq), take(nq)
     lam, alpha = take(nm), take(nq)
-    extra = {"ctrl": take(2 * _npid(s))}
+    extra = {"ctrl": take(_nctrl(s))}
     if memory is not None:
         from se3dyn.engine.memory import SolverMemory
 

@@ -448,6 +448,27 @@ class Strs(_Type):
 
 
 @_schema_type
+class StrList(_Type):
+    """A list of names (a single name is a list of one)."""
+
+    @property
+    def text(self) -> str:
+        return "list of names"
+
+    def schema(self) -> dict:
+        return {"oneOf": [{"type": "string"}, {"type": "array", "items": {"type": "string"}}]}
+
+    def convert(self, ctx, node, item, fld):
+        items = node.value if isinstance(node, SequenceNode) else [node]
+        out = []
+        for n in items:
+            if not isinstance(n, ScalarNode) or not n.value:
+                ctx.fail(n, item, fld, "a list of names")
+            out.append(str(n.value))
+        return tuple(out)
+
+
+@_schema_type
 class Vec(_Type):
     """``n`` numbers (``n`` None: ``lo``..``hi`` numbers)."""
 

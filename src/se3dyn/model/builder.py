@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from se3dyn.errors import ModelError, close_matches
+from se3dyn.model.contact import SHAPES, CollisionSpec, ContactMaterial, ContactPairSpec
 from se3dyn.model.joint_types import JOINT_SYNONYMS, JOINT_TYPES, is_abelian, unit_vector
 from se3dyn.model.sensors import check_sensor, parse_sensor
 from se3dyn.model.specs import (
@@ -77,6 +78,8 @@ class ModelBuilder:
         self._markers: dict[str, MarkerSpec] = {}
         self._drives: dict[str, DriveSpec] = {}
         self._couplings: dict[str, CouplingSpec] = {}
+        self._collisions: dict[str, CollisionSpec] = {}
+        self._contact_pairs: dict[frozenset, ContactPairSpec] = {}
 
     @classmethod
     def from_model(cls, model: Model) -> ModelBuilder:
@@ -97,8 +100,10 @@ class ModelBuilder:
                             ("_loads", model.loads), ("_springs", model.springs),
                             ("_bushings", model.bushings), ("_visuals", model.visuals),
                             ("_beams", model.beams), ("_markers", model.markers),
-                            ("_drives", model.drives), ("_couplings", model.couplings)):
+                            ("_drives", model.drives), ("_couplings", model.couplings),
+                            ("_collisions", model.collisions)):
             getattr(mb, attr).update((sp.name, sp) for sp in specs)
+        mb._contact_pairs.update((frozenset((p.a, p.b)), p) for p in model.contact_pairs)
         mb._composites.update(model.composites)
         return mb
 
@@ -579,6 +584,95 @@ class ModelBuilder:
                                                vals["stiffness"], vals["damping"], L0)
 
     # -----------------------------------------------------------------------------------------
+    def collision(self, name: str, node: str, shape: str, *, size: Any = None, at: Any = None,
+                  normal: Any = None, material: ContactMaterial | None = None,
+                  exclude: Any = ()) -> None:
+        """Add a collision shape on a node (compliant contact, docs/contact.md).
+
+        Parameters
+        ----------
+        name : str
+            Unique shape name.
+        node : str
+            The node it moves with: fixed, or with mass.
+        shape : {"sphere", "plane"}
+            A sphere, or the half-space below a plane (its outward side up).
+        size : float
+            Radius of a sphere (m), > 0; not used by a plane.
+        at : array_like (3,), optional
+            Centre of a sphere or a point of a plane, in the inertial frame of the initial
+            configuration; the node's position by default.
+        normal : array_like (3,), optional
+            Outward normal of a plane (inertial frame, initial configuration); +z by default.
+        material : ContactMaterial, optional
+            The shape's contact law (``ContactMaterial()`` by default).
+        exclude : sequence of str
+            Shapes or nodes this shape never touches.
+
+        Every sphere touches every plane and sphere on another node (pair rule:
+        :mod:`se3dyn.model.contact`); :meth:`contact_pair` sets a pair's material or disables it.
+        """
+        item = f"collision {_check_name('collision', name)!r} ({shape})"
+        if name in self._collisions:
+            raise ModelError(item, "name", "a new collision name", name, "already used")
+        if node not in self._nodes:
+            raise ModelError(item, "node", "an existing node", node, _did_you_mean(
+                node, list(self._nodes)))
+        nd = self._nodes[node]
+        if not nd.fixed and nd.mass <= 0:
+            raise ModelError(item, "node", "a fixed node or a node with mass", node,
+                             "a contact force on a massless node has no inertia to act on")
+        if shape not in SHAPES:
+            raise ModelError(item, "shape", f"one of {', '.join(SHAPES)}", shape)
+        r = 0.0
+        if shape == "sphere":
+            try:
+                r = float(size)
+            except (TypeError, ValueError):
+                raise ModelError(item, "size", "a positive radius (m)", size) from None
+            if isinstance(size, bool) or not math.isfinite(r) or r <= 0 or r > MAX_ABS:
+                raise ModelError(item, "size", "a positive finite radius (m)", size)
+        p = nd.position if at is None else _vec(at, 3, item, "at")
+        nrm = np.array([0.0, 0.0, 1.0]) if normal is None else _vec(normal, 3, item, "normal")
+        if shape == "plane":
+            ln = float(np.linalg.norm(nrm))
+            if ln == 0:
+                raise ModelError(item, "normal", "a non-zero 3-vector", normal)
+            nrm = nrm / ln
+        if material is None:
+            material = ContactMaterial()
+        if isinstance(material, dict):  # (model files, or a dict of ContactMaterial's fields)
+            try:
+                material = ContactMaterial(**material)
+            except ModelError as exc:
+                raise ModelError(item, f"material.{exc.field}", exc.expected, exc.got) from None
+            except TypeError as exc:
+                raise ModelError(item, "material", "the fields of se3dyn.ContactMaterial",
+                                 str(exc)) from None
+        if not isinstance(material, ContactMaterial):
+            raise ModelError(item, "material", "an se3dyn.ContactMaterial",
+                             type(material).__name__)
+        if isinstance(exclude, str):
+            exclude = (exclude,)
+        self._collisions[name] = CollisionSpec(name, node, shape, r, np.array(p, float),
+                                               np.array(nrm, float), material,
+                                               tuple(str(x) for x in exclude))
+
+    def contact_pair(self, shape_a: str, shape_b: str, *,
+                     material: ContactMaterial | None = None, enabled: bool = True) -> None:
+        """Give the pair of two shapes its own material, or disable it (``enabled=False``)."""
+        item = f"contact pair {shape_a!r}/{shape_b!r}"
+        for fld, nm in (("shape_a", shape_a), ("shape_b", shape_b)):
+            if nm not in self._collisions:
+                raise ModelError(item, fld, "an existing collision shape", nm,
+                                 _did_you_mean(nm, list(self._collisions)))
+        if material is not None and not isinstance(material, ContactMaterial):
+            raise ModelError(item, "material", "an se3dyn.ContactMaterial",
+                             type(material).__name__)
+        self._contact_pairs[frozenset((shape_a, shape_b))] = ContactPairSpec(
+            shape_a, shape_b, material, bool(enabled))
+
+    # -----------------------------------------------------------------------------------------
     def beam(self, name: str, node_a: str, node_b: str, *, elements: int | None = None,
              EA: Any, GA: Any, GJ: Any, EI: Any, mass_per_length: Any = 0.0,
              rotary_inertia: Any = None, damping: Any = 0.0, axis2: Any = None,
@@ -1018,9 +1112,16 @@ class ModelBuilder:
                       bushings=tuple(self._bushings.values()),
                       beams=tuple(self._beams.values()), markers=tuple(self._markers.values()),
                       drives=tuple(self._drives.values()),
-                      couplings=tuple(self._couplings.values()))
+                      couplings=tuple(self._couplings.values()),
+                      collisions=tuple(self._collisions.values()),
+                      contact_pairs=tuple(self._contact_pairs.values()))
         _check_sensors(model)
         return model
+
+
+def _did_you_mean(word: str, names: list) -> str:
+    m = close_matches(str(word), names)
+    return f"did you mean {m[0]!r}?" if m else f"known: {', '.join(names[:10]) or 'none'}"
 
 
 def _check_law(law, k: int, A_: np.ndarray, item: str, fld: str, init) -> None:

@@ -528,13 +528,17 @@ class Model:
     drives: tuple[DriveSpec, ...] = ()
     #: exact couplings of joint coordinates
     couplings: tuple[CouplingSpec, ...] = ()
+    #: collision shapes on nodes (:mod:`se3dyn.model.contact`)
+    collisions: tuple = ()
+    #: pairs of shapes with their own material, or disabled
+    contact_pairs: tuple = ()
 
     def __post_init__(self):
         # immutable for good: the arrays of every spec are read-only (a model compiles once,
         # :func:`se3dyn.engine.system.system_of`, so a change in place would go unseen)
         _read_only(self.gravity)
         for spec in (*self.nodes, *self.joints, *self.loads, *self.springs, *self.beams,
-                     *self.bushings, *self.visuals, *self.markers):
+                     *self.bushings, *self.visuals, *self.markers, *self.collisions):
             for value in vars(spec).values():
                 _read_only(value)
 

@@ -21,6 +21,8 @@ A channel is one scalar time history, shape (n,), named by a path (see ``docs/re
     drive/<drive>/power                             W   (sum of effort * rate)
     spring/<spring>/force|length|rate               N, m, m/s (point spring-damper)
     coupling/<coupling>/force                       N m or N (on the follower's coordinate)
+    contact/<pair>/force|point|normal/x|y|z         N, m, - (pair "a%2Fb": shapes a, b; the
+    contact/<pair>/normal_force|penetration         N, m   force on b; runs in memory)
     marker/<marker>/position/x|y|z                  m
     marker/<marker>/rotation/R11 .. R33             -   (marker axes in the inertial frame)
     marker/<marker>/velocity/material|inertial/x|y|z|wx|wy|wz      m/s, rad/s
@@ -162,6 +164,11 @@ def list_channels(res: Results) -> list[str]:
     for name in _spring_entries(res):
         out += [f"spring/{escape_name(name)}/{q}" for q in _SPRING]
     out += [f"coupling/{escape_name(n)}/force" for n in _coupling_names(res)]
+    if getattr(res, "contact_rows", None) is not None:
+        for n in res.contact_pairs():
+            e = f"contact/{escape_name(n)}"
+            out += [f"{e}/{q}/{c}" for q in ("force", "point", "normal") for c in "xyz"]
+            out += [f"{e}/normal_force", f"{e}/penetration"]
     mks = [escape_name(mk.name) for mk in marker_specs(s)]
     for i, mk in enumerate(mks):
         out += _marker_entries(f"marker/{mk}")
@@ -204,6 +211,21 @@ def _coupling_names(res: Results) -> list[str]:
     """The couplings of the model behind ``res``."""
     s = model_system(res.system)
     return [c.name for c in getattr(getattr(s, "model", None), "couplings", ())]
+
+
+def _contact_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
+    """A ``contact/<pair>/...`` channel (Results.contact_*)."""
+    pair = unescape_name(parts[1])
+    if pair not in res.contact_pairs():
+        raise _unknown(res, name, f"no contact pair {pair!r}")
+    if len(parts) == 3 and parts[2] in ("normal_force", "penetration"):
+        f = res.contact_normal_force if parts[2] == "normal_force" else res.contact_penetration
+        return f(pair)
+    if len(parts) == 4 and parts[2] in ("force", "point", "normal") and parts[3] in "xyz":
+        f = {"force": res.contact_force, "point": res.contact_point,
+             "normal": res.contact_normal}[parts[2]]
+        return f(pair)[:, "xyz".index(parts[3])]
+    raise _unknown(res, name)
 
 
 def _drive_channel(res: Results, name: str, parts: list[str]) -> np.ndarray:
@@ -357,6 +379,8 @@ def get_channel(res: Results, name: str) -> np.ndarray:
             f = {"force": res.spring_damper_force, "length": res.spring_damper_length,
                  "rate": res.spring_damper_rate}[parts[2]]
             return f(spring)
+        if parts[0] == "contact" and len(parts) in (3, 4):
+            return _contact_channel(res, name, parts)
         if parts[0] == "coupling" and len(parts) == 3 and parts[2] == "force":
             cpl = unescape_name(parts[1])
             if cpl not in _coupling_names(res):
@@ -414,6 +438,9 @@ def channel_unit(name: str, res: Results | None = None) -> str:
         return _SPRING.get(parts[2], "")
     if parts[0] == "coupling" and len(parts) == 3:
         return "N m | N"
+    if parts[0] == "contact" and len(parts) >= 3:
+        return {"force": "N", "normal_force": "N", "point": "m", "penetration": "m"}.get(
+            parts[2], "")
     if parts[0] == "drive" and len(parts) >= 3:
         return "W" if parts[2] == "power" else _drive_unit(res, parts)
     if parts[0] == "marker" and len(parts) >= 4:

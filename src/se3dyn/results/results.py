@@ -155,6 +155,9 @@ class Results:
     residual: np.ndarray
     constraint: np.ndarray
     stats: dict = field(default_factory=dict)
+    #: (n, 19 npairs) the contact pairs' states and outputs of the rows (runs in memory only;
+    #: :meth:`contact_force` and the other contact_* methods read them)
+    contact_rows: np.ndarray | None = None
 
     # ------------------------------------------------------------------------------------------
     def _node(self, name: str) -> int:
@@ -474,6 +477,44 @@ class Results:
         """Time derivative ``dL/dt`` of :meth:`spring_damper_length`, shape (n,) (m/s), from the
         exact velocities of the two points (positive when they move apart)."""
         return self._spring_damper(name)[1].copy()
+
+    # ------------------------------------------------------------------------------------------
+    # Contacts (se3dyn.elements.contact): the kernel's outputs at the rows, stored by the run
+    def contact_pairs(self) -> list[str]:
+        """The names ``"a/b"`` of the contact pairs (shape a: the plane, or the first sphere)."""
+        return [p.name for p in getattr(self.system, "contacts", ())]
+
+    def _contact(self, name: str, lo: int, hi: int) -> np.ndarray:
+        names = self.contact_pairs()
+        if name not in names:
+            raise _unknown("contact pair", name, names, "none: the model has no contact pairs")
+        if self.contact_rows is None:
+            raise ModelError("results", "contact pair", "results of a run in memory (the "
+                             "contact outputs are not stored in results files yet)", name)
+        k = 19 * names.index(name)
+        return self.contact_rows[:, k + lo:k + hi].copy()
+
+    def contact_force(self, name: str) -> np.ndarray:
+        """Force on the pair's shape b (its opposite on shape a), inertial frame, (n, 3) (N):
+        the normal force along :meth:`contact_normal` and the friction, at
+        :meth:`contact_point`; zero while apart."""
+        return self._contact(name, 10, 13)
+
+    def contact_normal_force(self, name: str) -> np.ndarray:
+        """The normal force ``k delta^{3/2} (1 + c delta'/v_in)`` (n,) (N), >= 0."""
+        return self._contact(name, 9, 10)[:, 0]
+
+    def contact_point(self, name: str) -> np.ndarray:
+        """The contact point (the middle of the overlap), inertial frame, (n, 3) (m)."""
+        return self._contact(name, 13, 16)
+
+    def contact_normal(self, name: str) -> np.ndarray:
+        """The unit normal from shape a into shape b, inertial frame, (n, 3)."""
+        return self._contact(name, 16, 19)
+
+    def contact_penetration(self, name: str) -> np.ndarray:
+        """The penetration ``delta`` (n,) (m): negative, the gap while apart."""
+        return self._contact(name, 6, 7)[:, 0]
 
     # ------------------------------------------------------------------------------------------
     # Markers and sensors: frames fixed on nodes (ModelBuilder.marker), H_m = H X

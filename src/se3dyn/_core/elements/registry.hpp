@@ -12,6 +12,7 @@
 #include "load.hpp"
 #include "spring_damper.hpp"
 #include "bushing.hpp"
+#include "contact.hpp"
 
 namespace se3dyn {
 
@@ -23,6 +24,7 @@ inline std::unique_ptr<ElementBatch> make_batch(const std::string& key) {
   if (key == "spring_damper") return std::make_unique<SpringDampers>();
   if (key == "bushing") return std::make_unique<Bushings>();
   if (key == "beam") return std::make_unique<Beams>();
+  if (key == "contact") return std::make_unique<Contacts>();
   throw std::invalid_argument("no compiled kernel for the element type '" + key + "'");
 }
 

@@ -71,6 +71,8 @@ class UrdfInfo:
     notes: list = field(default_factory=list)
     #: meshes found that the viewer does not read (format, mirroring scale): "link: file"
     undrawn: list = field(default_factory=list)
+    #: links drawn with their collision mesh instead
+    drawn_collision: list = field(default_factory=list)
 
     def report(self) -> str:
         """The import report: ignored tags and notes, one per line."""
@@ -411,7 +413,11 @@ def _add_visuals(mb, robot: Robot, group: dict, Tw: dict, roots: list, path: str
             if v.shape == "mesh":
                 file = _mesh_file(mb.urdf, link, v, roots, path)
                 if file is None:
-                    continue
+                    v, file = _collision_mesh(mb.urdf, lk, roots, path)
+                    if file is None:
+                        continue
+                    T = np.linalg.inv(Tw[node]) @ Tw[link] @ v.T
+                    kw.update(offset=T[:3, 3], orientation=T[:3, :3])
                 kw.update(size=v.size, file=file)
             else:
                 kw["size"] = v.size
@@ -429,6 +435,17 @@ def _mesh_file(info: UrdfInfo, link: str, v, roots: list, path: str) -> str | No
         info.undrawn.append(f"{link}: {found.name}")
         return None
     return str(found)
+
+
+def _collision_mesh(info: UrdfInfo, lk, roots: list, path: str):
+    """The first ``<collision>`` mesh of the link the viewer reads, drawn instead of a visual
+    mesh it cannot (noted); ``(None, None)`` if none."""
+    for c in lk.collisions:
+        found, _ = meshes.resolve(c.file, path, roots)
+        if found is not None and found.suffix.lower() in MESH_SUFFIXES and min(c.size) > 0:
+            info.drawn_collision.append(lk.name)
+            return c, str(found)
+    return None, None
 
 
 def _add_markers(mb, group: dict, Tw: dict) -> None:
@@ -464,6 +481,10 @@ def _keep(info: UrdfInfo, robot: Robot, order: list[Joint], group: dict, merge: 
                           + ", ".join(MESH_SUFFIXES) + " with positive scales): "
                           + ", ".join(info.undrawn[:4]) + (" ..." if len(info.undrawn) > 4
                                                            else ""))
+    if info.drawn_collision:
+        info.notes.append(f"{len(info.drawn_collision)} links drawn with their <collision> "
+                          "mesh instead: " + ", ".join(info.drawn_collision[:6])
+                          + (" ..." if len(info.drawn_collision) > 6 else ""))
     bare = [k for k, lk in robot.links.items() if lk.inertial is None]
     if bare:
         info.notes.append(f"{len(bare)} links without <inertial> have no mass (URDF's "

@@ -59,6 +59,8 @@ class Link:
     name: str
     inertial: Inertial | None
     visuals: list[Visual] = field(default_factory=list)
+    #: ``<collision>`` meshes (no contact yet: drawn where a visual mesh cannot be)
+    collisions: list[Visual] = field(default_factory=list)
 
 
 @dataclass
@@ -299,8 +301,15 @@ def _link(ctx: _Ctx, el, materials: dict) -> Link:
     name = ctx.name(el, "link", "")
     item = f"link {name!r}"
     ctx.unknown(el, ("inertial", "visual", "collision"), "<link>", name)
-    for _ in el.findall("collision"):
+    collisions = []
+    for i, c in enumerate(el.findall("collision")):
         ctx.ignored.add("<link>/<collision>", name)
+        try:
+            col = _visual(ctx, c, f"{item} <collision> {i}", materials, "<collision>")
+        except UrdfError:
+            col = None  # (only ever drawn; its element is in the report)
+        if col is not None and col.shape == "mesh":
+            collisions.append(col)
     inertials = el.findall("inertial")
     if len(inertials) > 1:
         ctx.fail(item, "<inertial>", "at most one <inertial>", len(inertials))
@@ -310,7 +319,7 @@ def _link(ctx: _Ctx, el, materials: dict) -> Link:
         vis = _visual(ctx, v, f"{item} <visual> {i}", materials)
         if vis is not None:
             visuals.append(vis)
-    return Link(name, inertial, visuals)
+    return Link(name, inertial, visuals, collisions)
 
 
 def _inertial(ctx: _Ctx, el, item: str) -> Inertial:
@@ -365,9 +374,11 @@ def _check_inertia(ctx: _Ctx, item: str, m: float, J: np.ndarray) -> None:
                  f"principal moments {ev.tolist()}: no mass distribution has them")
 
 
-def _visual(ctx: _Ctx, el, item: str, materials: dict) -> Visual | None:
-    ctx.unknown(el, ("origin", "geometry", "material"), "<visual>", item)
-    T = origin(ctx, el, item, "<visual><origin>")
+def _visual(ctx: _Ctx, el, item: str, materials: dict, tag: str = "<visual>"
+            ) -> Visual | None:
+    if tag == "<visual>":
+        ctx.unknown(el, ("origin", "geometry", "material"), tag, item)
+    T = origin(ctx, el, item, f"{tag}<origin>")
     g = el.find("geometry")
     shape = None if g is None else next((c for c in g if ctx.tag(c) != "#comment"), None)
     if shape is None:
@@ -397,7 +408,7 @@ def _visual(ctx: _Ctx, el, item: str, materials: dict) -> Visual | None:
         scale = tuple(ctx.floats(shape.get("scale"), 3, item, "<mesh> scale",
                                  default=(1.0, 1.0, 1.0)))
         return Visual(name, T, "mesh", scale, fname, color)
-    ctx.ignored.add(f"<visual>/<geometry>/<{kind}>", item)
+    ctx.ignored.add(f"{tag}/<geometry>/<{kind}>", item)
     return None
 
 
