@@ -151,3 +151,30 @@ def test_non_abelian_coordinates_refused():
     mb.joint("ball", "spherical", "ground", "bob", at=(0, 0, 0))
     with pytest.raises(ModelError, match="joint 'ball' \\(spherical\\)"):
         sd.JointSpace(mb.build())
+
+
+def test_inverse_dynamics_with_a_coupling_is_the_free_chains_projected():
+    """Virtual work: with ``q_b = r q_a + o`` the coupled chain's generalized force on q_a is
+    ``tau_a + r tau_b`` of the same chain without the coupling, at the same configuration, rates
+    ``(v, r v)``, accelerations ``(a, r a)`` (at nonzero rates: the velocity terms too). The
+    coupled chain's b reads o = 0.3 where the free one's reads 0 (``initial``)."""
+    def chain(coupled):
+        mb = sd.ModelBuilder(gravity=(0, -9.81, 0))
+        mb.node("g", fixed=True)
+        mb.node("l1", (0.2, 0, 0), mass=1.5, inertia=(0.01, 0.02, 0.03))
+        mb.node("l2", (0.6, 0.05, 0), mass=0.7, inertia=(0.004, 0.01, 0.012))
+        mb.joint("a", "hinge", "g", "l1", axis=(0, 0, 1), at=(0, 0, 0))
+        mb.joint("b", "hinge", "l1", "l2", axis=(0, 0.6, 0.8), at=(0.4, 0, 0),
+                 initial=0.3 if coupled else None)
+        if coupled:
+            mb.coupling("mimic", leader="a", follower="b", ratio=-1.0, offset=0.3)
+        return sd.JointSpace(mb.build())
+
+    r, o = -1.0, 0.3
+    coupled, free = chain(True), chain(False)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q, v, a = rng.normal(size=3)
+        tau = coupled.inverse_dynamics([q], [v], [a])
+        tf = free.inverse_dynamics([q, r * q + o - 0.3], [v, r * v], [a, r * a])
+        np.testing.assert_allclose(tau, [tf[0] + r * tf[1]], rtol=1e-10, atol=1e-12)

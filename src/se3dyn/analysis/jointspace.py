@@ -245,7 +245,9 @@ class JointSpace:
         v = T @ zd
         ev = evaluate(s, H, HJ, alpha, con.zq, v, con.zq, con.lam0, inputs, None,
                       full_alpha=False, accel=True)
-        w = rm.solve_dependent(ev.arhs) if np.any(v) else 0.0
+        # (the extra rows of couplings and held coordinates are linear: no right-hand side)
+        w = (rm.solve_dependent(np.concatenate([ev.arhs, np.zeros(len(con.E))]))
+             if np.any(v) else 0.0)
         return T.T @ (ev.r + M @ (T @ zdd + w)), T.T @ M @ T
 
     def _rows(self, q, v=None, a=None, inputs=None):

@@ -316,7 +316,7 @@ def _motion_terms(s: System, con: Constraints, rm: ReducedMap, p: _Point, M, C):
     zd, zdd = p.v[ind], p.vd[ind]  # (T is the identity there, v_p and w zero)
     nz = T.shape[1]
     scale = max(float(np.abs(zd).max(initial=0.0)), 1.0)
-    vp = _driven(rm, p.v[dd])
+    vp = _driven(rm, p.v[dd], s.nm)
     dw = np.zeros((s.nq, nz))
     for k in range(nz):  # w is quadratic in z_dot: the central difference is exact
         e = np.zeros(nz)
@@ -330,9 +330,9 @@ def _motion_terms(s: System, con: Constraints, rm: ReducedMap, p: _Point, M, C):
         ev = evaluate(s, p.H, p.HJ, p.alpha, n, con.zq, con.zq, con.lam0, con.zin, None,
                       full_alpha=False)
         r2 = con.map_at(ev.H, ev.HJ, ev.alpha, rm.part)
-        v = r2.T @ zd + _driven(r2, p.v[dd])
+        v = r2.T @ zd + _driven(r2, p.v[dd], s.nm)
         return np.concatenate([v, r2.T @ zdd + con.accel_term(r2, ev.H, ev.HJ, ev.alpha, v)
-                               + _driven(r2, p.vd[dd])])
+                               + _driven(r2, p.vd[dd], s.nm)])
 
     dV = np.zeros((2 * s.nq, nz))
     for k in range(nz):
@@ -345,14 +345,15 @@ def _motion_terms(s: System, con: Constraints, rm: ReducedMap, p: _Point, M, C):
     return T.T @ M @ dw, T.T @ (C @ dV[:nq] + M @ dV[nq:])
 
 
-def _driven(rm: ReducedMap, x: np.ndarray) -> np.ndarray:
+def _driven(rm: ReducedMap, x: np.ndarray, nm: int) -> np.ndarray:
     """The unknowns (nq,) moving with the driven coordinates' rates (or accelerations) ``x``
-    alone, the independent ones at rest: the locked rows of ``[B; E]`` are its last ones."""
+    alone, the independent ones at rest: the locked rows of ``[B; E]`` follow the ``nm``
+    joint rows (:func:`se3dyn.analysis.reduced.held_rows`)."""
     out = np.zeros(rm.T.shape[0])
     if not np.any(x):
         return out
     rhs = np.zeros(rm.B.shape[0])
-    rhs[len(rhs) - len(x):] = x
+    rhs[nm:nm + len(x)] = x
     return rm.solve_dependent(rhs)
 
 
