@@ -145,7 +145,12 @@ def cart_pole(theta0: float = 0.0) -> sd.Model:
 def test_cart_pole_lqr_stabilises_the_nonlinear_run():
     lin = sd.linearize(cart_pole(), inputs=["cart"], outputs=["cart", "pole"])
     md = lin.modes()
-    assert not np.all(md.stable)  # upright: unstable
+    # upright: the pole diverges at s^2 = mp g l / (I + mp l^2 mc / (mc + mp)) (I = mp l^2 / 3
+    # about its centre), the cart's position is a rigid-body mode
+    mc, mp, lp = 1.0, 0.3, 0.5
+    s2 = mp * G * lp / (mp * lp**2 / 3 + mp * lp**2 * mc / (mc + mp))
+    assert np.sum(md.rigid) == 1 and np.sum(~md.stable) == 1
+    assert abs(md.omega[~md.stable][0] / math.sqrt(s2) - 1) <= 1e-10
     sys = lin.state_space()
     assert sys.input_labels == ["cart"] and sys.output_labels == ["cart", "pole"]
     Kx, _, E = control.lqr(sys, np.diag([10.0, 50.0, 1.0, 1.0]), np.array([[0.1]]))
@@ -340,3 +345,25 @@ def test_driven_coordinate_is_held():
     Ia, Ib = 0.04 + 1.5 * 0.3**2, 0.02 + 0.7 * 0.9**2
     w2 = G * (1.5 * 0.3 + 0.7 * 0.9) / (Ia + Ib)
     assert abs(lin.modes().omega[0] / math.sqrt(w2) - 1) <= 1e-10
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_free_body_spinning_about_a_principal_axis(axis):
+    """A free body spinning about a principal axis (a relative equilibrium of a floating node:
+    its 6 unknowns independent, the coordinate rates of Eq. (27)'s ad term): Euler's equations
+    linearised give s^2 = -W^2 (I_a - I_j)(I_a - I_k) / (I_j I_k): oscillation about the
+    largest and the smallest axes, divergence about the intermediate one."""
+    I = np.array([1.0, 2.0, 2.6])
+    W = 1.7
+    mb = sd.ModelBuilder()
+    w = np.zeros(3)
+    w[axis] = W
+    mb.node("body", position=(0.3, -0.2, 0.5), mass=2.0, inertia=tuple(I), angular_velocity=w)
+    lin = sd.linearize(mb.build())
+    assert len(lin.names) == 6
+    lam = np.linalg.eigvals(lin.A)
+    j, k = (i for i in range(3) if i != axis)
+    ref = np.sqrt(complex(-W * W * (I[axis] - I[j]) * (I[axis] - I[k]) / (I[j] * I[k])))
+    for r in (ref, -ref):
+        assert np.abs(lam - r).min() <= 1e-10 * abs(ref)
+    assert np.all(lin.modes().stable) == (axis != 1)

@@ -130,8 +130,9 @@ class Modes:
     damping : ndarray (n,)      damping ratios ``-Re(s1 + s2) / (2 omega)``
     rigid : ndarray (n,) bool   rigid-body modes: as many as ``K_z`` has null directions (to
                                 1e-9 of its largest singular value), the slowest pairs
-    stable : ndarray (n,) bool  no eigenvalue of the pair with a positive real part (beyond
-                                round-off)
+    stable : ndarray (n,) bool  no eigenvalue of the pair with a real part above 1e-7 of the
+                                largest ``|s|`` (repeated eigenvalues of a defective problem,
+                                e.g. a free body's, carry errors of ``sqrt(eps)`` relative)
     shapes : ndarray (nz, n) complex   mode shapes in the minimal coordinates (the eigenvector
                                 of the kept eigenvalue; a rigid mode: a null vector of K_z)
     full_shapes : ndarray (nq, n) complex   the same in all unknowns (``T shapes``)
@@ -454,7 +455,7 @@ def _modes(lin: Linearization, k: int | None) -> Modes:
         om.append(w)
         zeta.append(float(-(s1 + s2).real / (2 * w)) if w > 1e-7 * scale else 0.0)
         shapes.append(Y[:n, i1])
-        st.append(bool(max(s1.real, s2.real) <= 1e-9 * scale))
+        st.append(bool(max(s1.real, s2.real) <= 1e-7 * scale))
     om_a = np.array(om)
     # rigid-body modes: as many as the null space of K has directions, the slowest pairs (a
     # double zero eigenvalue: a Jordan block, computed as +-sqrt(eps) scale)

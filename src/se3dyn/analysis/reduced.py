@@ -196,6 +196,19 @@ def reduced_map(s: System, B: np.ndarray, part: Partition,
     return ReducedMap(part=part, B=B, T=T, _qr=(Q, R))
 
 
+def held_rows(s: System, dofs) -> np.ndarray:
+    """Linear velocity constraints beyond the joints', (len(dofs) + ncpl, nq): a row ``e_d``
+    per held unknown ``d`` (driven, PID-held or locked coordinates), then a row
+    ``e_follower - ratio e_leader`` per coupling (``ModelBuilder.coupling``)."""
+    dofs = np.asarray(dofs, np.int64)
+    nc = len(s.cpl_follow)
+    E = np.zeros((len(dofs) + nc, s.nq))
+    E[np.arange(len(dofs)), dofs] = 1.0
+    E[len(dofs) + np.arange(nc), s.cpl_follow] = 1.0
+    E[len(dofs) + np.arange(nc), s.cpl_lead] = -s.cpl_ratio
+    return E
+
+
 class Constraints:
     """Evaluations of ``B`` and ``arhs`` for one system (one block extractor, zero inputs),
     with rows beyond the joints' (``E``, ne rows, linear and constant): the couplings
@@ -209,18 +222,10 @@ class Constraints:
         self.lam0 = np.zeros(s.nm)
         self.zin = dict(u=np.zeros(s.inputs.nu))
         self.cs = _unknown_scale(s, _char_length(s))
-        rows = []
-        for a, b, r in zip(s.cpl_lead, s.cpl_follow, s.cpl_ratio, strict=True):
-            e = np.zeros(s.nq)
-            e[b], e[a] = 1.0, -r
-            rows.append(e)
-        for d in locked:
-            e = np.zeros(s.nq)
-            e[d] = 1.0
-            rows.append(e)
-        self.E = np.array(rows).reshape(-1, s.nq)
+        self.nlocked = len(locked)
+        self.E = held_rows(s, locked)
         #: unknowns the extra rows determine (taken as dependent first)
-        self.first = np.concatenate([s.cpl_follow, np.asarray(locked, np.int64)]).astype(
+        self.first = np.concatenate([np.asarray(locked, np.int64), s.cpl_follow]).astype(
             np.int64)
 
     def rows(self, B: np.ndarray) -> np.ndarray:
@@ -239,7 +244,7 @@ class Constraints:
         ratio alpha_a - offset``; 0 for locked rows), (nm + ne,)."""
         s = self.s
         cpl = ev.alpha[s.cpl_follow] - s.cpl_ratio * ev.alpha[s.cpl_lead] - s.cpl_offset
-        return np.concatenate([ev.phi, cpl, np.zeros(len(self.E) - len(cpl))])
+        return np.concatenate([ev.phi, np.zeros(self.nlocked), cpl])
 
     def arhs(self, H, HJ, alpha, v: np.ndarray) -> np.ndarray:
         """The acceleration-level right-hand side ``arhs(v)`` (nm + ne,): ``B vd = arhs``

@@ -34,6 +34,7 @@ import numpy as np
 from se3dyn._lazy import LazyModule
 from se3dyn.analysis.assemble import _model_at
 from se3dyn.analysis.common import _as_system, _Blocks, _OneConfiguration, _unknown_name
+from se3dyn.analysis.reduced import held_rows
 from se3dyn.engine.evaluate import evaluate
 from se3dyn.engine.inputs import step_inputs
 from se3dyn.engine.scaling import (
@@ -448,10 +449,7 @@ def _stability(s: System, newton: _Newton, H, HJ, alpha, lam, inputs):
     K, _, B = newton.blocks(ev, (0.0, 0.0, 1.0))
     cs, rs = newton.cs, newton.rs
     dofs = newton.held[0]  # (driven and PID-held coordinates do not move; followers follow)
-    held = np.zeros((len(dofs) + len(s.cpl_follow), s.nq))
-    held[np.arange(len(dofs)), dofs] = 1.0
-    held[len(dofs) + np.arange(len(s.cpl_follow)), s.cpl_follow] = 1.0
-    held[len(dofs) + np.arange(len(s.cpl_follow)), s.cpl_lead] = -s.cpl_ratio
+    held = held_rows(s, dofs)
     _, N = _null_space(np.vstack([rs[:, None] * B * cs, held * cs]), _RCOND)
     if N.shape[1] == 0:
         return None, None
