@@ -338,3 +338,80 @@ def test_a_model_with_contacts_keeps_its_rigid_joints():
 def test_dense_output_of_fixed_steps_with_contacts_is_refused_clearly():
     with pytest.raises(ModelError, match="output_step.*contact"):
         sd.simulate(ball(), 0.1, 1e-3, output_step=0.01)
+
+
+def _capsule_model(theta_deg=0.0, mu=0.5, k=1e10):
+    """A 1 kg capsule (r = 0.1, segment 0.4 along y) lying on a floor, gravity tilted about y
+    by theta (an incline down +x); its inertia about its axis m r^2 / 2."""
+    th = math.radians(theta_deg)
+    mb = sd.ModelBuilder(gravity=(G * math.sin(th), 0, -G * math.cos(th)))
+    mb.node("ground", fixed=True)
+    mb.node("cap", position=(0, 0, R), mass=1.0, inertia=(0.02, 0.5 * R * R, 0.02))
+    mat = sd.ContactMaterial(stiffness=k, restitution=0.5, friction=mu)
+    mb.collision("floor", "ground", "plane", material=mat)
+    mb.collision("cap", "cap", "capsule", size=R, length=0.4, axis=(0, 1, 0), material=mat)
+    return mb.build()
+
+
+def test_capsule_lying_on_the_floor_rests_on_its_two_ends():
+    """The deepest points of a capsule on a plane are its two end spheres' (pairs cap:0 and
+    cap:1): at rest each carries half the weight."""
+    res = sd.simulate(_capsule_model(), 0.3, 1e-3)
+    assert res.contact_pairs() == ["floor/cap:0", "floor/cap:1"]
+    for name in res.contact_pairs():
+        assert abs(res.contact_normal_force(name)[-1] / (G / 2) - 1) < 1e-6
+    np.testing.assert_allclose(res.contact_point("floor/cap:1")[-1, :2], (0, 0.2), atol=1e-9)
+
+
+def test_capsule_rolls_down_an_incline_at_two_thirds_g_sin_theta():
+    """Lying across a 30 deg incline, its inertia about the axis m r^2 / 2: rolling without
+    slip at a = g sin(theta) / (1 + 1/2) within 1e-4."""
+    th = math.radians(30.0)
+    res = sd.simulate(_capsule_model(30.0), 0.5, 1e-3)
+    vx = res.node_velocity("cap", "inertial")[:, 0]
+    i1, i2 = np.searchsorted(res.t, [0.2, 0.5 - 1e-9])
+    a = (vx[i2] - vx[i1]) / (res.t[i2] - res.t[i1])
+    assert abs(a / (2 / 3 * G * math.sin(th)) - 1) < 1e-4, a
+
+
+def test_sphere_on_a_capsule_touches_the_closest_point_of_its_segment():
+    """A ball dropped without gravity onto a fixed horizontal capsule, off its middle: it
+    leaves at e times its speed, along the normal through the segment's closest point; at rest
+    under gravity the normal force is its weight and the normal vertical."""
+    def model(g, v0):
+        mb = sd.ModelBuilder(gravity=(0, 0, -g))
+        mb.node("ground", fixed=True)
+        mb.node("ball", position=(0.13, 0, 0.2 + 0.001), mass=1.0, inertia=(0.004,) * 3,
+                velocity=(0, 0, -v0))
+        mat = sd.ContactMaterial(stiffness=1e9, restitution=0.6, friction=0.3)
+        mb.collision("bar", "ground", "capsule", size=R, length=0.5, axis=(1, 0, 0),
+                     material=mat)
+        mb.collision("ball", "ball", "sphere", size=R, material=mat)
+        return mb.build()
+
+    res = sd.simulate(model(0.0, 2.0), 0.01, 1e-3)
+    v = res.node_velocity("ball", "inertial")[-1, :3]
+    np.testing.assert_allclose(v, (0, 0, 0.6 * 2.0), atol=5e-3 * 2.0)
+    res = sd.simulate(model(G, 0.0), 0.3, 1e-3)
+    assert abs(res.contact_normal_force("bar/ball")[-1] / G - 1) < 1e-6
+    np.testing.assert_allclose(res.contact_normal("bar/ball")[-1], (0, 0, 1), atol=1e-9)
+
+
+def test_capsule_errors_and_pairs():
+    mb = sd.ModelBuilder()
+    mb.node("g", fixed=True)
+    mb.node("a", mass=1.0, inertia=(1, 1, 1))
+    mb.node("b", mass=1.0, inertia=(1, 1, 1))
+    for bad, words in (({"length": 0.0}, "length"), ({"length": 0.2, "axis": (0, 0, 0)}, "axis"),
+                       ({"length": 0.2, "size": -1.0}, "size")):
+        kw = dict(size=0.1, **{k: v for k, v in bad.items() if k != "size"})
+        if "size" in bad:
+            kw["size"] = bad["size"]
+        with pytest.raises(ModelError, match=f"collision 'c'.*{words}"):
+            mb.collision("c", "a", "capsule", **kw)
+    mb.collision("floor", "g", "plane")
+    mb.collision("c1", "a", "capsule", size=0.1, length=0.3)
+    mb.collision("c2", "b", "capsule", size=0.1, length=0.3)
+    mb.collision("s", "b", "sphere", size=0.1)
+    names = [p.name for p in contact_pairs(mb.build())]
+    assert names == ["floor/c1:0", "floor/c1:1", "floor/c2:0", "floor/c2:1", "floor/s", "c1/s"]

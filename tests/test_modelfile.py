@@ -172,6 +172,7 @@ def everything_model() -> sd.Model:
     mb.collision("knob", "tensor", "sphere", size=0.05, at=(0.1, 0.2, 0.3),
                  material=sd.ContactMaterial(young=2e11, poisson=0.28, stiction_length=1e-4),
                  exclude=("arm",))
+    mb.collision("rod", "tensor", "capsule", size=0.02, length=0.3, axis=(0, 1, 1))
     return mb.build()
 
 

@@ -29,10 +29,13 @@ def tables(s, lay) -> dict:
     for i, p in enumerate(pairs):  # material offsets and normal: R0^T (p - x0), R0^T n
         Ra, xa = H0[fa[i], :3, :3], H0[fa[i], :3, 3]
         Rb, xb = H0[fb[i], :3, :3], H0[fb[i], :3, 3]
-        ca[i], cb[i], na[i] = Ra.T @ (p.a.at - xa), Rb.T @ (p.b.at - xb), Ra.T @ p.a.normal
+        at_a = p.a.at - 0.5 * p.a.length * p.a.normal  # (a capsule: its segment's first end)
+        ca[i], cb[i], na[i] = Ra.T @ (at_a - xa), Rb.T @ (p.b.at - xb), Ra.T @ p.a.normal
     col = lambda f: np.array([f(p) for p in pairs], float)  # noqa: E731
-    t = dict(fa=fa, fb=fb, kind=np.array([p.a.shape == "sphere" for p in pairs], np.int64),
-             ca=ca, cb=cb, na=na, ra=col(lambda p: p.a.size), rb=col(lambda p: p.b.size),
+    kind = {"plane": 0, "sphere": 1, "capsule": 2}
+    t = dict(fa=fa, fb=fb, kind=np.array([kind[p.a.shape] for p in pairs], np.int64),
+             ca=ca, cb=cb, na=na, la=col(lambda p: p.a.length), ra=col(lambda p: p.a.size),
+             rb=col(lambda p: p.b.size),
              k=col(lambda p: p.k), c=col(lambda p: p.c), mu=col(lambda p: p.mu),
              slen=col(lambda p: p.slen), tau=col(lambda p: p.tau), vmin=col(lambda p: p.vmin),
              slot=np.array(s.inputs.contact_slots, np.int64),
@@ -46,8 +49,8 @@ def tables(s, lay) -> dict:
 
 def examples(rng):
     """A sphere pressed into a tilted plane on a moving body (sticking, large friction) and
-    into a fixed floor, and two spheres overlapping (sliding, small friction), with spin and
-    offset centres."""
+    into a fixed floor, two spheres overlapping (sliding, small friction), with spin and
+    offset centres, and a capsule touching three spheres (one at its segment's end)."""
     from se3dyn.model.builder import ModelBuilder
     from se3dyn.model.contact import ContactMaterial
 
@@ -73,6 +76,11 @@ def examples(rng):
     # a floor on the fixed node (the kernel's path with one moving frame)
     mb.collision("floor", "g", "plane", at=(0.0, 0.0, 0.0), material=slide,
                  exclude=("s2", "s3"))
+    # a capsule touching s1 and s3 along its segment and s2 at its end (clamped)
+    mb.node("c", position=(0.3, 1.2, 0.4), mass=1.5, inertia=(0.1, 0.3, 0.3),
+            velocity=tuple(rng.normal(size=3)), angular_velocity=tuple(rng.normal(size=3)))
+    mb.collision("cap", "c", "capsule", size=0.5, length=2.0, axis=(1.0, 0.1, 0.0),
+                 at=(0.35, 1.2, 0.4), material=slide, exclude=("plane", "floor"))
     return [mb.build()]
 
 
@@ -85,12 +93,15 @@ def model_file(mf):
     v3 = mf.Vec(3)
     fields = (
         F("node", mf.Str(ref="node"), None, "The node the shape moves with (required).", True),
-        F("shape", mf.Str(choices=SHAPES), None, "`sphere`, or `plane` (the half-space below "
-          "it) (required).", True),
-        F("size", mf.Num(exclusive_minimum=0), None, "Radius of a sphere (m)."),
-        F("at", v3, "position of node", "Centre of a sphere, a point of a plane (inertial "
-          "frame, initial configuration)."),
+        F("shape", mf.Str(choices=SHAPES), None, "`sphere`, `plane` (the half-space below "
+          "it) or `capsule` (required).", True),
+        F("size", mf.Num(exclusive_minimum=0), None, "Radius of a sphere or a capsule (m)."),
+        F("at", v3, "position of node", "Centre of a sphere or a capsule, a point of a plane "
+          "(inertial frame, initial configuration)."),
         F("normal", v3, [0, 0, 1], "Outward normal of a plane (inertial frame, initial "
+          "configuration)."),
+        F("length", mf.Num(exclusive_minimum=0), None, "Length of a capsule's segment (m)."),
+        F("axis", v3, [0, 0, 1], "Direction of a capsule's segment (inertial frame, initial "
           "configuration)."),
         F("material", mf.Section("contact_material"), "ContactMaterial()", "The contact law "
           "of the shape (docs/contact.md)."),
@@ -123,11 +134,13 @@ def model_file(mf):
         ref = ContactMaterial()
         for c in model.collisions:
             e = {"node": c.node, "shape": c.shape}
-            if c.shape == "sphere":
+            if c.shape != "plane":
                 e["size"] = float(c.size)
             e["at"] = mf.plain(c.at)
             if c.shape == "plane":
                 e["normal"] = mf.plain(c.normal)
+            if c.shape == "capsule":
+                e["length"], e["axis"] = float(c.length), mf.plain(c.normal)
             mat = {k: v for k, v in c.material.as_dict().items()
                    if v is not None and v != getattr(ref, k)}
             if c.material.stiffness is not None:

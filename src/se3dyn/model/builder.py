@@ -586,7 +586,7 @@ class ModelBuilder:
     # -----------------------------------------------------------------------------------------
     def collision(self, name: str, node: str, shape: str, *, size: Any = None, at: Any = None,
                   normal: Any = None, material: ContactMaterial | None = None,
-                  exclude: Any = ()) -> None:
+                  exclude: Any = (), length: Any = None, axis: Any = None) -> None:
         """Add a collision shape on a node (compliant contact, docs/contact.md).
 
         Parameters
@@ -595,15 +595,19 @@ class ModelBuilder:
             Unique shape name.
         node : str
             The node it moves with: fixed, or with mass.
-        shape : {"sphere", "plane"}
-            A sphere, or the half-space below a plane (its outward side up).
+        shape : {"sphere", "plane", "capsule"}
+            A sphere, the half-space below a plane (its outward side up), or a capsule (the
+            points within ``size`` of a segment).
         size : float
-            Radius of a sphere (m), > 0; not used by a plane.
+            Radius of a sphere or a capsule (m), > 0; not used by a plane.
         at : array_like (3,), optional
-            Centre of a sphere or a point of a plane, in the inertial frame of the initial
-            configuration; the node's position by default.
+            Centre of a sphere or a capsule, or a point of a plane, in the inertial frame of the
+            initial configuration; the node's position by default.
         normal : array_like (3,), optional
             Outward normal of a plane (inertial frame, initial configuration); +z by default.
+        length, axis :
+            A capsule's segment: its length (m, > 0) and direction (inertial frame, initial
+            configuration; +z by default).
         material : ContactMaterial, optional
             The shape's contact law (``ContactMaterial()`` by default).
         exclude : sequence of str
@@ -625,7 +629,7 @@ class ModelBuilder:
         if shape not in SHAPES:
             raise ModelError(item, "shape", f"one of {', '.join(SHAPES)}", shape)
         r = 0.0
-        if shape == "sphere":
+        if shape != "plane":
             try:
                 r = float(size)
             except (TypeError, ValueError):
@@ -633,12 +637,22 @@ class ModelBuilder:
             if isinstance(size, bool) or not math.isfinite(r) or r <= 0 or r > MAX_ABS:
                 raise ModelError(item, "size", "a positive finite radius (m)", size)
         p = nd.position if at is None else _vec(at, 3, item, "at")
-        nrm = np.array([0.0, 0.0, 1.0]) if normal is None else _vec(normal, 3, item, "normal")
-        if shape == "plane":
+        fld, given = ("axis", axis) if shape == "capsule" else ("normal", normal)
+        nrm = np.array([0.0, 0.0, 1.0]) if given is None else _vec(given, 3, item, fld)
+        if shape != "sphere":
             ln = float(np.linalg.norm(nrm))
             if ln == 0:
-                raise ModelError(item, "normal", "a non-zero 3-vector", normal)
-            nrm = nrm / ln
+                raise ModelError(item, fld, "a non-zero 3-vector", given)
+            if abs(ln - 1.0) > 1e-15:  # (a unit vector stays as given: files round-trip)
+                nrm = nrm / ln
+        seg = 0.0
+        if shape == "capsule":
+            try:
+                seg = float(length)
+            except (TypeError, ValueError):
+                raise ModelError(item, "length", "a positive length (m)", length) from None
+            if isinstance(length, bool) or not math.isfinite(seg) or seg <= 0 or seg > MAX_ABS:
+                raise ModelError(item, "length", "a positive finite length (m)", length)
         if material is None:
             material = ContactMaterial()
         if isinstance(material, dict):  # (model files, or a dict of ContactMaterial's fields)
@@ -656,7 +670,7 @@ class ModelBuilder:
             exclude = (exclude,)
         self._collisions[name] = CollisionSpec(name, node, shape, r, np.array(p, float),
                                                np.array(nrm, float), material,
-                                               tuple(str(x) for x in exclude))
+                                               tuple(str(x) for x in exclude), seg)
 
     def contact_pair(self, shape_a: str, shape_b: str, *,
                      material: ContactMaterial | None = None, enabled: bool = True) -> None:

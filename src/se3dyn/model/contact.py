@@ -6,10 +6,15 @@ its centre) or a ``"plane"`` (the half-space below the plane through ``at`` with
 unit ``normal``; ``size`` unused), given in the inertial frame of the initial configuration and
 moving with their nodes.
 
-**Pair rule** (:func:`contact_pairs`): every sphere touches every plane and every sphere of
-another node, unless both nodes are fixed, either shape names the other or its node in its
-``exclude``, or a :meth:`~se3dyn.model.builder.ModelBuilder.contact_pair` disables the pair.
-Plane-plane pairs do not exist (a half-space has no extent to touch with).
+A ``"capsule"`` (``size``: its radius, ``length``: its segment's, along ``normal`` through
+``at``) touches planes with its two end spheres (the deepest point of a segment below a plane
+is an end) and spheres at the closest point of its segment.
+
+**Pair rule** (:func:`contact_pairs`): every sphere touches every plane, sphere and capsule of
+another node and every capsule every plane, unless both nodes are fixed, either shape names
+the other or its node in its ``exclude``, or a
+:meth:`~se3dyn.model.builder.ModelBuilder.contact_pair` disables the pair. Plane-plane pairs do
+not exist (a half-space has no extent to touch with), capsule-capsule pairs not yet.
 
 **Material of a pair**: :func:`combine` of the shapes' materials, or of the material given by
 ``contact_pair(a, b, material=...)`` with itself (both bodies of that material).
@@ -27,7 +32,7 @@ from se3dyn.errors import ModelError
 
 #: gravity used to scale the default bristle damping time (m/s^2)
 G0 = 9.81
-SHAPES = ("sphere", "plane")
+SHAPES = ("sphere", "plane", "capsule")
 #: smallest restitution coefficient (c(0.01) = 100: the damping of slower impacts than the
 #: touch-down speed would clip the force to zero)
 E_MIN = 0.01
@@ -129,7 +134,8 @@ class CollisionSpec:
     at : ndarray (3,)
         Centre of a sphere, a point of a plane (inertial frame, initial configuration).
     normal : ndarray (3,)
-        Outward unit normal of a plane (inertial frame, initial configuration).
+        Outward unit normal of a plane, unit axis of a capsule (inertial frame, initial
+        configuration).
     material : ContactMaterial
     exclude : tuple of str
         Shapes or nodes this shape does not touch.
@@ -143,6 +149,16 @@ class CollisionSpec:
     normal: np.ndarray
     material: ContactMaterial = field(default_factory=ContactMaterial)
     exclude: tuple = ()
+    #: length of a capsule's segment (m): the capsule is the set of points within ``size`` of
+    #: the segment of this length along ``normal`` through ``at``
+    length: float = 0.0
+
+    def ends(self) -> tuple:
+        """A capsule's two end spheres (as sphere shapes named ``<name>:0``, ``<name>:1``)."""
+        half = 0.5 * self.length * self.normal
+        return tuple(CollisionSpec(f"{self.name}:{i}", self.node, "sphere", self.size,
+                                   self.at + sg * half, self.normal, self.material,
+                                   self.exclude) for i, sg in enumerate((-1.0, 1.0)))
 
 
 @dataclass(frozen=True)
@@ -231,6 +247,7 @@ def _hertz(m: ContactMaterial, a: CollisionSpec, b: CollisionSpec) -> float:
     if m.stiffness is not None:
         return m.stiffness
     R = b.size if a.shape == "plane" else a.size * b.size / (a.size + b.size)
+    # (a sphere on a capsule's cylinder: the sphere's Hertz radius with the cylinder's)
     return 4.0 / 3.0 * m.young / (1 - m.poisson ** 2) * math.sqrt(R)
 
 
@@ -255,11 +272,13 @@ def contact_pairs(model) -> list[Pair]:
         for s2 in shapes[i + 1:]:
             if s1.node == s2.node or (fixed[s1.node] and fixed[s2.node]):
                 continue
-            if "sphere" not in (s1.shape, s2.shape):
+            kinds = {s1.shape, s2.shape}
+            if kinds in ({"plane"}, {"capsule"}):
                 continue
             if {s2.name, s2.node} & set(s1.exclude) or {s1.name, s1.node} & set(s2.exclude):
                 continue
-            a, b = (s2, s1) if s2.shape == "plane" else (s1, s2)
+            order = {"plane": 0, "capsule": 1, "sphere": 2}
+            a, b = (s2, s1) if order[s2.shape] < order[s1.shape] else (s1, s2)
             ov = over.get(frozenset((a.name, b.name)))
             if ov is not None and not ov.enabled:
                 continue
@@ -267,7 +286,8 @@ def contact_pairs(model) -> list[Pair]:
                 mat = combine(ov.material, ov.material)
             else:
                 mat = combine(a.material, b.material)
-            out.append(pair_of(a, b, mat))
+            for bb in (b.ends() if b.shape == "capsule" else (b,)):  # (a plane and a capsule)
+                out.append(pair_of(a, bb, mat))
     return out
 
 
@@ -275,7 +295,8 @@ def describe(model, pairs, show: int = 12) -> list[str]:
     """Lines for ``se3dyn check``: the shapes and the contact pairs with their laws."""
     shapes = model.collisions
     out = [f"collision shapes: {len(shapes)} (" + ", ".join(
-        f"{c.name}: {c.shape}" + (f" r={c.size:g}" if c.shape == "sphere" else "")
+        f"{c.name}: {c.shape}" + (f" r={c.size:g}" if c.shape != "plane" else "")
+        + (f" L={c.length:g}" if c.shape == "capsule" else "")
         + f" on {c.node}" for c in shapes[:show]) + (", ..." if len(shapes) > show else "")
         + ")"]
     out.append(f"contact pairs: {len(pairs)}" + (" (" + ", ".join(

@@ -1,5 +1,7 @@
 // Compliant contact between two shapes on two node frames (se3dyn.elements.contact): a
-// half-space on frame a and a sphere on frame b (kind 0), or two spheres (kind 1).
+// half-space on frame a and a sphere on frame b (kind 0), two spheres (kind 1), or a capsule
+// on frame a (a segment from ca along na of length la, radius ra) and a sphere (kind 2: the
+// sphere of the segment's point closest to b's centre).
 //
 // Geometry at the iterate: the normal n (from a into b), the penetration delta and the contact
 // point p_c (the middle of the overlap). Velocity of b relative to a at p_c: w = w_b - w_a with
@@ -178,8 +180,8 @@ struct Body {
 // The contact's geometry: normal n (a into b), penetration delta, contact point pc
 template <class T>
 inline void geometry(int kind, const Body<T>& A, const Body<T>& B, const double* ca,
-                     const double* cb, const double* na, double ra, double rb, T* n, T& delta,
-                     T* pc) {
+                     const double* cb, const double* na, double la, double ra, double rb, T* n,
+                     T& delta, T* pc) {
   T pb[3];
   B.point(cb, pb);
   if (kind == 0) {  // half-space of a (point ca, outward normal na) and sphere b
@@ -188,9 +190,18 @@ inline void geometry(int kind, const Body<T>& A, const Body<T>& B, const double*
     mat_vec(A.R, nm, n);
     for (int i = 0; i < 3; ++i) d[i] = pb[i] - p0[i];
     delta = T(rb) - dot(n, d);
-  } else {  // spheres a and b
+  } else {  // spheres a and b; a capsule a: the sphere of its segment's point closest to b
     T pa[3], d[3];
     A.point(ca, pa);
+    if (kind == 2) {
+      T u[3], nm[3] = {T(na[0]), T(na[1]), T(na[2])}, r[3];
+      mat_vec(A.R, nm, u);
+      for (int i = 0; i < 3; ++i) r[i] = pb[i] - pa[i];
+      T s = dot(r, u);
+      if (val(s) < 0) s = T(0.0);
+      if (val(s) > la) s = T(la);
+      for (int i = 0; i < 3; ++i) pa[i] = pa[i] + s * u[i];
+    }
     for (int i = 0; i < 3; ++i) d[i] = pb[i] - pa[i];
     T L = gsqrt(dot(d, d));
     for (int i = 0; i < 3; ++i) n[i] = d[i] / L;
@@ -207,6 +218,7 @@ struct Contacts : ElementBatch {
   std::vector<int> fa, fb, kind;     // (n,) frames, 0 half-space-sphere, 1 sphere-sphere
   std::vector<double> ca, cb, na;    // (n, 3) material centres / plane point, plane normal
   std::vector<double> ra, rb;        // (n,) radii (ra: 0 for a half-space)
+  std::vector<double> la;            // (n,) a capsule's segment length (0 otherwise)
   std::vector<double> k, c, mu, slen, tau, vmin;  // (n,) the pair's material
   std::vector<int> slot;             // (n,) first input slot of the state (CS + 1: h/2)
   int ctrl0 = 0;                     // offset of the contact states in Context::ctrl
@@ -221,6 +233,7 @@ struct Contacts : ElementBatch {
     cb = t.real("cb");
     na = t.real("na");
     ra = t.real("ra");
+    la = t.real("la");
     rb = t.real("rb");
     k = t.real("k");
     c = t.real("c");
@@ -306,7 +319,8 @@ struct Contacts : ElementBatch {
     A.set(St.H[fr[0]], &St.v[6 * fr[0]], ia, ia < 0 ? -1 : ia + NV);
     B.set(St.H[fr[1]], &St.v[6 * fr[1]], ib, ib < 0 ? -1 : ib + NV);
     S n[3], delta, pc[3], wa[3], wb[3], w[3];
-    geometry(kind[e], A, B, &ca[3 * e], &cb[3 * e], &na[3 * e], ra[e], rb[e], n, delta, pc);
+    geometry(kind[e], A, B, &ca[3 * e], &cb[3 * e], &na[3 * e], la[e], ra[e], rb[e], n, delta,
+             pc);
     A.velocity_at(pc, wa);
     B.velocity_at(pc, wb);
     for (int i = 0; i < 3; ++i) w[i] = wb[i] - wa[i];
