@@ -11,6 +11,7 @@ import pinocchio as pin
 import pytest
 
 import se3dyn as sd
+from _mechanisms import FOURBAR, parallelogram_fourbar
 from _pinocchio_models import pinocchio_model, random_chain, random_states, se3dyn_model
 from se3dyn.errors import ModelError
 
@@ -89,17 +90,10 @@ def test_closed_loop_parallelogram():
     moments J about them) and the translating coupler (mass mc) the closed forms are
     M = J1 + m1 c^2 + J3 + m3 c^2 + mc a^2, g(theta) = g (m1 c + m3 c + mc a) sin theta, the
     coupler's pose a translation by a (sin theta, 0, 1 - cos theta)."""
-    a, d, c, m1, m3, mc, J1, J3, g = 0.5, 0.9, 0.2, 1.2, 0.8, 2.5, 0.03, 0.02, 9.81
-    mb = sd.ModelBuilder(gravity=(0, 0, -g))
-    mb.node("ground", fixed=True)
-    mb.node("crank", position=(0, 0, -c), mass=m1, inertia=(J1, J1, J1 * 0.4))
-    mb.node("rocker", position=(d, 0, -c), mass=m3, inertia=(J3, J3, J3 * 0.4))
-    mb.node("coupler", position=(d / 2, 0, -a), mass=mc, inertia=(0.01, 0.2, 0.2))
-    mb.joint("A", "hinge", "ground", "crank", axis=(0, 1, 0), at=(0, 0, 0))
-    mb.joint("B", "hinge", "crank", "coupler", axis=(0, 1, 0), at=(0, 0, -a))
-    mb.joint("C", "hinge", "coupler", "rocker", axis=(0, 1, 0), at=(d, 0, -a))
-    mb.joint("D", "hinge", "ground", "rocker", axis=(0, 1, 0), at=(d, 0, 0))
-    js = sd.JointSpace(mb.build())
+    a, d, c, m1, m3, mc, J1, J3 = (FOURBAR[k] for k in ("a", "d", "c", "m1", "m3", "mc", "J1",
+                                                        "J3"))
+    g = 9.81
+    js = sd.JointSpace(parallelogram_fourbar(g))
     assert js.joint_names == ("joint 'A' alpha_0",)
     th = np.linspace(-1.2, 1.2, 7)[:, None]
     Mref = J1 + m1 * c**2 + J3 + m3 * c**2 + mc * a**2

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import se3dyn as sd
+from _mechanisms import FOURBAR, parallelogram_fourbar
 from se3dyn.errors import ModelError
 
 G = 9.81
@@ -83,19 +84,8 @@ def test_compound_double_pendulum():
 def test_parallelogram_four_bar():
     """Crank and rocker of length a (centres of mass at c), coupler of length d translating:
     omega^2 = g (m1 c + m3 c + mc a) / (I1 + I3 + mc a^2) with I about the pivots."""
-    a, d, c = 0.5, 0.9, 0.2
-    m1, m3, mc = 1.2, 0.8, 2.5
-    J1, J3 = 0.03, 0.02
-    mb = sd.ModelBuilder(gravity=(0, 0, -G))
-    mb.node("ground", fixed=True)
-    mb.node("crank", position=(0, 0, -c), mass=m1, inertia=(J1, J1, J1 * 0.4))
-    mb.node("rocker", position=(d, 0, -c), mass=m3, inertia=(J3, J3, J3 * 0.4))
-    mb.node("coupler", position=(d / 2, 0, -a), mass=mc, inertia=(0.01, 0.2, 0.2))
-    mb.joint("A", "hinge", "ground", "crank", axis=(0, 1, 0), at=(0, 0, 0))
-    mb.joint("B", "hinge", "crank", "coupler", axis=(0, 1, 0), at=(0, 0, -a))
-    mb.joint("C", "hinge", "coupler", "rocker", axis=(0, 1, 0), at=(d, 0, -a))
-    mb.joint("D", "hinge", "ground", "rocker", axis=(0, 1, 0), at=(d, 0, 0))
-    model = mb.build()
+    a, c, m1, m3, mc, J1, J3 = (FOURBAR[k] for k in ("a", "c", "m1", "m3", "mc", "J1", "J3"))
+    model = parallelogram_fourbar(G)
     eq = sd.static_equilibrium(model)
     lin = sd.linearize(model, at=eq)
     assert lin.partition.rank == 4 * 6 - 1 - 2  # 21 of 24 equations: 3 redundant
