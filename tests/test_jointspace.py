@@ -11,7 +11,7 @@ import pinocchio as pin
 import pytest
 
 import se3dyn as sd
-from _mechanisms import FOURBAR, parallelogram_fourbar
+from _mechanisms import FOURBAR, delta_platform, delta_robot, parallelogram_fourbar
 from _pinocchio_models import pinocchio_model, random_chain, random_states, se3dyn_model
 from se3dyn.errors import ModelError
 
@@ -172,3 +172,25 @@ def test_inverse_dynamics_with_a_coupling_is_the_free_chains_projected():
         tau = coupled.inverse_dynamics([q], [v], [a])
         tf = free.inverse_dynamics([q, r * q + o - 0.3], [v, r * v], [a, r * a])
         np.testing.assert_allclose(tau, [tf[0] + r * tf[1]], rtol=1e-10, atol=1e-12)
+
+
+def test_delta_robot_motors_to_platform_map_and_a_passive_run_keep_the_closed_form():
+    """A delta robot (three RUU legs): in joint space the motor angles are the independent
+    coordinates and the platform's pose is the closed-form forward kinematics (three
+    spheres) with its orientation unchanged; a 2 s passive fall keeps the loops closed (scaled
+    violation <= 1e-12) and the platform on the closed form of the motors' angles."""
+    model = delta_robot()
+    js = sd.JointSpace(model, independent=["m0", "m1", "m2"])
+    assert len(js.joint_names) == 3
+    rng = np.random.default_rng(11)
+    th = 0.3 + rng.uniform(-0.4, 0.4, (20, 3))
+    poses = js.frame_pose(th, "platform")
+    for k in range(len(th)):
+        assert np.abs(poses[k, :3, 3] - delta_platform(th[k])).max() <= 1e-10
+        assert np.abs(poses[k, :3, :3] - np.eye(3)).max() <= 1e-10
+    res = sd.simulate(model, 2.0, 2e-3, tol_constraint=1e-13)
+    assert res.stats["max_constraint"] <= 1e-12
+    motors = np.column_stack([res.joint_coordinates(f"m{i}")[:, 0] for i in range(3)])
+    assert np.ptp(motors) > 1.0  # (the arms swing far)
+    P = res.node_position("platform")
+    assert max(np.abs(P[k] - delta_platform(motors[k])).max() for k in range(len(P))) <= 1e-9
