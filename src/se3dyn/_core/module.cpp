@@ -7,11 +7,13 @@
 #include <nanobind/stl/tuple.h>
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 #include <tuple>
 
 #include "block_pattern.hpp"
+#include "joint_tree.hpp"
 #include "newton.hpp"
 
 namespace nb = nanobind;
@@ -126,6 +128,39 @@ void build(Engine& E, const nb::dict& d) {
     E.xiprod.push_back({xp[i], int(xp[i + 1]), int(xp[i + 2]), int(xp[i + 3]), int(xp[i + 4]),
                         int(xp[i + 5])});
   E.setup();
+}
+
+// The tables of a JointTree (joint_tree.hpp) from se3dyn.analysis._jointtree.tree_tables.
+JointTree joint_tree(const nb::dict& d) {
+  JointTree J;
+  J.nq = nb::cast<int>(item(d, "nq"));
+  J.nv = nb::cast<int>(item(d, "nv"));
+  J.par = ivec<int>(d, "parent");
+  J.kind = ivec<int>(d, "kind");
+  J.k = ivec<int>(d, "k");
+  J.qadr = ivec<int>(d, "qadr");
+  J.vadr = ivec<int>(d, "vadr");
+  J.nl = static_cast<int>(J.par.size());
+  J.P = frames(d, "P");
+  J.Q = frames(d, "Q");
+  J.S0 = dvec(d, "S0");
+  J.S = dvec(d, "S");
+  J.alpha0 = dvec(d, "alpha0");
+  J.M = dvec(d, "M");
+  J.mc = dvec(d, "mc");
+  J.m = dvec(d, "m");
+  J.armature = dvec(d, "armature");
+  std::vector<double> g = dvec(d, "gravity");
+  for (int i = 0; i < 3; ++i) J.g[i] = g[i];
+  return J;
+}
+// rows of a batch: N when x holds N rows of n finite values (or is empty: zero), else -1
+long rows_of(const CArr& x, int n, long N) {
+  if (x.size() == 0) return N;
+  if (n == 0 || x.size() % n != 0 || (N >= 0 && static_cast<long>(x.size() / n) != N)) return -1;
+  for (size_t i = 0; i < x.size(); ++i)
+    if (!std::isfinite(x.data()[i])) return -1;
+  return static_cast<long>(x.size() / n);
 }
 
 }  // namespace
@@ -522,4 +557,30 @@ NB_MODULE(_engine, m) {
             return nb::make_tuple(R.status, R.done, R.iterations, R.factorisations, rows.count,
                                   R.residual, R.constraint);
           });
+
+  // JointSpace's compiled path on trees (joint_tree.hpp): batches of N states, a loop here;
+  // False (nothing written) when the sizes do not match or a value is not finite
+  nb::class_<JointTree>(m, "JointTree")
+      .def("__init__", [](JointTree* J, nb::dict d) { new (J) JointTree(joint_tree(d)); })
+      .def_ro("nq", &JointTree::nq)
+      .def_ro("nv", &JointTree::nv)
+      .def("rnea", [](const JointTree& J, CArr q, CArr v, CArr a, DArr tau) {
+        long N = rows_of(q, J.nq, -1);
+        if (q.size() == 0 || N < 0 || rows_of(v, J.nv, N) < 0 || rows_of(a, J.nv, N) < 0 ||
+            tau.size() != static_cast<size_t>(N * J.nv))
+          return false;
+        JointTree::Work w(J.nl);
+        for (long r = 0; r < N; ++r)
+          J.rnea(q.data() + r * J.nq, v.size() ? v.data() + r * J.nv : nullptr,
+                 a.size() ? a.data() + r * J.nv : nullptr, tau.data() + r * J.nv, w);
+        return true;
+      })
+      .def("crba", [](const JointTree& J, CArr q, DArr out) {
+        long N = rows_of(q, J.nq, -1);
+        if (q.size() == 0 || N < 0 || out.size() != static_cast<size_t>(N * J.nv * J.nv))
+          return false;
+        JointTree::Work w(J.nl);
+        for (long r = 0; r < N; ++r) J.crba(q.data() + r * J.nq, out.data() + r * J.nv * J.nv, w);
+        return true;
+      });
 }

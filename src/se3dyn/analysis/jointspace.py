@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from se3dyn import lie
+from se3dyn._core import _engine
+from se3dyn.analysis._jointtree import fallback_reason, tree_tables
 from se3dyn.analysis.common import _as_system, _unknown_name
 from se3dyn.analysis.reduced import Constraints, partition, reduced_map
 from se3dyn.engine.evaluate import evaluate
@@ -35,6 +37,7 @@ if TYPE_CHECKING:
 
 __all__ = ["JointSpace"]
 
+_NONE = np.zeros(0)  # (a velocity or acceleration of zero for the compiled path)
 _FRAMES = ("local", "local_world_aligned")
 
 
@@ -76,6 +79,16 @@ class JointSpace:
         Names of the velocity coordinates (``joint 'name'`` labels of the unknowns).
     nq, nv : int
         Sizes of a configuration ``q`` and of a velocity ``v`` (``nq = nv + 1`` per root).
+    compiled : bool
+        Whether :meth:`inverse_dynamics`, :meth:`bias`, :meth:`gravity`, :meth:`mass_matrix`
+        and :meth:`forward_dynamics` take the compiled path (C++ recursive Newton-Euler and
+        composite-rigid-body algorithm, batches looped in C++): trees of abelian joints and
+        floating roots whose forces are inertia, armature and gravity. The others (closed
+        loops, couplings, drives, loads, joint springs, dampers, PD/PID laws, actuators,
+        spring-dampers, beams, bushings, contacts) take the general path, as do
+        :meth:`jacobian` and :meth:`frame_pose`; both paths agree to rounding.
+    fallback_reason : str
+        Why the general path is taken ('' when ``compiled``).
     """
 
     def __init__(self, model_or_system: Model | System, *, t: float = 0.0,
@@ -90,6 +103,37 @@ class JointSpace:
         self._plan = _tree_plan(s, self._roots)
         self._inputs = step_inputs(s, float(t))
         self._rs = _row_scale(s, _char_length(s))
+        self.fallback_reason = fallback_reason(self)
+        self.compiled = not self.fallback_reason
+        self._fast = (_engine.JointTree(tree_tables(self, self._inputs["u"][:3]))
+                      if self.compiled else None)
+
+    def _fast_tau(self, q, v, a):
+        """``M a + b`` by the compiled path, or None (not a tree, or input the general path
+        must judge)."""
+        try:
+            q = np.ascontiguousarray(q, dtype=float)
+            v = _NONE if v is None else np.ascontiguousarray(v, dtype=float)
+            a = _NONE if a is None else np.ascontiguousarray(a, dtype=float)
+        except (TypeError, ValueError):
+            return None
+        shape = q.shape[:-1] + (self.nv,)
+        if (q.ndim not in (1, 2) or q.shape[-1] != self.nq or (v.size and v.shape != shape)
+                or (a.size and a.shape != shape)):
+            return None
+        out = np.empty(shape)
+        return out if self._fast.rnea(q, v, a, out) else None
+
+    def _fast_mass(self, q):
+        """The mass matrix by the compiled path, or None (as :meth:`_fast_tau`)."""
+        try:
+            q = np.ascontiguousarray(q, dtype=float)
+        except (TypeError, ValueError):
+            return None
+        if q.ndim not in (1, 2) or q.shape[-1] != self.nq:
+            return None
+        out = np.empty(q.shape[:-1] + (self.nv, self.nv))
+        return out if self._fast.crba(q, out) else None
 
     # ------------------------------------------------------------------ set-up
     def _layout(self) -> None:
@@ -266,6 +310,8 @@ class JointSpace:
     # ------------------------------------------------------------------ public
     def mass_matrix(self, q) -> np.ndarray:
         """Mass matrix ``T^T M T`` of the independent coordinates, (nv, nv) or (N, nv, nv)."""
+        if self._fast is not None and (out := self._fast_mass(q)) is not None:
+            return out
         qb, one = self._batch(q, self.nq, "q")
         H, HJ, alpha = self._frames(qb)
         out = []
@@ -280,6 +326,8 @@ class JointSpace:
         Includes the model's own forces (gravity, springs, dampers, PD laws, actuator signals
         and loads at the time ``t`` of the JointSpace): ``tau`` is what must be applied in
         addition."""
+        if self._fast is not None and (tau := self._fast_tau(q, v, a)) is not None:
+            return tau
         out, one = self._rows(q, v, a)
         tau = np.array([o[0] for o in out])
         return tau[0] if one else tau
@@ -297,6 +345,11 @@ class JointSpace:
     def forward_dynamics(self, q, v, tau) -> np.ndarray:
         """Accelerations ``a = M^-1 (tau - b(q, v))`` (Pinocchio's aba), (nv,) or (N, nv)."""
         tb, one_t = self._batch(tau, self.nv, "tau")
+        if self._fast is not None:
+            b, M = self._fast_tau(q, v, None), self._fast_mass(q)
+            if b is not None and M is not None and np.shape(b) == np.shape(tau):
+                return np.linalg.solve(M, (tb - np.atleast_2d(b))[..., None])[..., 0].reshape(
+                    b.shape)
         out, one = self._rows(q, v, None)
         a = np.array([np.linalg.solve(M, t - b) for (b, M), t in zip(out, tb, strict=True)])
         return a[0] if one else a

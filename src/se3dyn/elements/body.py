@@ -16,11 +16,9 @@ KEY = "body"
 TRAITS = dict(conservative=True, constraint=False, objective=False)
 
 
-def tables(s, lay) -> dict:
-    """Every node with mass or inertia is a body (``node_com``: centre of mass in the node's
-    material frame)."""
-    ids = np.flatnonzero((np.asarray(s.node_mass) > 0)
-                         | np.any(np.asarray(s.node_J).reshape(s.M, 9) != 0, axis=1))
+def mass_matrices(s, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The constant material mass matrices about the nodes ``ids`` (n,) (module docstring),
+    ``(M (n, 6, 6), m c (n, 3), m (n,))``; zero for a node without mass."""
     n = len(ids)
     m, c = np.asarray(s.node_mass, float)[ids], np.asarray(s.node_com, float)[ids]
     C = lie.hat3(c).reshape(n, 3, 3)
@@ -29,11 +27,20 @@ def tables(s, lay) -> dict:
     M[:, :3, 3:] = -m[:, None, None] * C
     M[:, 3:, :3] = m[:, None, None] * C
     M[:, 3:, 3:] = np.asarray(s.node_J)[ids] - (m[:, None, None] * C) @ C
-    mc = m[:, None] * c
+    return M, (m[:, None] * c).reshape(n, 3), m.astype(float)
+
+
+def tables(s, lay) -> dict:
+    """Every node with mass or inertia is a body (``node_com``: centre of mass in the node's
+    material frame)."""
+    ids = np.flatnonzero((np.asarray(s.node_mass) > 0)
+                         | np.any(np.asarray(s.node_J).reshape(s.M, 9) != 0, axis=1))
+    M, mc, m = mass_matrices(s, ids)
     lay.velocity_blocks(ids, ids)
     fg = lay.frame_groups(ids)
-    return dict(frame=ids.astype(np.int64), M=M, mc=mc.reshape(n, 3), m=m.astype(float),
+    return dict(frame=ids.astype(np.int64), M=M, mc=mc, m=m,
                 off=lay.blocks(fg, fg).astype(np.int64))
+
 
 def examples(rng):
     """A free body with its node off the centre of mass, spinning and moving, under gravity."""
