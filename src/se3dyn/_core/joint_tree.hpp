@@ -25,6 +25,10 @@ struct JointTree {
   std::vector<double> S0, S, alpha0;  // (nl, 6, 6): column c of link l at 36 l + 6 c
   std::vector<double> M, mc, m;       // (nl, 6, 6), (nl, 3), (nl,)
   std::vector<double> armature;       // (nv,)
+  // joint springs and dampers (joint_force.hpp on abelian joints): K (q - ref) + C v per
+  // velocity coordinate, qidx its position in q (-1: a root's)
+  std::vector<double> K, ref, C;
+  std::vector<int> qidx;
   double g[3] = {0.0, 0.0, 0.0};
 
   struct Work {
@@ -145,8 +149,12 @@ struct JointTree {
         for (int i = 0; i < 6; ++i) w.f[6 * par[l] + i] += fp[i];
       }
     }
-    for (int i = 0; i < nv; ++i)
-      if (armature[i] != 0.0 && aa) tau[i] += armature[i] * aa[i];
+    for (int i = 0; i < nv; ++i) {
+      if (qidx[i] < 0) continue;
+      if (aa) tau[i] += armature[i] * aa[i];
+      tau[i] += K[i] * (q[qidx[i]] - ref[i]);
+      if (vv) tau[i] += C[i] * vv[i];
+    }
   }
 
   // column c of link l's subspace (the identity for a root)

@@ -150,6 +150,10 @@ JointTree joint_tree(const nb::dict& d) {
   J.mc = dvec(d, "mc");
   J.m = dvec(d, "m");
   J.armature = dvec(d, "armature");
+  J.K = dvec(d, "stiffness");
+  J.ref = dvec(d, "reference");
+  J.C = dvec(d, "damping");
+  J.qidx = ivec<int>(d, "qidx");
   std::vector<double> g = dvec(d, "gravity");
   for (int i = 0; i < 3; ++i) J.g[i] = g[i];
   return J;

@@ -29,9 +29,10 @@ __all__ = ["fallback_reason", "tree_tables"]
 
 def fallback_reason(js: JointSpace) -> str:
     """Why the model needs the general path ('' when the compiled path covers it): closed
-    loops, couplings, drives, or forces beyond inertia, gravity and armature."""
+    loops, couplings, drives, or forces beyond inertia, gravity, armature and the joints'
+    springs and dampers."""
     s, md = js.system, js.system.model
-    dof = np.concatenate([s.dof_stiffness, s.dof_damping, s.dof_kp, s.dof_kd, s.dof_ki])
+    dof = np.concatenate([s.dof_kp, s.dof_kd, s.dof_ki])
     checks = (
         (bool(js._plan.closures), "closed loops"),
         (len(s.cpl_follow) > 0, "couplings"),
@@ -40,7 +41,7 @@ def fallback_reason(js: JointSpace) -> str:
         (len(s.springs) + len(s.beams) + len(md.bushings) > 0,
          "spring-dampers, beams or bushings"),
         (len(s.contacts) + len(md.contact_pairs) + len(md.collisions) > 0, "contacts"),
-        (bool(np.any(dof != 0)), "joint springs, dampers or control laws"),
+        (bool(np.any(dof != 0)), "joint control laws (PD, PID)"),
         (len(s.inputs.joint_slots) > 0 or len(law_table(s)[0]) > 0, "joint actuators"),
         (s.inputs.nu != 3, "time-dependent inputs beyond gravity"),
     )
@@ -97,7 +98,9 @@ def tree_tables(js: JointSpace, gravity: np.ndarray) -> dict:
         link[c] = n
         nodes.append(c)
     M, mc, m = mass_matrices(s, np.array(nodes, np.int64))
+    qidx = np.where(np.asarray(s.dof_is_joint, bool)[ind], js._qpos, -1).astype(np.int64)
+    per_v = {name: np.asarray(getattr(s, "dof_" + name), float)[ind].copy()
+             for name in ("armature", "stiffness", "reference", "damping")}
     return dict(nq=js.nq, nv=js.nv, parent=par, kind=kind, k=k, qadr=qadr, vadr=vadr, P=P,
-                Q=Q, S0=S0, S=S, alpha0=alpha0, M=M, mc=mc, m=m,
-                armature=np.asarray(s.dof_armature, float)[ind].copy(),
+                Q=Q, S0=S0, S=S, alpha0=alpha0, M=M, mc=mc, m=m, qidx=qidx, **per_v,
                 gravity=np.asarray(gravity, float).copy())

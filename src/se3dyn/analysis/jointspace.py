@@ -71,6 +71,8 @@ class JointSpace:
         PD targets) are taken.
     independent : sequence of str, optional
         Joints whose coordinates must be independent (closed loops).
+    compiled : bool
+        False: the general path even on trees (the reference of the compiled one).
 
     Attributes
     ----------
@@ -83,16 +85,16 @@ class JointSpace:
         Whether :meth:`inverse_dynamics`, :meth:`bias`, :meth:`gravity`, :meth:`mass_matrix`
         and :meth:`forward_dynamics` take the compiled path (C++ recursive Newton-Euler and
         composite-rigid-body algorithm, batches looped in C++): trees of abelian joints and
-        floating roots whose forces are inertia, armature and gravity. The others (closed
-        loops, couplings, drives, loads, joint springs, dampers, PD/PID laws, actuators,
-        spring-dampers, beams, bushings, contacts) take the general path, as do
+        floating roots whose forces are inertia, gravity and the joints' armatures, springs
+        and dampers. The others (closed loops, couplings, drives, loads, PD/PID laws,
+        actuators, spring-dampers, beams, bushings, contacts) take the general path, as do
         :meth:`jacobian` and :meth:`frame_pose`; both paths agree to rounding.
     fallback_reason : str
         Why the general path is taken ('' when ``compiled``).
     """
 
     def __init__(self, model_or_system: Model | System, *, t: float = 0.0,
-                 independent=None):
+                 independent=None, compiled: bool = True):
         s = _as_system(model_or_system, "JointSpace")
         self.system = s
         self._con = Constraints(s)
@@ -103,7 +105,7 @@ class JointSpace:
         self._plan = _tree_plan(s, self._roots)
         self._inputs = step_inputs(s, float(t))
         self._rs = _row_scale(s, _char_length(s))
-        self.fallback_reason = fallback_reason(self)
+        self.fallback_reason = fallback_reason(self) if compiled else "compiled=False"
         self.compiled = not self.fallback_reason
         self._fast = (_engine.JointTree(tree_tables(self, self._inputs["u"][:3]))
                       if self.compiled else None)
