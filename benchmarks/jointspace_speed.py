@@ -4,7 +4,9 @@ Pinocchio's Python calls (``pin.rnea``, ``pin.crba``) and MuJoCo's (``mj_inverse
 rotated inertias: tests/_pinocchio_models.py; MuJoCo's from an MJCF written here), warm
 (median over 200 calls at random states) and for a batch of 1000 states (per state); the
 first call in a fresh process for se3dyn and Pinocchio; each code's agreement with Pinocchio
-printed beside. MuJoCo is optional (``pip install se3dyn[bench]``).
+printed beside; the general path (``compiled=False``: the engine's evaluations and the
+minimal-coordinate map, what loops and elements beyond the compiled path's take) beside it.
+MuJoCo is optional (``pip install se3dyn[bench]``).
 
     python benchmarks/jointspace_speed.py
 """
@@ -137,6 +139,8 @@ def main() -> None:
     pm, _ = pinocchio_model(chain)
     pd = pm.createData()
     js = sd.JointSpace(se3dyn_model(chain))
+    slow = sd.JointSpace(se3dyn_model(chain), compiled=False)
+    print(f"compiled path: {js.compiled}")
     Q, V, A, _ = random_states(pm, 200, seed=1)
     err_id = max(float(np.abs(js.inverse_dynamics(q, v, a) - pin.rnea(pm, pd, q, v, a)).max()
                        / np.abs(pin.rnea(pm, pd, q, v, a)).max())
@@ -155,6 +159,13 @@ def main() -> None:
         pin_t[len(args)] = t_p
         print(f"  {name:26s} se3dyn {t_s * 1e6:8.1f} us   pinocchio {t_p * 1e6:6.2f} us   "
               f"ratio {t_s / t_p:7.1f} x   difference {err:.1e}")
+    t_g = per_call(lambda q, v, a: slow.inverse_dynamics(q, v, a), (Q, V, A), 50)
+    err_g = max(float(np.abs(slow.inverse_dynamics(q, v, a) - js.inverse_dynamics(q, v, a)).max()
+                      / np.abs(js.inverse_dynamics(q, v, a)).max())
+                for q, v, a in zip(Q[:20], V[:20], A[:20], strict=True))
+    print(f"  {'  general path, rnea':26s} se3dyn {t_g * 1e6:8.1f} us   "
+          f"({t_g / pin_t[3]:.0f} x pinocchio's call)   difference from the compiled "
+          f"{err_g:.1e}")
     for name, fn, args, err in mujoco_rows(chain, pm, pd, Q, V, A):
         t_m = per_call(fn, args)
         print(f"  {name:26s} mujoco {t_m * 1e6:8.2f} us   ({t_m / pin_t[len(args)]:.1f} x "
@@ -163,7 +174,11 @@ def main() -> None:
     t0 = time.perf_counter()
     js.inverse_dynamics(Qb, Vb, Ab)
     tb = (time.perf_counter() - t0) / 1000
-    print(f"  batch of 1000 states: inverse_dynamics {tb * 1e6:.1f} us per state")
+    t0 = time.perf_counter()
+    js.mass_matrix(Qb)
+    tm = (time.perf_counter() - t0) / 1000
+    print(f"  batch of 1000 states: inverse_dynamics {tb * 1e6:.2f} us, mass_matrix "
+          f"{tm * 1e6:.2f} us per state")
     print(f"first call in a fresh process (imports, model build, one call): se3dyn "
           f"{first_call('se3dyn'):.2f} s, pinocchio {first_call('pinocchio'):.2f} s")
 

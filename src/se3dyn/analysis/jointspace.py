@@ -13,6 +13,11 @@ springs, dampers, PD laws, actuators and loads of the model) and the constraint 
 ``M_z z_ddot + b(q, z_dot) = tau`` with ``b = T^T r(q, T z_dot, w)``, ``tau`` the generalized
 forces applied on the independent coordinates (for a joint coordinate: the actuator torque or
 force along it, as ``ModelBuilder.joint(..., torque=)``).
+
+On trees whose forces are inertia, gravity and the joints' armatures, springs and dampers, the
+same quantities come from a compiled path (recursive Newton-Euler, composite-rigid-body
+algorithm: :mod:`se3dyn.analysis._jointtree`, ``se3dyn/_core/joint_tree.hpp``);
+:attr:`JointSpace.compiled` and :attr:`JointSpace.fallback_reason` say which path a model takes.
 """
 
 from __future__ import annotations
