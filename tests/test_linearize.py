@@ -357,3 +357,35 @@ def test_free_body_spinning_about_a_principal_axis(axis):
     for r in (ref, -ref):
         assert np.abs(lam - r).min() <= 1e-10 * abs(ref)
     assert np.all(lin.modes().stable) == (axis != 1)
+
+
+def test_modes_page_plays_the_closed_form_mode_shapes(tmp_path, capsys):
+    """``se3dyn modes MODEL --mode N``: the page's motion is the mode's shape, a cos(theta) times
+    the eigenvector of the compound double pendulum's M^-1 K (absolute angles p; the joint
+    coordinates are p1 and p2 - p1), every frame, for both modes."""
+    from se3dyn.cli.commands import main
+    from se3dyn.io.modelfile import save_model
+    from se3dyn.viewer.modes import mode_results
+
+    m1, m2, l1, c1, c2, J1, J2 = 2.0, 1.5, 0.8, 0.35, 0.45, 0.11, 0.07
+    model = compound_double(m1, m2, l1, c1, c2, J1, J2)
+    M = np.array([[J1 + m1 * c1**2 + m2 * l1**2, m2 * l1 * c2], [m2 * l1 * c2, J2 + m2 * c2**2]])
+    K = G * np.diag([m1 * c1 + m2 * l1, m2 * c2])
+    w2, V = np.linalg.eig(np.linalg.solve(M, K))
+    lin = sd.linearize(model, at=sd.static_equilibrium(model))
+    for mode, col in enumerate(np.argsort(w2)):
+        v = V[:, col]
+        shape = np.array([v[0], v[1] - v[0]])  # (joint coordinates)
+        res = mode_results(lin, mode, frames=16, amplitude=0.01)
+        q = np.column_stack([res.joint_coordinates(j)[:, 0] for j in ("h1", "h2")])
+        big = np.abs(q[:, 0]) > 1e-3
+        np.testing.assert_allclose(q[big, 1] / q[big, 0], shape[1] / shape[0], rtol=1e-10)
+        theta = 2 * np.pi * res.t / res.t[-1]
+        np.testing.assert_allclose(np.abs(q[:, 0]), np.abs(q[0, 0] * np.cos(theta)),
+                                   atol=1e-14)
+    path = tmp_path / "pendulum.yaml"
+    save_model(model, path)
+    page = tmp_path / "mode2.html"
+    assert main(["modes", str(path), "--mode", "2", "-o", str(page)]) == 0
+    assert "wrote" in capsys.readouterr().out and "mode 2" in page.read_text()
+    assert main(["modes", str(path), "--mode", "3"]) == 2

@@ -605,3 +605,43 @@ def test_imported_panda_with_mimic_mass_matrix_matches_pinocchio():
         M = pin.crba(pm, data, q)
         M = np.triu(M) + np.triu(M, 1).T
         assert np.abs(js.mass_matrix(qs) - M[np.ix_(perm, perm)]).max() <= 1e-10 * np.abs(M).max()
+
+
+def test_inertias_no_body_can_have_are_refused_or_repaired_on_request(tmp_path):
+    """Principal moments (1, 1, 3) break J3 <= J1 + J2: refused by default (naming the
+    option), or repaired with the same principal axes to (1.5, 1.5, 3) (the two smaller raised
+    equally to the triangle's equality, a plate's) and listed in the report; the repaired link
+    turns about its hinge (x, one of the two raised axes) at tau / 1.5."""
+    link = ('<link name="b"><inertial><origin rpy="0 0 0.3"/><mass value="2"/>'
+            '<inertia ixx="1" iyy="1" izz="3"/></inertial></link>')
+    joint = ('<joint name="h" type="continuous"><parent link="a"/><child link="b"/>'
+             '<axis xyz="0 0 1"/></joint>')
+    p = tmp_path / "bad_inertia.urdf"
+    p.write_text(_robot('<link name="a"/>' + link + joint))
+    with pytest.raises(ModelError, match="triangle inequality.*inertia='repair'"):
+        sd.load_urdf(p)
+    with pytest.warns(Se3dynWarning, match="made physical"):
+        mb = sd.load_urdf(p, inertia="repair", gravity=(0, 0, 0))
+    assert any("(1, 1, 3) -> (1.5, 1.5, 3)" in n for n in mb.urdf.notes)
+    J = mb.build().node("b").inertia
+    np.testing.assert_allclose(np.linalg.eigvalsh(J), [1.5, 1.5, 3.0], rtol=1e-12)
+    # the hinge is about z, the tensor's third principal axis (rotated about z): 3 kept
+    mb.load("t", "b", torque=(0.0, 0.0, 0.6))
+    res = sd.simulate(mb.build(), 0.1, 1e-3)
+    np.testing.assert_allclose(res.joint_coordinates("h")[-1, 0], 0.5 * (0.6 / 3.0) * 0.01,
+                               rtol=1e-9)
+    with pytest.raises(ModelError, match="field 'inertia'"):
+        sd.load_urdf(p, inertia="fix")
+
+
+def test_real_robots_with_placeholder_inertias_load_with_inertia_repair():
+    """example-robot-data's Allegro hand has inertias no body can have (refused by default);
+    with ``inertia="repair"`` it loads, the report lists the links, and it simulates."""
+    p = _robots_dir() / "allegro_hand_description/urdf/allegro_right_hand.urdf"
+    with pytest.raises(ModelError, match="inertia"):
+        sd.load_urdf(p)
+    with pytest.warns(Se3dynWarning, match="made physical"):
+        mb = sd.load_urdf(p, inertia="repair")
+    assert any("made physical" in n for n in mb.urdf.notes)
+    res = sd.simulate(mb.build(), 0.02, 1e-3)
+    assert np.all(np.isfinite(res.H))

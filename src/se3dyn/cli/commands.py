@@ -892,14 +892,7 @@ def cmd_linearize(args) -> int:
         md = lin.modes(args.modes)
     except Se3dynError as exc:
         raise _Usage(str(exc)) from None
-    print(f"{model.name}: {len(lin.names)} minimal coordinates about the "
-          f"{'static equilibrium' if args.at == 'static' else 'initial state'}: "
-          + ", ".join(lin.names))
-    print("  mode  frequency [Hz]  omega [rad/s]  damping ratio")
-    for i in range(len(md)):
-        kind = " rigid" if md.rigid[i] else ("" if md.stable[i] else " UNSTABLE")
-        print(f"  {i + 1:4d}  {md.frequency[i]:14.6g}  {md.omega[i]:13.6g}  "
-              f"{md.damping[i]:13.4g}{kind}")
+    _print_modes(model, lin, md, args.at)
     if args.export:
         data = dict(M=lin.M, C=lin.C, K=lin.K, B=lin.B, C_y=lin.C_y, T=lin.T, A=lin.A,
                     B_x=lin.B_x, names=np.array(lin.names), input_names=np.array(
@@ -912,6 +905,42 @@ def cmd_linearize(args) -> int:
         except OSError as exc:
             raise _Usage(f"--export {args.export}: cannot write ({exc.strerror})") from None
         print(f"wrote {args.export}")
+    return 0
+
+
+def _print_modes(model, lin, md, at: str) -> None:
+    print(f"{model.name}: {len(lin.names)} minimal coordinates about the "
+          f"{'static equilibrium' if at == 'static' else 'initial state'}: "
+          + ", ".join(lin.names))
+    print("  mode  frequency [Hz]  omega [rad/s]  damping ratio")
+    for i in range(len(md)):
+        kind = " rigid" if md.rigid[i] else ("" if md.stable[i] else " UNSTABLE")
+        print(f"  {i + 1:4d}  {md.frequency[i]:14.6g}  {md.omega[i]:13.6g}  "
+              f"{md.damping[i]:13.4g}{kind}")
+
+
+def cmd_modes(args) -> int:
+    """Linearise a model file (as ``se3dyn linearize``), print its modes and write a viewer
+    page playing one of them (se3dyn.viewer.modes)."""
+    from se3dyn.analysis.linearize import linearize
+    from se3dyn.analysis.statics import static_equilibrium
+    from se3dyn.errors import Se3dynError
+    from se3dyn.viewer.modes import mode_results
+
+    model, _ = _load(args.model)
+    try:
+        at = static_equilibrium(model) if args.at == "static" else None
+        lin = linearize(model, at=at)
+        md = lin.modes()
+        res = mode_results(lin, args.mode - 1, amplitude=args.amplitude)
+    except Se3dynError as exc:
+        raise _Usage(str(exc)) from None
+    _print_modes(model, lin, md, args.at)
+    out = args.output or f"{Path(args.model).stem}_mode{args.mode}.html"
+    f = res.stats["frequency"]
+    _viewer("write_html", res, out, model=model, model_path=args.model, channels=[],
+            title=f"{model.name}: mode {args.mode}, {f:.6g} Hz")
+    print(f"wrote {out} (mode {args.mode}: {f:.6g} Hz, amplitude {res.stats['amplitude']:.3g})")
     return 0
 
 
@@ -1238,6 +1267,18 @@ def _linearize_args(li) -> None:
     li.set_defaults(func=cmd_linearize)
 
 
+def _modes_args(mo) -> None:
+    mo.add_argument("model")
+    mo.add_argument("--at", choices=("static", "initial"), default="static",
+                    help="about the static equilibrium (default) or the initial state")
+    mo.add_argument("--mode", type=_count, default=1, help="the mode to play (1: the slowest)")
+    mo.add_argument("--amplitude", type=float, help="scale of the shape (its largest entry "
+                    "1); default: a tenth of the model's size")
+    mo.add_argument("-o", "--output", metavar="PAGE.html", help="the page (default "
+                    "MODEL_modeN.html)")
+    mo.set_defaults(func=cmd_modes)
+
+
 # the subcommands: help line, and the declaration of their arguments
 _COMMANDS = {
     "check": ("validate model files; counts and rank analysis", _check_args),
@@ -1255,6 +1296,7 @@ _COMMANDS = {
     "import-urdf": ("write a URDF robot as a model file (docs/urdf.md)", _import_urdf_args),
     "linearize": ("linear model and modes about the static equilibrium (.npz export)",
                   _linearize_args),
+    "modes": ("the modes of a model, and a viewer page playing one (HTML)", _modes_args),
 }
 
 

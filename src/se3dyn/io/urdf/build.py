@@ -93,7 +93,8 @@ class UrdfBuilder(ModelBuilder):
 # ---------------------------------------------------------------------------------------------
 def load_urdf(path, *, floating_base: bool = False, package_dirs=(), mimic: str = "enforce",
               loops=None, q0: dict | None = None, v0: dict | None = None,
-              fixed: str = "keep", gravity=(0.0, 0.0, -9.81)) -> UrdfBuilder:
+              fixed: str = "keep", gravity=(0.0, 0.0, -9.81),
+              inertia: str = "refuse") -> UrdfBuilder:
     """Read a URDF file into a :class:`UrdfBuilder` (docs/urdf.md).
 
     Parameters
@@ -120,6 +121,12 @@ def load_urdf(path, *, floating_base: bool = False, package_dirs=(), mimic: str 
         and inertias lumped exactly; the merged links' frames become markers).
     gravity : array_like (3,)
         URDF has none; ROS's z-up convention by default.
+    inertia : {"refuse", "repair"}
+        An inertia tensor no body can have (not positive definite, or principal moments
+        breaking the triangle inequality ``J3 <= J1 + J2``: placeholders of real files) is
+        refused naming the link, or made physical with the same principal axes (moments
+        raised to 1e-3 of the largest, then the two smaller ones equally until the triangle
+        inequality holds) and listed in the report.
 
     Returns
     -------
@@ -127,12 +134,16 @@ def load_urdf(path, *, floating_base: bool = False, package_dirs=(), mimic: str 
         Nodes named by links, joints by URDF joints (coordinates absolute, zero at
         ``<origin>``), couplings ``<follower>:mimic``; ``.urdf`` holds the report.
     """
-    robot = read_robot(path, read_loop_tags)
+    _check_option(str(path), "inertia", inertia, ("refuse", "repair"))
+    robot = read_robot(path, read_loop_tags, repair_inertia=inertia == "repair")
     ctx = _Ctx(robot.file, {})
     _check_option(robot.file, "mimic", mimic, ("enforce", "ignore"))
     _check_option(robot.file, "fixed", fixed, ("keep", "merge"))
     root, order = tree_order(robot)
     info = UrdfInfo(robot.file, root, ignored=robot.ignored.lines())
+    if robot.repaired:
+        info.notes.append(f"{len(robot.repaired)} inertia tensors no body can have made "
+                          "physical (inertia='repair'): " + "; ".join(robot.repaired))
     follow = _mimics(robot, order, mimic, info)
     all_loops = robot.loops + loops_argument(loops, ctx)
     q, Tw, tw = _initial_state(robot, order, root, q0, v0, follow, floating_base, all_loops,
@@ -497,8 +508,10 @@ def _keep(info: UrdfInfo, robot: Robot, order: list[Joint], group: dict, merge: 
 
 
 def _warn(info: UrdfInfo) -> None:
-    """One warning with what was ignored and what was kept but not applied."""
-    said = info.ignored + [n for n in info.notes if "not " in n or "dropped" in n]
+    """One warning with what was ignored, what was kept but not applied, and what was
+    changed (inertias made physical)."""
+    said = info.ignored + [n for n in info.notes
+                           if "not " in n or "dropped" in n or "made physical" in n]
     if said:
         warnings.warn(Se3dynWarning(
             f"{info.file}: not mapped: " + "; ".join(said) + " (mb.urdf.report())"),

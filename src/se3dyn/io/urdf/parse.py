@@ -134,16 +134,21 @@ class Robot:
     loops: list[Loop]
     ignored: Ignored
     file: str
+    #: the inertias made physical (``load_urdf(..., inertia="repair")``), one line each
+    repaired: list[str] = field(default_factory=list)
 
 
 # ---------------------------------------------------------------------------------------------
 class _Ctx:
     """The file being read: its name for messages, the namespace prefixes it declares."""
 
-    def __init__(self, file: str, prefixes: dict[str, str]):
+    def __init__(self, file: str, prefixes: dict[str, str], repair: bool = False):
         self.file = file
         self.prefixes = prefixes  # uri -> prefix
         self.ignored = Ignored()
+        #: inertias no body can have: repaired (and listed here) rather than refused
+        self.repair = repair
+        self.repaired: list[str] = []
 
     def fail(self, item: str, fld: str, expected: str, got=None, hint: str = ""):
         raise UrdfError(f"{self.file}: {item}", fld, expected, got, hint)
@@ -244,12 +249,13 @@ def read_xml(path: str):
     return root, prefixes
 
 
-def read_robot(path: str, extra=None) -> Robot:
+def read_robot(path: str, extra=None, repair_inertia: bool = False) -> Robot:
     """Read ``path`` into a :class:`Robot` (links, joints, and the loop closures declared in
     it: ``extra(ctx, element, tag, loops) -> bool`` reads a top-level tag into ``loops``,
-    :func:`se3dyn.io.urdf.loops.read_loop_tags`)."""
+    :func:`se3dyn.io.urdf.loops.read_loop_tags`); ``repair_inertia``: inertia tensors no body
+    can have made physical (:func:`physical_inertia`) and listed in ``Robot.repaired``."""
     root, prefixes = read_xml(path)
-    ctx = _Ctx(os.path.basename(str(path)), prefixes)
+    ctx = _Ctx(os.path.basename(str(path)), prefixes, repair_inertia)
     if ctx.tag(root) != "robot":
         ctx.fail("root element", "tag", "<robot>", f"<{ctx.tag(root)}>")
     materials = _materials(ctx, root)
@@ -274,7 +280,8 @@ def read_robot(path: str, extra=None) -> Robot:
             continue
         elif extra is None or not extra(ctx, el, t, loops):
             ctx.ignored.add(f"<robot>/<{t}>", root.get("name") or "robot")
-    return Robot(root.get("name") or "robot", links, joints, loops, ctx.ignored, ctx.file)
+    return Robot(root.get("name") or "robot", links, joints, loops, ctx.ignored, ctx.file,
+                 ctx.repaired)
 
 
 def _materials(ctx: _Ctx, root) -> dict[str, tuple]:
@@ -360,18 +367,47 @@ def _check_inertia(ctx: _Ctx, item: str, m: float, J: np.ndarray) -> None:
         J[:] = 0.0  # a point mass
         return
     if m == 0:
-        if np.any(J != 0):
+        if np.any(J != 0) and ctx.repair:
+            J[:] = 0.0
+            ctx.repaired.append(f"{item}: an inertia without mass dropped")
+        elif np.any(J != 0):
             ctx.fail(item, "<inertia>", "no inertia on a link without mass (URDF mass 0)",
                      J.tolist(), "give the link its mass, or remove the inertia")
         return
     ev = np.linalg.eigvalsh(J)
+    bad = ev[0] <= 0 or ev[2] > (ev[0] + ev[1]) * (1 + 1e-9)
+    if bad and ctx.repair:
+        J[:], new = physical_inertia(J)
+        ctx.repaired.append(f"{item}: principal moments {_g(ev)} -> {_g(new)} kg m^2")
+        return
     if ev[0] <= 0:
         ctx.fail(item, "<inertia>", "a positive-definite inertia tensor", J.tolist(),
-                 f"principal moments {ev.tolist()}")
-    if ev[2] > (ev[0] + ev[1]) * (1 + 1e-9):
+                 f"principal moments {ev.tolist()}; load_urdf(..., inertia='repair') "
+                 "makes such tensors physical and lists them")
+    if bad:
         ctx.fail(item, "<inertia>", "principal moments satisfying the triangle inequality "
                  "J3 <= J1 + J2 of a real body", J.tolist(),
-                 f"principal moments {ev.tolist()}: no mass distribution has them")
+                 f"principal moments {ev.tolist()}: no mass distribution has them; "
+                 "load_urdf(..., inertia='repair') makes such tensors physical and lists them")
+
+
+def _g(v) -> str:
+    return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
+
+
+def physical_inertia(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The nearest inertia tensor a body can have, with the same principal axes: principal
+    moments raised to at least 1e-3 of the largest (a thin rod's ratio), then the two smaller
+    ones raised equally until ``J3 <= J1 + J2`` (equality: a plate). Returns the tensor (3, 3)
+    and its principal moments (3,)."""
+    ev, V = np.linalg.eigh(0.5 * (J + J.T))
+    top = max(float(ev[2]), 1e-300)
+    ev = np.maximum(ev, 1e-3 * top)
+    gap = ev[2] - ev[0] - ev[1]
+    if gap > 0:
+        ev[:2] += 0.5 * gap
+    ev[2] = min(ev[2], ev[0] + ev[1])
+    return (V * ev) @ V.T, ev
 
 
 def _visual(ctx: _Ctx, el, item: str, materials: dict, tag: str = "<visual>"
