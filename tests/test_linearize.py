@@ -389,3 +389,23 @@ def test_modes_page_plays_the_closed_form_mode_shapes(tmp_path, capsys):
     assert main(["modes", str(path), "--mode", "2", "-o", str(page)]) == 0
     assert "wrote" in capsys.readouterr().out and "mode 2" in page.read_text()
     assert main(["modes", str(path), "--mode", "3"]) == 2
+
+
+def test_modes_of_a_long_cantilever_with_a_wide_spectrum():
+    """A 60-element cantilever whose rotary inertia is tiny (frequencies from 20 to 1e8 rad/s
+    in one model): the two lowest bending pairs from the scaled companion form approach
+    Euler-Bernoulli's (beta L)^2 sqrt(EI / m L^4), beta L = 1.87510, 4.69409 (lumped masses:
+    within 2e-3; the unscaled symmetric problem in w^2 loses 0.35 % there), and modes(k) is
+    the first k of the whole spectrum."""
+    L, EI, m = 2.0, (2e3, 1e3), 2.0
+    mb = sd.ModelBuilder()
+    mb.node("root", fixed=True)
+    mb.node("tip", (L, 0, 0))
+    mb.beam("b", "root", "tip", elements=60, EA=1e7, GA=1e8, GJ=1e3, EI=EI,
+            mass_per_length=m, rotary_inertia=(2e-9, 1e-9, 1e-9))
+    lin = sd.linearize(mb.build())
+    few, every = lin.modes(6), lin.modes()
+    np.testing.assert_array_equal(few.omega, every.omega[:6])
+    for bl, pair in ((1.87510407, few.omega[:2]), (4.69409113, few.omega[2:4])):
+        ref = np.sort([bl ** 2 * math.sqrt(e / (m * L ** 4)) for e in EI])
+        np.testing.assert_allclose(np.sort(pair), ref, rtol=2e-3)
