@@ -3,8 +3,9 @@ MuJoCo, each as its users run it (issue 31's benchmark).
 
 The same arm in both codes (random offsets, unaligned axes, rotated inertias:
 ``tests/_pinocchio_models.py``; MuJoCo's MJCF from ``benchmarks/jointspace_speed.py``),
-released at rest from its zero configuration (bent: random axes and offsets). se3dyn: ``sd.simulate(model, 1.0, 1e-3)`` at its defaults
-(generalized-alpha, every step stored, the compiled loop); MuJoCo: ``mj_step`` at its
+released at rest from its zero configuration (bent: random axes and offsets). se3dyn:
+``sd.simulate(model, 1.0, 1e-3)`` at its defaults (generalized-alpha, every step stored, the
+compiled loop); MuJoCo: ``mj_step`` at its
 defaults (semi-implicit Euler, the model's default timestep 2 ms). Printed: the wall time of
 the second and per step (warm; se3dyn's first call in a fresh process too), and each code's
 error at 1 s against Pinocchio's ABA integrated by DOP853 at 1e-13 (the converged reference).
@@ -26,8 +27,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tests"))
 sys.path.insert(0, HERE)
 
-from _pinocchio_models import pinocchio_model, random_chain, se3dyn_model  # noqa: E402
 from jointspace_speed import mjcf  # noqa: E402
+
+from _pinocchio_models import pinocchio_model, random_chain, se3dyn_model  # noqa: E402
 
 SEED, T, H = 11, 1.0, 1e-3
 Q0 = np.zeros(7)
@@ -96,8 +98,8 @@ def main() -> None:
         [sys.executable, "-c", FIRST.format(tests=os.path.join(HERE, "..", "tests"),
                                             seed=SEED, T=T, H=H)],
         capture_output=True, text=True, check=True).stdout)
-    print(f"7-axis arm, 1 s of a free fall (no torque), error of the angles at 1 s against "
-          f"Pinocchio ABA + DOP853 1e-13")
+    print("7-axis arm, 1 s of a free fall (no torque), error of the angles at 1 s against "
+          "Pinocchio ABA + DOP853 1e-13")
     print(f"  se3dyn  h = {H:g} (defaults)   {w * 1e3:8.1f} ms  {w / n * 1e6:7.1f} us/step  "
           f"error {np.abs(q - ref).max():.2e} rad   first call in a fresh process {first:.2f} s")
     try:
