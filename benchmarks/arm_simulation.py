@@ -80,7 +80,7 @@ def run_mujoco(chain):
     mm = mujoco.MjModel.from_xml_string(mjcf(chain))
     md = mujoco.MjData(mm)
     steps = round(T / mm.opt.timestep)
-    for warm in (True, False):
+    for _pass in ("warm-up", "timed"):
         mujoco.mj_resetData(mm, md)
         md.qpos[:] = Q0
         t0 = time.perf_counter()
