@@ -110,9 +110,13 @@ class _Spin:
     speed: float
     inputs: dict
     blocks: Any = field(init=False)
+    axis: np.ndarray = field(init=False)
 
     def __post_init__(self):
         self.blocks = _Blocks(self.s)
+        # the spin joint's twist per unit rate in its frame: the column of its A (Eq. (9))
+        g = next(g for g in self.s.groups if self.j in g.ids)
+        self.axis = g.A[list(g.ids).index(self.j)][:, 0]
 
     def velocities(self, ev) -> np.ndarray:
         """Material velocities of the rigid spin at the iterate ``ev`` (nq,): nodes from the
@@ -120,11 +124,10 @@ class _Spin:
         s, j = self.s, self.j
         a = int(s.joint_a[j])
         G = s.node_H0[a] @ s.joint_XA[j] @ ev.HJ[j]
-        A = np.concatenate([g.A[list(g.ids).index(j)] for g in s.groups if j in g.ids])
-        V = lie.adjoint(G) @ A[:, 0] * self.speed
+        V = lie.adjoint(G) @ self.axis * self.speed
         v = np.zeros(s.nq)
-        for i in np.flatnonzero(~s.node_fixed):
-            v[s.node_dofadr[i]:s.node_dofadr[i] + 6] = lie.adjoint_inv(ev.H[i]) @ V
+        free = np.flatnonzero(~s.node_fixed)
+        v[s.node_dofadr[free][:, None] + np.arange(6)] = lie.adjoint_inv(ev.H[free]) @ V
         joint = np.flatnonzero(s.dof_is_joint)
         v[self.d] = self.speed
         rest = np.setdiff1d(joint, [self.d])
