@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from se3dyn import lie
+from se3dyn.engine.scaling import _char_length
 from se3dyn.errors import ModelError
 from se3dyn.results.results import Results
 
@@ -72,8 +73,7 @@ def _amplitude(s, phi: np.ndarray) -> float:
     trans = float(mags[dofs[:, :3]].max(initial=0.0))
     rot = max(float(mags[dofs[:, 3:]].max(initial=0.0)),
               float(mags[s.dof_is_joint].max(initial=0.0)))
-    pos = s.node_H0[:, :3, 3]
-    size = float(np.linalg.norm(pos - pos.mean(axis=0), axis=1).max(initial=0.0)) or 1.0
+    size = _char_length(s)  # (the largest distance of a node from the centroid)
     scales = [x for x in (0.1 * size / trans if trans > 0 else None,
                           0.3 / rot if rot > 0 else None) if x is not None]
     return min(scales) if scales else 1.0
